@@ -1,0 +1,159 @@
+/// \file effect.hpp
+/// The compliance model as a sum of physical-effect terms (docs/effects.md).
+///
+/// The displacement of the measured point P under the wrench W applied at the load point L is
+/// evaluated in stages; every effect may act in any of them:
+///  1. wrench:      the wrench and the points as the set-up really has them
+///                  (force-sensor frame, offsets of P and L from the flange axis);
+///  2. joint:       joint deflection dtheta from the external joint torques tau = J(L)^T W
+///                  (joint compliance, coupling, nonlinear reducer, backlash, compensator);
+///     (then d = J_p(P) dtheta, rot = J_r dtheta)
+///  3. cartesian:   displacement added in the base frame (link compliance, tool compliance);
+///  4. measurement: what the tracker reports (tracker frame rotation, drift).
+/// Each effect writes its stage functions once as templates on the scalar T (double or
+/// ceres::Jet) so that Ceres differentiates them automatically; EffectT instantiates them.
+#pragma once
+
+#include <ceres/jet.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "stiff/dataset.hpp"
+#include "stiff/robot_model.hpp"
+
+namespace stiff {
+
+/// Jet used for automatic differentiation of the model (DynamicAutoDiffCostFunction stride).
+constexpr int kJetStride = 8;
+using Jet = ceres::Jet<double, kJetStride>;
+
+/// One parameter of an effect, SI units.
+struct ParameterSpec {
+  std::string name;     ///< unique within the effect, e.g. "c2"
+  std::string unit;     ///< e.g. "rad/(N*m)"
+  std::string meaning;  ///< one line of physics
+  double lower = -1e300;
+  double upper = 1e300;
+  double typical = 1.0;     ///< typical magnitude (for scaling and priors)
+  double null_value = 0.0;  ///< value at which the effect vanishes
+  double start = 0.0;       ///< start value of a fit
+};
+
+/// Data of one measurement that does not depend on the parameters (computed once).
+struct MeasurementContext {
+  ChainState chain;
+  Eigen::VectorXd tau_gravity;  ///< gravity torques [N*m] (zeros without a mass model)
+  int session = 0;              ///< index of the measurement's session (0..sessions-1)
+  double time = 0.0;            ///< time of the reading [s] (row index when the file has no t)
+};
+
+/// Evolving state of one evaluation (see the stages above). Sizes are the robot's dof.
+template <typename T>
+struct EvalState {
+  const RobotModel* robot = nullptr;
+  const Measurement* measurement = nullptr;
+  const MeasurementContext* context = nullptr;
+  Vector3<T> force;    ///< force at L, base frame [N]
+  Vector3<T> moment;   ///< moment about L, base frame [N*m]
+  Vector3<T> r_meas;   ///< measured point P in the flange frame [m]
+  Vector3<T> r_load;   ///< load point L in the flange frame [m]
+  Vector3<T> p_meas;   ///< P in the base frame [m] (after stage 1)
+  Vector3<T> p_load;   ///< L in the base frame [m] (after stage 1)
+  Matrix6X<T> jac_meas;  ///< geometric Jacobian at P (after stage 1)
+  Matrix6X<T> jac_load;  ///< geometric Jacobian at L (after stage 1)
+  VectorX<T> tau;      ///< external joint torques J(L)^T W [N*m] (after stage 1)
+  VectorX<T> dtheta;   ///< joint deflection [rad] (stage 2)
+  Vector3<T> d;        ///< displacement of P [m] (stages 3-4)
+  Vector3<T> rot;      ///< small rotation of the flange [rad] (stages 3-4)
+};
+
+/// What an effect needs from the robot file or the data.
+enum Requirement : unsigned {
+  kNeedsNothing = 0,
+  kNeedsMasses = 1u << 0,    ///< link masses (gravity torques)
+  kNeedsTime = 1u << 1,      ///< a `t` column or meaningful row order
+  kNeedsSessions = 1u << 2,  ///< a `session` column
+};
+
+/// A physical effect configured for one robot (and, where it matters, one dataset).
+class Effect {
+ public:
+  virtual ~Effect() = default;
+  virtual const std::string& name() const = 0;
+  /// One-line physical explanation.
+  virtual std::string description() const = 0;
+  /// The model and its literature reference (docs).
+  virtual std::string reference() const = 0;
+  virtual unsigned requirements() const { return kNeedsNothing; }
+  /// Parameters, in the order of the parameter block.
+  virtual const std::vector<ParameterSpec>& parameters() const = 0;
+  int size() const { return static_cast<int>(parameters().size()); }
+
+  virtual void wrench(const double* p, EvalState<double>& s) const = 0;
+  virtual void wrench(const Jet* p, EvalState<Jet>& s) const = 0;
+  virtual void joint(const double* p, EvalState<double>& s) const = 0;
+  virtual void joint(const Jet* p, EvalState<Jet>& s) const = 0;
+  virtual void cartesian(const double* p, EvalState<double>& s) const = 0;
+  virtual void cartesian(const Jet* p, EvalState<Jet>& s) const = 0;
+  virtual void measurement(const double* p, EvalState<double>& s) const = 0;
+  virtual void measurement(const Jet* p, EvalState<Jet>& s) const = 0;
+};
+
+/// CRTP helper: an effect defines any of
+///   template <typename T> void wrench_t(const T* p, EvalState<T>& s) const;
+///   ... joint_t, cartesian_t, measurement_t
+/// and this class instantiates them for double and Jet. Stages it does not define do nothing.
+template <typename Derived>
+class EffectT : public Effect {
+ public:
+  template <typename T>
+  void wrench_t(const T*, EvalState<T>&) const {}
+  template <typename T>
+  void joint_t(const T*, EvalState<T>&) const {}
+  template <typename T>
+  void cartesian_t(const T*, EvalState<T>&) const {}
+  template <typename T>
+  void measurement_t(const T*, EvalState<T>&) const {}
+
+  void wrench(const double* p, EvalState<double>& s) const final { self().wrench_t(p, s); }
+  void wrench(const Jet* p, EvalState<Jet>& s) const final { self().wrench_t(p, s); }
+  void joint(const double* p, EvalState<double>& s) const final { self().joint_t(p, s); }
+  void joint(const Jet* p, EvalState<Jet>& s) const final { self().joint_t(p, s); }
+  void cartesian(const double* p, EvalState<double>& s) const final { self().cartesian_t(p, s); }
+  void cartesian(const Jet* p, EvalState<Jet>& s) const final { self().cartesian_t(p, s); }
+  void measurement(const double* p, EvalState<double>& s) const final {
+    self().measurement_t(p, s);
+  }
+  void measurement(const Jet* p, EvalState<Jet>& s) const final { self().measurement_t(p, s); }
+
+ private:
+  const Derived& self() const { return static_cast<const Derived&>(*this); }
+};
+
+/// What a factory gets: the robot and, optionally, the data the model will be used with
+/// (sessions, time span).
+struct EffectSetup {
+  const RobotModel* robot = nullptr;
+  const Dataset* data = nullptr;  ///< may be null (prediction without data)
+  int sessions = 1;               ///< number of distinct sessions in the data
+};
+
+using EffectFactory = std::unique_ptr<Effect> (*)(const EffectSetup&);
+
+/// Registry entry.
+struct EffectEntry {
+  const char* name;
+  EffectFactory factory;
+};
+
+/// Every effect the library knows, in the registry's order.
+const std::vector<EffectEntry>& effect_registry();
+/// Names of every registered effect.
+std::vector<std::string> effect_names();
+/// Create an effect by name; throws InvalidArgument listing the known names if unknown, or if
+/// the robot or data lack what it needs (e.g. masses).
+std::unique_ptr<Effect> make_effect(const std::string& name, const EffectSetup& setup);
+
+}  // namespace stiff
