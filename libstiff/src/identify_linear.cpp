@@ -17,10 +17,12 @@ FitResult identify_joint_linear(const RobotModel& robot, const Dataset& data,
   DeflectionModel model(robot, {"joint"}, &data);
 
   Eigen::MatrixXd a = observation_matrix(robot, data);
+  bool weighted = options.use_sigma && data.has_sigma;
+  for (const auto& row : data.rows) weighted = weighted && row.sigma_d > 0;
   Eigen::VectorXd x(m), w = Eigen::VectorXd::Ones(m);
   for (int r = 0; r < N; ++r) {
     x.segment<3>(3 * r) = data.rows[r].displacement;
-    if (options.use_sigma && data.has_sigma) w.segment<3>(3 * r).setConstant(1.0 / data.rows[r].sigma_d);
+    if (weighted) w.segment<3>(3 * r).setConstant(1.0 / data.rows[r].sigma_d);
   }
   const Eigen::MatrixXd aw = w.asDiagonal() * a;
   const Eigen::VectorXd xw = w.asDiagonal() * x;
@@ -120,7 +122,6 @@ FitResult identify_joint_linear(const RobotModel& robot, const Dataset& data,
   f.weights = Eigen::VectorXd::Ones(N);
   f.rms_m = std::sqrt(f.residuals.squaredNorm() / m);
   f.noise_floor_m = stated_noise_m(data);
-  const bool weighted = options.use_sigma && data.has_sigma;
   f.sigma_hat_m = weighted ? std::sqrt(s2) * f.noise_floor_m : std::sqrt(s2);
   if (weighted)
     f.chi2 = rss_w;

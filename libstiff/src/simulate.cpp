@@ -217,7 +217,6 @@ Dataset simulate(const RobotModel& robot, const Truth& truth, const Dataset& des
   Rng rng(noise.seed);
   Dataset out = design;
   out.has_displacement = true;
-  out.has_sigma = true;
   out.has_id = true;
   if (outlier_rows) outlier_rows->clear();
   const auto ctx = model.contexts(design);
@@ -233,6 +232,7 @@ Dataset simulate(const RobotModel& robot, const Truth& truth, const Dataset& des
       if (outlier_rows) outlier_rows->push_back(static_cast<int>(r));
     }
     m.sigma_d = sigma;
+    out.has_sigma = out.has_sigma || sigma > 0;
     // What the force sensor and the encoders report, not what acted.
     for (int k = 0; k < 3; ++k)
       m.force(k) += noise.force_relative * m.force(k) * rng.normal() +

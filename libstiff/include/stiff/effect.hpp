@@ -65,6 +65,9 @@ struct EvalState {
   Matrix6X<T> jac_load;  ///< geometric Jacobian at L (after stage 1)
   VectorX<T> tau;      ///< external joint torques J(L)^T W [N*m] (after stage 1)
   VectorX<T> dtheta;   ///< joint deflection [rad] (stage 2)
+  /// Diagonal joint compliances c_j [rad/(N*m)] as set by the `joint` effect in stage 2
+  /// (empty when the model has no joint effect); read by second-order effects in stage 3.
+  VectorX<T> compliance;
   Vector3<T> d;        ///< displacement of P [m] (stages 3-4)
   Vector3<T> rot;      ///< small rotation of the flange [rad] (stages 3-4)
 };

@@ -32,7 +32,12 @@ class JointCompliance : public EffectT<JointCompliance> {
 
   template <typename T>
   void joint_t(const T* c, EvalState<T>& s) const {
-    for (int j = 0; j < s.dtheta.size(); ++j) s.dtheta(j) += c[j] * s.tau(j);
+    const int n = static_cast<int>(s.dtheta.size());
+    s.compliance.resize(n);
+    for (int j = 0; j < n; ++j) {
+      s.dtheta(j) += c[j] * s.tau(j);
+      s.compliance(j) = c[j];
+    }
   }
 
  private:

@@ -4,8 +4,11 @@
 
 #include "stiff/effects/common.hpp"
 
+// clang-format off
 #define STIFF_EFFECT_LIST(X) \
-  X(joint)
+  X(joint) X(complementary) X(link) X(gravity_compensator) X(nonlinear_joint) X(backlash) \
+  X(coupling) X(tracker_frame) X(force_frame) X(point_offset) X(tool_compliance) X(drift)
+// clang-format on
 
 namespace stiff {
 

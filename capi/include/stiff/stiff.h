@@ -1,0 +1,341 @@
+/* stiff.h - the stable C ABI of stiff (libstiff_c).
+ *
+ * Conventions (docs/c-api.md):
+ *  - All quantities are SI: m, rad, N, N*m; compliance rad/(N*m); stiffness N*m/rad.
+ *    Frames: "base" is the robot base frame; the "flange" frame is the last link's frame.
+ *  - Every call that can fail returns a stiff_status: 0 on success, a negative pinned code
+ *    on failure. stiff_last_error() then holds "function: reason" (for files
+ *    "function: path:line:column: reason"). It is thread-local and set on failure only.
+ *  - Handles are opaque, created by *_create/_load/_read and released by the matching
+ *    *_destroy; destroy(NULL) does nothing. Memory the library allocates is freed only by it.
+ *  - Out-parameters come first, user_data last. On failure, handle out-parameters are NULL.
+ *  - Matrices are row-major contiguous double arrays with their dimensions given.
+ *  - Buffers: (values, capacity, needed). If capacity is too small nothing is written,
+ *    *needed (when needed != NULL) holds the required count and STIFF_E_BUFFER_TOO_SMALL is
+ *    returned; call again with a larger buffer.
+ *  - Option structs start with struct_size = sizeof(struct) as the caller compiled it; zero
+ *    fields mean "library default"; fields are only ever appended. NULL options: defaults.
+ *  - Threading: a handle is used by one thread at a time; distinct handles are independent;
+ *    const handles (robot, result, model) may be shared by threads that only read them.
+ *  - Nothing is printed; no exception or abort crosses this boundary.
+ */
+#ifndef STIFF_H
+#define STIFF_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#if defined(STIFF_C_BUILDING)
+#define STIFF_API __attribute__((visibility("default")))
+#else
+#define STIFF_API
+#endif
+
+#define STIFF_VERSION_MAJOR 0
+#define STIFF_VERSION_MINOR 1
+#define STIFF_VERSION_PATCH 0
+#define STIFF_VERSION_NUMBER \
+  (STIFF_VERSION_MAJOR * 10000 + STIFF_VERSION_MINOR * 100 + STIFF_VERSION_PATCH)
+/** ABI number: the SONAME is libstiff_c.so.<STIFF_ABI_VERSION>. */
+#define STIFF_ABI_VERSION 0
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Result of every call that can fail. Values are ABI: append only, never renumber. */
+typedef enum stiff_status {
+  STIFF_OK = 0,
+  STIFF_E_INVALID_ARGUMENT = -1, /**< NULL, NaN, wrong size, out of range, unknown name */
+  STIFF_E_INVALID_STATE = -2,    /**< call out of order for this handle */
+  STIFF_E_PARSE = -3,            /**< bad input file; message has path:line:column */
+  STIFF_E_IO = -4,               /**< file cannot be opened, read or written */
+  STIFF_E_BUFFER_TOO_SMALL = -5, /**< *needed holds the required count */
+  STIFF_E_NUMERICAL = -6,        /**< singular, non-finite or unidentifiable problem */
+  STIFF_E_CANCELLED = -7,        /**< a user callback asked to stop (or threw) */
+  STIFF_E_NO_MEMORY = -8,        /**< allocation failed */
+  STIFF_E_INTERNAL = -99         /**< unexpected failure: a bug, please report */
+} stiff_status;
+
+/** Opaque handles. */
+typedef struct stiff_robot stiff_robot;     /**< robot description (kinematics, masses) */
+typedef struct stiff_dataset stiff_dataset; /**< one experiment: poses, loads, displacements */
+typedef struct stiff_result stiff_result;   /**< an identified model (a "fit") */
+typedef struct stiff_model stiff_model;     /**< robot + fit, ready to predict and compensate */
+
+/* ---------------------------------------------------------------- version and errors */
+
+/** Runtime version, STIFF_VERSION_NUMBER of the loaded library. @since 0.1 */
+STIFF_API uint32_t stiff_version(void);
+/** Runtime version as "major.minor.patch"; static string. @since 0.1 */
+STIFF_API const char* stiff_version_string(void);
+/** Name of a status code ("STIFF_E_PARSE"); static string, never NULL. @since 0.1 */
+STIFF_API const char* stiff_status_name(stiff_status status);
+/** Message of the calling thread's last failure; never NULL ("" before any failure); valid
+ *  until the next failing stiff_ call on this thread. Test the returned status, not this.
+ *  @since 0.1 */
+STIFF_API const char* stiff_last_error(void);
+
+/* ---------------------------------------------------------------- robot */
+
+/** Load a robot description: YAML (docs/formats.md) or, for names ending in .urdf, a URDF
+ *  serial chain. Errors: STIFF_E_IO, STIFF_E_PARSE (path:line:column), INVALID_ARGUMENT.
+ *  Release with stiff_robot_destroy. @since 0.1 */
+STIFF_API stiff_status stiff_robot_load(stiff_robot** out, const char* path);
+/** Release a robot; NULL is a no-op. @since 0.1 */
+STIFF_API void stiff_robot_destroy(stiff_robot* robot);
+/** Joint count. @since 0.1 */
+STIFF_API stiff_status stiff_robot_dof(size_t* dof, const stiff_robot* robot);
+/** Robot name as UTF-8 with its NUL; buffer semantics in bytes. @since 0.1 */
+STIFF_API stiff_status stiff_robot_name(char* name,
+                                        size_t capacity,
+                                        size_t* needed,
+                                        const stiff_robot* robot);
+/** Joint limits [rad]: lower and upper, each of dof values. @since 0.1 */
+STIFF_API stiff_status stiff_robot_limits(
+    double* lower, double* upper, size_t capacity, size_t* needed, const stiff_robot* robot);
+/** Pose of the measured point (tool) at joint positions q (n = dof values, rad): a 4 x 4
+ *  homogeneous transform, row-major, base frame, translation in m. @since 0.1 */
+STIFF_API stiff_status stiff_robot_tool_pose(double pose[16],
+                                             const stiff_robot* robot,
+                                             const double* q,
+                                             size_t n);
+/** 6 x n geometric Jacobian at the measured point, base frame, row-major: rows 0-2 the
+ *  linear velocity [m/rad], rows 3-5 the angular velocity [rad/rad]. capacity >= 6n.
+ *  @since 0.1 */
+STIFF_API stiff_status stiff_robot_jacobian(double* jacobian,
+                                            size_t capacity,
+                                            size_t* needed,
+                                            const stiff_robot* robot,
+                                            const double* q,
+                                            size_t n);
+
+/* ---------------------------------------------------------------- datasets */
+
+/** Columns of a dataset, for stiff_dataset_get. Shapes: Q rows x dof [rad]; FORCE, MOMENT,
+ *  DISPLACEMENT, ROTATION rows x 3 [N, N*m, m, rad], base frame; SIGMA rows [m]; TIME rows
+ *  [s]. */
+typedef enum stiff_column {
+  STIFF_COLUMN_Q = 0,
+  STIFF_COLUMN_FORCE = 1,
+  STIFF_COLUMN_MOMENT = 2,
+  STIFF_COLUMN_DISPLACEMENT = 3,
+  STIFF_COLUMN_ROTATION = 4,
+  STIFF_COLUMN_SIGMA = 5,
+  STIFF_COLUMN_TIME = 6
+} stiff_column;
+
+/** Read a measurement file (docs/formats.md). robot may be NULL (the joint count is then
+ *  taken from the columns); with a robot, a q column beyond its dof is an error. Nothing is
+ *  read half: on any error *out is NULL. Errors: IO, PARSE. @since 0.1 */
+STIFF_API stiff_status stiff_dataset_read_csv(stiff_dataset** out,
+                                              const stiff_robot* robot,
+                                              const char* path);
+/** Write in SI units, atomically (temporary file renamed when complete). @since 0.1 */
+STIFF_API stiff_status stiff_dataset_write_csv(const stiff_dataset* dataset, const char* path);
+/** Build a dataset from arrays (copied): q rows x dof [rad], force rows x 3 [N] (base frame,
+ *  at the load point); moment, displacement (rows x 3) and sigma_d (rows) may be NULL.
+ *  @since 0.1 */
+STIFF_API stiff_status stiff_dataset_create(stiff_dataset** out,
+                                            size_t rows,
+                                            size_t dof,
+                                            const double* q,
+                                            const double* force,
+                                            const double* moment,
+                                            const double* displacement,
+                                            const double* sigma_d);
+/** Release a dataset; NULL is a no-op. @since 0.1 */
+STIFF_API void stiff_dataset_destroy(stiff_dataset* dataset);
+/** Number of rows and joints. @since 0.1 */
+STIFF_API stiff_status stiff_dataset_size(size_t* rows, size_t* dof, const stiff_dataset* dataset);
+/** 1 if the file had the column (q and force always exist), else 0. @since 0.1 */
+STIFF_API stiff_status stiff_dataset_has(int* present,
+                                         const stiff_dataset* dataset,
+                                         stiff_column column);
+/** Copy a column (shapes above) into values. @since 0.1 */
+STIFF_API stiff_status stiff_dataset_get(double* values,
+                                         size_t capacity,
+                                         size_t* needed,
+                                         const stiff_dataset* dataset,
+                                         stiff_column column);
+/** Replace the measured displacements (rows x 3, m, base frame). @since 0.1 */
+STIFF_API stiff_status stiff_dataset_set_displacement(stiff_dataset* dataset,
+                                                      const double* displacement,
+                                                      size_t rows);
+/** Id of a row (UTF-8 with NUL; buffer in bytes). @since 0.1 */
+STIFF_API stiff_status stiff_dataset_id(
+    char* id, size_t capacity, size_t* needed, const stiff_dataset* dataset, size_t row);
+
+/* ---------------------------------------------------------------- simulation */
+
+/** Noise of a simulated experiment. Zero fields mean zero error, except the seed (0 = 1). */
+typedef struct stiff_noise_options {
+  uint32_t struct_size;
+  double tracker_sigma_m;       /**< per-axis tracker sigma, constant part [m] */
+  double tracker_ppm;           /**< distance-proportional part [um per m] */
+  double tracker_position_m[3]; /**< tracker station, base frame [m]; 0,0,0: (2, 0, 0.5) */
+  double force_relative;        /**< relative force error, 1 sigma */
+  double force_absolute_N;      /**< absolute force error, 1 sigma [N] */
+  double joint_sigma_rad;       /**< joint reading error, 1 sigma [rad] */
+  double outlier_rate;          /**< fraction of rows with a gross tracker error */
+  double outlier_size_m;        /**< size of a gross error [m] */
+  uint64_t seed;                /**< random seed; same seed, same data */
+} stiff_noise_options;
+
+/** Read a noise file (YAML, docs/formats.md) into *noise (set its struct_size first).
+ *  Errors: IO, PARSE with path:line:column. @since 0.1 */
+STIFF_API stiff_status stiff_noise_read(stiff_noise_options* noise, const char* path);
+
+/** Random design: count poses uniform in 95 % of each joint's range, q6 free, loads with
+ *  per-axis magnitude in [15, 35] N and random sign; near-singular poses rejected. @since 0.1 */
+STIFF_API stiff_status stiff_design_random(stiff_dataset** out,
+                                           const stiff_robot* robot,
+                                           size_t count,
+                                           uint64_t seed);
+/** Simulate measurements of design (poses and loads; NULL: 20 random poses) on a virtual
+ *  robot whose truth is read from truth_path (YAML, docs/formats.md), or, when truth_path is
+ *  NULL, is the joint stiffness `stiffness` (n = dof values, N*m/rad). @since 0.1 */
+STIFF_API stiff_status stiff_simulate(stiff_dataset** out,
+                                      const stiff_robot* robot,
+                                      const stiff_dataset* design,
+                                      const char* truth_path,
+                                      const double* stiffness,
+                                      size_t n,
+                                      const stiff_noise_options* noise);
+
+/* ---------------------------------------------------------------- identification */
+
+/** Progress callback: return 0 to continue, non-zero to stop (the call then returns
+ *  STIFF_E_CANCELLED). Called from the calling thread. */
+typedef int (*stiff_progress_fn)(uint32_t iteration, double cost, void* user_data);
+
+/** Identification methods. */
+typedef enum stiff_method {
+  STIFF_METHOD_AUTO = 0,   /**< linear least squares for "joint" without robust loss, else Ceres */
+  STIFF_METHOD_LINEAR = 1, /**< linear least squares (model "joint" only) */
+  STIFF_METHOD_CERES = 2   /**< nonlinear robust least squares (any model) */
+} stiff_method;
+
+typedef struct stiff_identify_options {
+  uint32_t struct_size;
+  const char* model;          /**< effects joined by '+', e.g. "joint+link"; NULL: "joint" */
+  const char* loss;           /**< none, huber, cauchy, soft_l1, tukey; NULL: none */
+  double loss_scale_m;        /**< robust loss scale [m]; 0: from sigma_d or the data */
+  uint32_t max_iterations;    /**< 0: default */
+  uint32_t method;            /**< a stiff_method */
+  stiff_progress_fn progress; /**< may be NULL */
+  void* progress_user_data;
+} stiff_identify_options;
+
+/** Identify the model from data with measured displacements. Joints or parameters that the
+ *  data cannot identify are named in the result's warnings and held fixed. Errors:
+ *  INVALID_ARGUMENT (bad data, unknown effect or loss), NUMERICAL, CANCELLED. Release with
+ *  stiff_result_destroy. @since 0.1 */
+STIFF_API stiff_status stiff_identify(stiff_result** out,
+                                      const stiff_robot* robot,
+                                      const stiff_dataset* data,
+                                      const stiff_identify_options* options);
+/** Release a result; NULL is a no-op. @since 0.1 */
+STIFF_API void stiff_result_destroy(stiff_result* result);
+/** Read / write a fit file (JSON, docs/formats.md). Writing is atomic. @since 0.1 */
+STIFF_API stiff_status stiff_result_read_json(stiff_result** out, const char* path);
+STIFF_API stiff_status stiff_result_write_json(const stiff_result* result, const char* path);
+/** The fit file's JSON text (UTF-8 with NUL; buffer in bytes). @since 0.1 */
+STIFF_API stiff_status stiff_result_json(char* json,
+                                         size_t capacity,
+                                         size_t* needed,
+                                         const stiff_result* result);
+/** Joint stiffness k_j = 1/c_j [N*m/rad] (dof values; NaN for unidentified joints). */
+STIFF_API stiff_status stiff_result_joint_stiffness(double* values,
+                                                    size_t capacity,
+                                                    size_t* needed,
+                                                    const stiff_result* result);
+/** Standard errors of the joint stiffness [N*m/rad] (delta method; NaN when unidentified). */
+STIFF_API stiff_status stiff_result_joint_stiffness_se(double* values,
+                                                       size_t capacity,
+                                                       size_t* needed,
+                                                       const stiff_result* result);
+/** All model parameters (SI) and their standard errors (NaN when not identified); p values
+ *  each; se may be NULL. @since 0.1 */
+STIFF_API stiff_status stiff_result_parameters(double* values,
+                                               double* standard_errors,
+                                               size_t capacity,
+                                               size_t* needed,
+                                               const stiff_result* result);
+/** Parameter covariance, p x p row-major (NaN rows for unidentified parameters). */
+STIFF_API stiff_status stiff_result_covariance(double* covariance,
+                                               size_t capacity,
+                                               size_t* needed,
+                                               const stiff_result* result);
+/** Residuals measured - predicted, rows x 3 [m]. @since 0.1 */
+STIFF_API stiff_status stiff_result_residuals(double* residuals,
+                                              size_t capacity,
+                                              size_t* needed,
+                                              const stiff_result* result);
+
+/** Fit statistics. */
+typedef struct stiff_fit_statistics {
+  uint32_t struct_size;
+  uint32_t measurements;   /**< N rows */
+  uint32_t rank;           /**< identified parameters */
+  uint32_t dof;            /**< 3N - rank */
+  double rms_m;            /**< RMS of the residual components [m] */
+  double sigma_hat_m;      /**< residual standard deviation [m] */
+  double noise_floor_m;    /**< stated noise (sigma_d, metadata) [m]; 0 if unknown */
+  double chi2;             /**< sum of squared residuals over sigma^2 (0 if sigma unknown) */
+  double condition_number; /**< of the column-scaled observation matrix */
+  uint32_t outliers;       /**< measurements flagged by the robust loss */
+  uint32_t warnings;       /**< warnings (see stiff_result_warning) */
+} stiff_fit_statistics;
+/** Fill *statistics (set its struct_size first). @since 0.1 */
+STIFF_API stiff_status stiff_result_statistics(stiff_fit_statistics* statistics,
+                                               const stiff_result* result);
+/** Warning i of the fit (unidentifiable joints, sign problems). @since 0.1 */
+STIFF_API stiff_status stiff_result_warning(
+    char* text, size_t capacity, size_t* needed, const stiff_result* result, size_t index);
+
+/* ---------------------------------------------------------------- prediction */
+
+/** Compile a robot and a fit into a model for prediction and compensation. The fit's effects
+ *  must exist for this robot. Release with stiff_model_destroy. @since 0.1 */
+STIFF_API stiff_status stiff_model_create(stiff_model** out,
+                                          const stiff_robot* robot,
+                                          const stiff_result* fit);
+STIFF_API void stiff_model_destroy(stiff_model* model);
+/** Predicted deflection (dx, dy, dz [m], rx, ry, rz [rad]), base frame, of the measured point
+ *  at joint positions q (n = dof, rad) under the wrench (fx, fy, fz [N], mx, my, mz [N*m])
+ *  applied at the load point, base frame. @since 0.1 */
+STIFF_API stiff_status stiff_predict(double deflection[6],
+                                     const stiff_model* model,
+                                     const double* q,
+                                     size_t n,
+                                     const double wrench[6]);
+/** Batch form: q rows x n, wrench rows x 6, deflection rows x 6 (capacity >= 6 rows).
+ *  @since 0.1 */
+STIFF_API stiff_status stiff_predict_batch(double* deflection,
+                                           size_t capacity,
+                                           size_t* needed,
+                                           const stiff_model* model,
+                                           const double* q,
+                                           const double* wrench,
+                                           size_t rows,
+                                           size_t n);
+
+/* ---------------------------------------------------------------- effect registry */
+
+/** Number of physical effects the library knows. @since 0.1 */
+STIFF_API size_t stiff_effect_count(void);
+/** Name of effect `index` (0 .. count-1), e.g. "joint", "backlash". @since 0.1 */
+STIFF_API stiff_status stiff_effect_name(char* name, size_t capacity, size_t* needed, size_t index);
+/** JSON description of an effect for a robot (NULL: a generic 6R arm with masses):
+ *  {"name", "description", "reference", "needs": [...], "parameters": [{"name", "unit",
+ *  "meaning", "lower", "upper", "typical", "null_value"}]}. Unknown name:
+ *  STIFF_E_INVALID_ARGUMENT listing the known ones. @since 0.1 */
+STIFF_API stiff_status stiff_effect_describe(
+    char* json, size_t capacity, size_t* needed, const stiff_robot* robot, const char* name);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* STIFF_H */

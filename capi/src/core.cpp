@@ -1,0 +1,443 @@
+// Version, errors, robots, datasets.
+#include <thread>
+
+#include "boundary.hpp"
+#include "handles.hpp"
+#include "stiff/robot_io.hpp"
+#include "stiff/simulate.hpp"
+
+namespace stiff::capi {
+namespace {
+thread_local std::string last_error;
+}
+
+stiff_status fail(const char* function, stiff_status status, const std::string& what) noexcept {
+  try {
+    last_error = std::string(function) + ": " + what;
+  } catch (...) {
+    // Out of memory while formatting: keep the previous message.
+  }
+  return status;
+}
+
+}  // namespace stiff::capi
+
+using namespace stiff;
+using namespace stiff::capi;
+
+extern "C" {
+
+uint32_t stiff_version(void) { return STIFF_VERSION_NUMBER; }
+
+const char* stiff_version_string(void) {
+#define STIFF_STR2(x) #x
+#define STIFF_STR(x) STIFF_STR2(x)
+  return STIFF_STR(STIFF_VERSION_MAJOR) "." STIFF_STR(STIFF_VERSION_MINOR) "." STIFF_STR(
+      STIFF_VERSION_PATCH);
+}
+
+const char* stiff_status_name(stiff_status status) {
+  switch (status) {
+    case STIFF_OK:
+      return "STIFF_OK";
+    case STIFF_E_INVALID_ARGUMENT:
+      return "STIFF_E_INVALID_ARGUMENT";
+    case STIFF_E_INVALID_STATE:
+      return "STIFF_E_INVALID_STATE";
+    case STIFF_E_PARSE:
+      return "STIFF_E_PARSE";
+    case STIFF_E_IO:
+      return "STIFF_E_IO";
+    case STIFF_E_BUFFER_TOO_SMALL:
+      return "STIFF_E_BUFFER_TOO_SMALL";
+    case STIFF_E_NUMERICAL:
+      return "STIFF_E_NUMERICAL";
+    case STIFF_E_CANCELLED:
+      return "STIFF_E_CANCELLED";
+    case STIFF_E_NO_MEMORY:
+      return "STIFF_E_NO_MEMORY";
+    case STIFF_E_INTERNAL:
+      return "STIFF_E_INTERNAL";
+  }
+  return "STIFF_E_UNKNOWN";
+}
+
+const char* stiff_last_error(void) { return stiff::capi::last_error.c_str(); }
+
+stiff_status stiff_robot_load(stiff_robot** out, const char* path) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require_string(path, "path");
+    auto r = std::make_unique<stiff_robot>();
+    r->model = load_robot(path);
+    *out = r.release();
+    return STIFF_OK;
+  });
+}
+
+void stiff_robot_destroy(stiff_robot* robot) { delete robot; }
+
+stiff_status stiff_robot_dof(size_t* dof, const stiff_robot* robot) {
+  return guarded(__func__, [&] {
+    require(dof, "dof");
+    require(robot, "robot");
+    *dof = static_cast<size_t>(robot->model.dof());
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_robot_name(char* name,
+                              size_t capacity,
+                              size_t* needed,
+                              const stiff_robot* robot) {
+  return guarded(__func__, [&] {
+    require(robot, "robot");
+    return copy_string(__func__, robot->model.name, name, capacity, needed);
+  });
+}
+
+stiff_status stiff_robot_limits(
+    double* lower, double* upper, size_t capacity, size_t* needed, const stiff_robot* robot) {
+  return guarded(__func__, [&] {
+    require(robot, "robot");
+    const size_t n = robot->model.dof();
+    if (needed) *needed = n;
+    if (capacity < n || !lower || !upper)
+      return fail(
+          __func__, STIFF_E_BUFFER_TOO_SMALL,
+          "buffers hold " + std::to_string(capacity) + " values, " + std::to_string(n) + " needed");
+    for (size_t j = 0; j < n; ++j) {
+      lower[j] = robot->model.joints[j].lower;
+      upper[j] = robot->model.joints[j].upper;
+    }
+    return STIFF_OK;
+  });
+}
+
+namespace {
+Eigen::VectorXd joint_vector(const stiff_robot* robot, const double* q, size_t n) {
+  require(robot, "robot");
+  require(q, "q");
+  if (n != static_cast<size_t>(robot->model.dof()))
+    throw InvalidArgument("q has " + std::to_string(n) + " values, the robot has " +
+                          std::to_string(robot->model.dof()) + " joints");
+  require_finite(q, n, "q");
+  return Eigen::Map<const Eigen::VectorXd>(q, static_cast<Eigen::Index>(n));
+}
+}  // namespace
+
+stiff_status stiff_robot_tool_pose(double pose[16],
+                                   const stiff_robot* robot,
+                                   const double* q,
+                                   size_t n) {
+  return guarded(__func__, [&] {
+    require(pose, "pose");
+    const Eigen::VectorXd qv = joint_vector(robot, q, n);
+    const Eigen::Matrix4d t = robot->model.tool_pose(qv);
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) pose[4 * r + c] = t(r, c);
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_robot_jacobian(double* jacobian,
+                                  size_t capacity,
+                                  size_t* needed,
+                                  const stiff_robot* robot,
+                                  const double* q,
+                                  size_t n) {
+  return guarded(__func__, [&] {
+    const Eigen::VectorXd qv = joint_vector(robot, q, n);
+    const Eigen::Matrix<double, 6, Eigen::Dynamic, Eigen::RowMajor> j = robot->model.jacobian(qv);
+    return copy_out(__func__, j.data(), static_cast<size_t>(j.size()), jacobian, capacity, needed);
+  });
+}
+
+stiff_status stiff_dataset_read_csv(stiff_dataset** out,
+                                    const stiff_robot* robot,
+                                    const char* path) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require_string(path, "path");
+    auto d = std::make_unique<stiff_dataset>();
+    d->data = read_measurements_csv(path, robot ? robot->model.dof() : 0);
+    *out = d.release();
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_dataset_write_csv(const stiff_dataset* dataset, const char* path) {
+  return guarded(__func__, [&] {
+    require(dataset, "dataset");
+    require_string(path, "path");
+    write_measurements_csv(path, dataset->data);
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_dataset_create(stiff_dataset** out,
+                                  size_t rows,
+                                  size_t dof,
+                                  const double* q,
+                                  const double* force,
+                                  const double* moment,
+                                  const double* displacement,
+                                  const double* sigma_d) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require(q, "q");
+    require(force, "force");
+    if (rows == 0) throw InvalidArgument("rows must be > 0");
+    if (dof == 0 || dof > 64) throw InvalidArgument("dof must be in 1..64");
+    require_finite(q, rows * dof, "q");
+    require_finite(force, rows * 3, "force");
+    if (moment) require_finite(moment, rows * 3, "moment");
+    if (displacement) require_finite(displacement, rows * 3, "displacement");
+    if (sigma_d) {
+      require_finite(sigma_d, rows, "sigma_d");
+      for (size_t r = 0; r < rows; ++r)
+        if (!(sigma_d[r] > 0))
+          throw InvalidArgument("sigma_d[" + std::to_string(r) + "] must be > 0");
+    }
+    auto d = std::make_unique<stiff_dataset>();
+    Dataset& ds = d->data;
+    ds.dof = static_cast<int>(dof);
+    ds.has_id = true;
+    ds.has_moment = moment != nullptr;
+    ds.has_displacement = displacement != nullptr;
+    ds.has_sigma = sigma_d != nullptr;
+    for (size_t r = 0; r < rows; ++r) {
+      Measurement m;
+      m.id = std::to_string(r + 1);
+      m.q = Eigen::Map<const Eigen::VectorXd>(q + r * dof, static_cast<Eigen::Index>(dof));
+      m.force = Eigen::Map<const Eigen::Vector3d>(force + 3 * r);
+      if (moment) m.moment = Eigen::Map<const Eigen::Vector3d>(moment + 3 * r);
+      if (displacement) m.displacement = Eigen::Map<const Eigen::Vector3d>(displacement + 3 * r);
+      if (sigma_d) m.sigma_d = sigma_d[r];
+      ds.rows.push_back(std::move(m));
+    }
+    *out = d.release();
+    return STIFF_OK;
+  });
+}
+
+void stiff_dataset_destroy(stiff_dataset* dataset) { delete dataset; }
+
+stiff_status stiff_dataset_size(size_t* rows, size_t* dof, const stiff_dataset* dataset) {
+  return guarded(__func__, [&] {
+    require(dataset, "dataset");
+    if (rows) *rows = dataset->data.rows.size();
+    if (dof) *dof = static_cast<size_t>(dataset->data.dof);
+    return STIFF_OK;
+  });
+}
+
+namespace {
+bool column_present(const Dataset& d, stiff_column column) {
+  switch (column) {
+    case STIFF_COLUMN_Q:
+    case STIFF_COLUMN_FORCE:
+      return true;
+    case STIFF_COLUMN_MOMENT:
+      return d.has_moment;
+    case STIFF_COLUMN_DISPLACEMENT:
+      return d.has_displacement;
+    case STIFF_COLUMN_ROTATION:
+      return d.has_rotation;
+    case STIFF_COLUMN_SIGMA:
+      return d.has_sigma;
+    case STIFF_COLUMN_TIME:
+      return d.has_time;
+  }
+  throw InvalidArgument("unknown column " + std::to_string(static_cast<int>(column)));
+}
+}  // namespace
+
+stiff_status stiff_dataset_has(int* present, const stiff_dataset* dataset, stiff_column column) {
+  return guarded(__func__, [&] {
+    require(present, "present");
+    require(dataset, "dataset");
+    *present = column_present(dataset->data, column) ? 1 : 0;
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_dataset_get(double* values,
+                               size_t capacity,
+                               size_t* needed,
+                               const stiff_dataset* dataset,
+                               stiff_column column) {
+  return guarded(__func__, [&] {
+    require(dataset, "dataset");
+    const Dataset& d = dataset->data;
+    if (!column_present(d, column)) throw InvalidArgument("the dataset has no such column");
+    std::vector<double> v;
+    for (const auto& m : d.rows) {
+      switch (column) {
+        case STIFF_COLUMN_Q:
+          for (int j = 0; j < d.dof; ++j) v.push_back(m.q(j));
+          break;
+        case STIFF_COLUMN_FORCE:
+          v.insert(v.end(), m.force.data(), m.force.data() + 3);
+          break;
+        case STIFF_COLUMN_MOMENT:
+          v.insert(v.end(), m.moment.data(), m.moment.data() + 3);
+          break;
+        case STIFF_COLUMN_DISPLACEMENT:
+          v.insert(v.end(), m.displacement.data(), m.displacement.data() + 3);
+          break;
+        case STIFF_COLUMN_ROTATION:
+          v.insert(v.end(), m.rotation.data(), m.rotation.data() + 3);
+          break;
+        case STIFF_COLUMN_SIGMA:
+          v.push_back(m.sigma_d);
+          break;
+        case STIFF_COLUMN_TIME:
+          v.push_back(m.time);
+          break;
+      }
+    }
+    return copy_out(__func__, v.data(), v.size(), values, capacity, needed);
+  });
+}
+
+stiff_status stiff_dataset_set_displacement(stiff_dataset* dataset,
+                                            const double* displacement,
+                                            size_t rows) {
+  return guarded(__func__, [&] {
+    require(dataset, "dataset");
+    require(displacement, "displacement");
+    if (rows != dataset->data.rows.size())
+      throw InvalidArgument("displacement has " + std::to_string(rows) + " rows, the dataset " +
+                            std::to_string(dataset->data.rows.size()));
+    require_finite(displacement, 3 * rows, "displacement");
+    for (size_t r = 0; r < rows; ++r)
+      dataset->data.rows[r].displacement = Eigen::Map<const Eigen::Vector3d>(displacement + 3 * r);
+    dataset->data.has_displacement = true;
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_dataset_id(
+    char* id, size_t capacity, size_t* needed, const stiff_dataset* dataset, size_t row) {
+  return guarded(__func__, [&] {
+    require(dataset, "dataset");
+    if (row >= dataset->data.rows.size())
+      throw InvalidArgument("row " + std::to_string(row) + " out of range (dataset has " +
+                            std::to_string(dataset->data.rows.size()) + ")");
+    return copy_string(__func__, dataset->data.rows[row].id, id, capacity, needed);
+  });
+}
+
+stiff_status stiff_noise_read(stiff_noise_options* noise, const char* path) {
+  return guarded(__func__, [&] {
+    require(noise, "noise");
+    require_string(path, "path");
+    const NoiseModel n = read_noise(path);
+    stiff_noise_options o = read_options(noise);
+    o.tracker_sigma_m = n.tracker_sigma_m;
+    o.tracker_ppm = n.tracker_ppm;
+    for (int k = 0; k < 3; ++k) o.tracker_position_m[k] = n.tracker_position_m(k);
+    o.force_relative = n.force_relative;
+    o.force_absolute_N = n.force_absolute_N;
+    o.joint_sigma_rad = n.joint_sigma_rad;
+    o.outlier_rate = n.outlier_rate;
+    o.outlier_size_m = n.outlier_size_m;
+    o.seed = n.seed;
+    const size_t size = std::min<size_t>(noise->struct_size, sizeof o);
+    o.struct_size = noise->struct_size;
+    std::memcpy(noise, &o, size);
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_design_random(stiff_dataset** out,
+                                 const stiff_robot* robot,
+                                 size_t count,
+                                 uint64_t seed) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require(robot, "robot");
+    if (count == 0 || count > 1000000) throw InvalidArgument("count must be in 1..1e6");
+    RandomDesignOptions o;
+    o.count = static_cast<int>(count);
+    o.seed = seed;
+    auto d = std::make_unique<stiff_dataset>();
+    d->data = random_design(robot->model, o);
+    *out = d.release();
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_simulate(stiff_dataset** out,
+                            const stiff_robot* robot,
+                            const stiff_dataset* design,
+                            const char* truth_path,
+                            const double* stiffness,
+                            size_t n,
+                            const stiff_noise_options* noise) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require(robot, "robot");
+    const RobotModel& rm = robot->model;
+    Truth truth;
+    if (truth_path) {
+      require_string(truth_path, "truth_path");
+      truth = read_truth(truth_path, rm);
+    } else {
+      require(stiffness, "stiffness (or truth_path)");
+      if (n != static_cast<size_t>(rm.dof()))
+        throw InvalidArgument("stiffness has " + std::to_string(n) + " values, the robot has " +
+                              std::to_string(rm.dof()) + " joints");
+      require_finite(stiffness, n, "stiffness");
+      for (size_t j = 0; j < n; ++j)
+        if (!(stiffness[j] > 0))
+          throw InvalidArgument("stiffness[" + std::to_string(j) + "] must be > 0");
+      truth =
+          joint_truth(Eigen::Map<const Eigen::VectorXd>(stiffness, static_cast<Eigen::Index>(n)));
+    }
+    const stiff_noise_options o = read_options(noise);
+    NoiseModel nm;
+    if (noise) {
+      const double vals[] = {o.tracker_sigma_m,       o.tracker_ppm,
+                             o.force_relative,        o.force_absolute_N,
+                             o.joint_sigma_rad,       o.outlier_rate,
+                             o.outlier_size_m,        o.tracker_position_m[0],
+                             o.tracker_position_m[1], o.tracker_position_m[2]};
+      require_finite(vals, 10, "noise");
+      for (int i = 0; i < 7; ++i)
+        if (vals[i] < 0) throw InvalidArgument("noise: negative error size");
+      if (o.outlier_rate > 0.5) throw InvalidArgument("noise: outlier_rate must be <= 0.5");
+      nm.tracker_sigma_m = o.tracker_sigma_m;
+      nm.tracker_ppm = o.tracker_ppm;
+      if (o.tracker_position_m[0] != 0 || o.tracker_position_m[1] != 0 ||
+          o.tracker_position_m[2] != 0)
+        nm.tracker_position_m = Eigen::Vector3d(o.tracker_position_m);
+      nm.force_relative = o.force_relative;
+      nm.force_absolute_N = o.force_absolute_N;
+      nm.joint_sigma_rad = o.joint_sigma_rad;
+      nm.outlier_rate = o.outlier_rate;
+      nm.outlier_size_m = o.outlier_size_m;
+      nm.seed = o.seed ? o.seed : 1;
+    }
+    Dataset plan;
+    if (design) {
+      plan = design->data;
+    } else {
+      RandomDesignOptions ro;
+      ro.seed = nm.seed;
+      plan = random_design(rm, ro);
+    }
+    auto d = std::make_unique<stiff_dataset>();
+    d->data = simulate(rm, truth, plan, nm);
+    *out = d.release();
+    return STIFF_OK;
+  });
+}
+
+}  // extern "C"

@@ -1,0 +1,23 @@
+// C ABI of the FMU export (stiff_fmu.h).
+#include "boundary.hpp"
+#include "handles.hpp"
+#include "stiff/fmu_export.hpp"
+#include "stiff/stiff_fmu.h"
+
+extern "C" stiff_status stiff_fmu_export(const char* path,
+                                         const stiff_robot* robot,
+                                         const stiff_result* fit,
+                                         const stiff_fmu_options* options) {
+  return stiff::capi::guarded(__func__, [&] {
+    stiff::capi::require_string(path, "path");
+    stiff::capi::require(robot, "robot");
+    stiff::capi::require(fit, "fit");
+    const stiff_fmu_options o = stiff::capi::read_options(options);
+    stiff::FmuExportOptions opt;
+    opt.fmi_version = o.fmi_version == 0 ? 2 : static_cast<int>(o.fmi_version);
+    if (o.model_identifier) opt.model_identifier = o.model_identifier;
+    if (o.binaries_dir) opt.binaries_dir = o.binaries_dir;
+    stiff::export_fmu(robot->model, fit->fit, path, opt);
+    return STIFF_OK;
+  });
+}

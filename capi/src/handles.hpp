@@ -1,0 +1,29 @@
+// Definitions of the opaque C handles: real structs around core objects (no casts).
+#pragma once
+
+#include <memory>
+
+#include "stiff/dataset.hpp"
+#include "stiff/fit.hpp"
+#include "stiff/model.hpp"
+#include "stiff/robot_model.hpp"
+
+struct stiff_robot {
+  stiff::RobotModel model;
+};
+
+struct stiff_dataset {
+  stiff::Dataset data;
+};
+
+struct stiff_result {
+  stiff::FitResult fit;
+};
+
+/// A robot with an identified model, ready for prediction and compensation.
+struct stiff_model {
+  stiff::RobotModel robot;
+  stiff::FitResult fit;
+  std::unique_ptr<stiff::DeflectionModel> model;
+  Eigen::VectorXd theta;
+};

@@ -1,0 +1,288 @@
+// Identification, fit results, prediction.
+#include "stiff/identify.hpp"
+
+#include "boundary.hpp"
+#include "handles.hpp"
+
+using namespace stiff;
+using namespace stiff::capi;
+
+namespace {
+
+const FitResult& fit_of(const stiff_result* r) {
+  require(r, "result");
+  return r->fit;
+}
+
+}  // namespace
+
+extern "C" {
+
+stiff_status stiff_identify(stiff_result** out,
+                            const stiff_robot* robot,
+                            const stiff_dataset* data,
+                            const stiff_identify_options* options) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require(robot, "robot");
+    require(data, "data");
+    const stiff_identify_options o = read_options(options);
+    const std::vector<std::string> effects = parse_model_string(o.model ? o.model : "joint");
+    const std::string loss = o.loss ? o.loss : "none";
+    if (!(std::isfinite(o.loss_scale_m) && o.loss_scale_m >= 0))
+      throw InvalidArgument("loss_scale_m must be finite and >= 0");
+    if (o.method > STIFF_METHOD_CERES)
+      throw InvalidArgument("unknown method " + std::to_string(o.method));
+    const bool linear_ok = effects.size() == 1 && effects[0] == "joint" && loss == "none";
+    auto r = std::make_unique<stiff_result>();
+    if (o.method == STIFF_METHOD_LINEAR || (o.method == STIFF_METHOD_AUTO && linear_ok)) {
+      if (!linear_ok)
+        throw InvalidArgument("the linear method fits the model 'joint' without robust loss only");
+      r->fit = identify_joint_linear(robot->model, data->data);
+    } else {
+      IdentifyOptions io;
+      io.loss = loss;
+      io.loss_scale_m = o.loss_scale_m;
+      if (o.max_iterations) io.max_iterations = static_cast<int>(o.max_iterations);
+      if (o.progress) {
+        const auto fn = o.progress;
+        void* ud = o.progress_user_data;
+        io.progress = [fn, ud](int iteration, double cost) {
+          int stop = 1;
+          try {
+            stop = fn(static_cast<uint32_t>(iteration), cost, ud);
+          } catch (...) {
+            stop = 1;  // an exception in user code stops the call cleanly
+          }
+          return stop == 0;
+        };
+      }
+      r->fit = identify(robot->model, data->data, effects, io);
+    }
+    *out = r.release();
+    return STIFF_OK;
+  });
+}
+
+void stiff_result_destroy(stiff_result* result) { delete result; }
+
+stiff_status stiff_result_read_json(stiff_result** out, const char* path) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require_string(path, "path");
+    auto r = std::make_unique<stiff_result>();
+    r->fit = read_fit(path);
+    *out = r.release();
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_result_write_json(const stiff_result* result, const char* path) {
+  return guarded(__func__, [&] {
+    require_string(path, "path");
+    write_fit(path, fit_of(result));
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_result_json(char* json,
+                               size_t capacity,
+                               size_t* needed,
+                               const stiff_result* result) {
+  return guarded(__func__, [&] {
+    return copy_string(__func__, fit_to_json(fit_of(result)), json, capacity, needed);
+  });
+}
+
+stiff_status stiff_result_joint_stiffness(double* values,
+                                          size_t capacity,
+                                          size_t* needed,
+                                          const stiff_result* result) {
+  return guarded(__func__, [&] {
+    const FitResult& f = fit_of(result);
+    Eigen::VectorXd k = f.joint_stiffness();
+    const auto ident = f.joint_identified();
+    for (int j = 0; j < k.size(); ++j)
+      if (!ident[j]) k(j) = NAN;
+    return copy_out(__func__, k.data(), static_cast<size_t>(k.size()), values, capacity, needed);
+  });
+}
+
+stiff_status stiff_result_joint_stiffness_se(double* values,
+                                             size_t capacity,
+                                             size_t* needed,
+                                             const stiff_result* result) {
+  return guarded(__func__, [&] {
+    const Eigen::VectorXd k = fit_of(result).joint_stiffness_se();
+    return copy_out(__func__, k.data(), static_cast<size_t>(k.size()), values, capacity, needed);
+  });
+}
+
+stiff_status stiff_result_parameters(double* values,
+                                     double* standard_errors,
+                                     size_t capacity,
+                                     size_t* needed,
+                                     const stiff_result* result) {
+  return guarded(__func__, [&] {
+    const FitResult& f = fit_of(result);
+    const size_t p = f.parameters.size();
+    if (needed) *needed = p;
+    if (capacity < p || !values)
+      return fail(
+          __func__, STIFF_E_BUFFER_TOO_SMALL,
+          "buffer holds " + std::to_string(capacity) + " values, " + std::to_string(p) + " needed");
+    for (size_t k = 0; k < p; ++k) {
+      values[k] = f.parameters[k].value;
+      if (standard_errors) standard_errors[k] = f.parameters[k].standard_error;
+    }
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_result_covariance(double* covariance,
+                                     size_t capacity,
+                                     size_t* needed,
+                                     const stiff_result* result) {
+  return guarded(__func__, [&] {
+    const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> c =
+        fit_of(result).covariance;
+    return copy_out(__func__, c.data(), static_cast<size_t>(c.size()), covariance, capacity,
+                    needed);
+  });
+}
+
+stiff_status stiff_result_residuals(double* residuals,
+                                    size_t capacity,
+                                    size_t* needed,
+                                    const stiff_result* result) {
+  return guarded(__func__, [&] {
+    const Eigen::VectorXd& r = fit_of(result).residuals;
+    return copy_out(__func__, r.data(), static_cast<size_t>(r.size()), residuals, capacity, needed);
+  });
+}
+
+stiff_status stiff_result_statistics(stiff_fit_statistics* statistics, const stiff_result* result) {
+  return guarded(__func__, [&] {
+    require(statistics, "statistics");
+    const FitResult& f = fit_of(result);
+    stiff_fit_statistics s = read_options(statistics);
+    s.measurements = static_cast<uint32_t>(f.measurements);
+    s.rank = static_cast<uint32_t>(f.rank);
+    s.dof = static_cast<uint32_t>(f.dof);
+    s.rms_m = f.rms_m;
+    s.sigma_hat_m = f.sigma_hat_m;
+    s.noise_floor_m = f.noise_floor_m;
+    s.chi2 = f.chi2;
+    s.condition_number = f.condition_number;
+    s.outliers = static_cast<uint32_t>(f.outliers.size());
+    s.warnings = static_cast<uint32_t>(f.warnings.size());
+    // Write back only the caller's part of the struct.
+    const size_t n = std::min<size_t>(statistics->struct_size, sizeof s);
+    s.struct_size = statistics->struct_size;
+    std::memcpy(statistics, &s, n);
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_result_warning(
+    char* text, size_t capacity, size_t* needed, const stiff_result* result, size_t index) {
+  return guarded(__func__, [&] {
+    const FitResult& f = fit_of(result);
+    if (index >= f.warnings.size())
+      throw InvalidArgument("warning " + std::to_string(index) + " out of range (" +
+                            std::to_string(f.warnings.size()) + " warnings)");
+    return copy_string(__func__, f.warnings[index], text, capacity, needed);
+  });
+}
+
+stiff_status stiff_model_create(stiff_model** out,
+                                const stiff_robot* robot,
+                                const stiff_result* fit) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require(robot, "robot");
+    const FitResult& f = fit_of(fit);
+    auto m = std::make_unique<stiff_model>();
+    m->robot = robot->model;
+    m->fit = f;
+    m->model = std::make_unique<DeflectionModel>(m->robot, f.model);
+    if (m->model->parameter_count() != static_cast<int>(f.parameters.size()))
+      throw InvalidArgument(
+          "the fit has " + std::to_string(f.parameters.size()) + " parameters, model '" +
+          m->model->model_string() + "' on robot '" + m->robot.name + "' needs " +
+          std::to_string(m->model->parameter_count()) + " (identified for another robot?)");
+    m->theta = f.theta();
+    *out = m.release();
+    return STIFF_OK;
+  });
+}
+
+void stiff_model_destroy(stiff_model* model) { delete model; }
+
+namespace {
+void predict_one(
+    const stiff_model* model, const double* q, size_t n, const double* wrench, double* out) {
+  const RobotModel& r = model->robot;
+  if (n != static_cast<size_t>(r.dof()))
+    throw InvalidArgument("q has " + std::to_string(n) + " values, the robot has " +
+                          std::to_string(r.dof()) + " joints");
+  require_finite(q, n, "q");
+  require_finite(wrench, 6, "wrench");
+  Measurement m;
+  m.q = Eigen::Map<const Eigen::VectorXd>(q, static_cast<Eigen::Index>(n));
+  m.force = Eigen::Map<const Eigen::Vector3d>(wrench);
+  m.moment = Eigen::Map<const Eigen::Vector3d>(wrench + 3);
+  const MeasurementContext c = model->model->context(m, 0);
+  const Eigen::Matrix<double, 6, 1> d = model->model->predict(model->theta, m, c);
+  if (!d.allFinite()) throw NumericalError("the predicted deflection is not finite");
+  for (int k = 0; k < 6; ++k) out[k] = d(k);
+}
+}  // namespace
+
+stiff_status stiff_predict(double deflection[6],
+                           const stiff_model* model,
+                           const double* q,
+                           size_t n,
+                           const double wrench[6]) {
+  return guarded(__func__, [&] {
+    require(deflection, "deflection");
+    require(model, "model");
+    require(q, "q");
+    require(wrench, "wrench");
+    predict_one(model, q, n, wrench, deflection);
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_predict_batch(double* deflection,
+                                 size_t capacity,
+                                 size_t* needed,
+                                 const stiff_model* model,
+                                 const double* q,
+                                 const double* wrench,
+                                 size_t rows,
+                                 size_t n) {
+  return guarded(__func__, [&] {
+    require(model, "model");
+    require(q, "q");
+    require(wrench, "wrench");
+    if (needed) *needed = 6 * rows;
+    if (capacity < 6 * rows || !deflection)
+      return fail(__func__, STIFF_E_BUFFER_TOO_SMALL,
+                  "buffer holds " + std::to_string(capacity) + " values, " +
+                      std::to_string(6 * rows) + " needed");
+    for (size_t r = 0; r < rows; ++r) {
+      try {
+        predict_one(model, q + r * n, n, wrench + 6 * r, deflection + 6 * r);
+      } catch (const stiff::Error& e) {
+        throw stiff::Error(e.status(), "row " + std::to_string(r) + ": " + e.what());
+      }
+    }
+    return STIFF_OK;
+  });
+}
+
+}  // extern "C"

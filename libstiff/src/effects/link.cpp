@@ -1,0 +1,85 @@
+// link: link compliance by the virtual joint method (VJM), reduced to the rotational springs
+// the joint compliances cannot absorb (effects-and-diagnosis.md 1.2).
+#include "stiff/effects/common.hpp"
+
+namespace stiff {
+namespace {
+
+/// A virtual rotational spring at the root of link i (on joint axis i), about a unit axis u
+/// fixed in link frame i and perpendicular to joint axis i. It acts like an extra revolute
+/// joint between joints i and i+1: d += c (u x (P - o)) (u x (L - o) . F + u . M).
+/// Candidates per link are the two axes perpendicular to joint axis i (bending out of the
+/// link's plane and torsion); a candidate parallel to joint axis i+1 is dropped because that
+/// joint's compliance absorbs it (Klimchik's model reduction). Links 2 and 3 (upper arm and
+/// forearm) carry springs.
+class LinkCompliance : public EffectT<LinkCompliance> {
+ public:
+  explicit LinkCompliance(const EffectSetup& s) {
+    const RobotModel& robot = *s.robot;
+    const int n = robot.dof();
+    const ChainState c0 = robot.chain(Eigen::VectorXd::Zero(n));
+    for (int link = 2; link <= std::min(3, n - 1); ++link) {
+      const Eigen::Matrix3d r = c0.link[link - 1].block<3, 3>(0, 0);
+      const Eigen::Vector3d a = r.transpose() * c0.axis.col(link - 1);  // axis i, link frame
+      const Eigen::Vector3d next = r.transpose() * c0.axis.col(link);   // axis i+1
+      Eigen::Vector3d u1 = Eigen::Vector3d::UnitX() - a.x() * a;
+      if (u1.norm() < 0.3) u1 = Eigen::Vector3d::UnitY() - a.y() * a;
+      u1.normalize();
+      const Eigen::Vector3d u2 = a.cross(u1).normalized();
+      const Eigen::Vector3d cand[2] = {u1, u2};
+      const char* label[2] = {"x", "y"};
+      for (int k = 0; k < 2; ++k) {
+        if (std::abs(cand[k].dot(next)) > 0.95) continue;  // collinear with joint i+1
+        springs_.push_back({link - 1, cand[k]});
+        params_.push_back(
+            effects::parameter("c_link" + std::to_string(link) + "_" + label[k], "rad/(N*m)",
+                               "compliance of a virtual rotational spring at the root of link " +
+                                   std::to_string(link) + " about its frame's " + label[k] +
+                                   " axis (bending or torsion of the link)",
+                               0.0, 1e-2, 3e-6, 0.0, 1e-6));
+      }
+    }
+  }
+  const std::string& name() const override { return name_; }
+  std::string description() const override {
+    return "link compliance (virtual joint method): rotational springs in links 2 and 3 about "
+           "the axes the joints cannot absorb, d += c_v (u x (P-o)) (u x (L-o) . F)";
+  }
+  std::string reference() const override {
+    return "Pashkevich, Chablat & Wenger, Mech. Mach. Theory 44(5), 2009; Klimchik et al., "
+           "Robotics Comput.-Integr. Manuf. 2014 (model reduction)";
+  }
+  const std::vector<ParameterSpec>& parameters() const override { return params_; }
+
+  template <typename T>
+  void cartesian_t(const T* p, EvalState<T>& s) const {
+    const auto& chain = s.context->chain;
+    for (size_t k = 0; k < springs_.size(); ++k) {
+      const int i = springs_[k].link;
+      const Eigen::Vector3d u_d = chain.link[i].template block<3, 3>(0, 0) * springs_[k].axis;
+      const Vector3<T> u = u_d.cast<T>();
+      const Vector3<T> o = chain.origin.col(i).template cast<T>();
+      const T torque = u.cross(s.p_load - o).dot(s.force) + u.dot(s.moment);
+      const T angle = p[k] * torque;
+      s.d += angle * u.cross(s.p_meas - o);
+      s.rot += angle * u;
+    }
+  }
+
+ private:
+  struct Spring {
+    int link;              ///< 0-based link index
+    Eigen::Vector3d axis;  ///< unit axis in the link frame
+  };
+  std::string name_ = "link";
+  std::vector<Spring> springs_;
+  std::vector<ParameterSpec> params_;
+};
+
+}  // namespace
+
+std::unique_ptr<Effect> make_link_effect(const EffectSetup& s) {
+  return std::make_unique<LinkCompliance>(s);
+}
+
+}  // namespace stiff

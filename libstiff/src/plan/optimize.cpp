@@ -1,0 +1,465 @@
+// Set optimizers of measurement planning: the paper's simulated annealing (Jiang & Fang 2023,
+// section 2.2), a modified Fedorov exchange (Cook & Nachtsheim 1980) and the plan driver.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include "plan_internal.hpp"
+#include "stiff/error.hpp"
+#include "stiff/random.hpp"
+
+namespace stiff {
+
+using namespace plan_detail;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+Context make_context(const RobotModel& robot,
+                     const CandidatePool& pool,
+                     const PlanOptions& o,
+                     std::vector<double>* task) {
+  Context c;
+  c.id = criterion_id(o.criterion);
+  c.m = pool.identified_count();
+  c.count = o.count;
+  if (c.id == Crit::task) {
+    if (o.task.rows.empty())
+      throw InvalidArgument("plan: criterion 'task' needs task poses and loads (PlanOptions::task)");
+    *task = task_information(robot, o.task, pool.identified_joints);
+    c.task = task->data();
+  }
+  return c;
+}
+
+void validate(const CandidatePool& pool, const PlanOptions& o) {
+  criterion_id(o.criterion);
+  const int m = pool.identified_count();
+  if (pool.size() == 0 || m == 0 || pool.packed_gram.empty())
+    throw InvalidArgument("plan: the pool is empty or not finalized");
+  if (o.count < 1) throw InvalidArgument("plan: count must be >= 1");
+  if (o.count > pool.size())
+    throw InvalidArgument("plan: count " + std::to_string(o.count) + " is larger than the pool (" +
+                          std::to_string(pool.size()) + " elements)");
+  if (3 * o.count < m)
+    throw InvalidArgument("plan: count " + std::to_string(o.count) + " is too small to identify " +
+                          std::to_string(m) + " compliances (need 3N >= m, N >= " +
+                          std::to_string((m + 2) / 3) + ")");
+  if (o.progress_interval < 1) throw InvalidArgument("plan: progress_interval must be >= 1");
+}
+
+void report(const PlanOptions& o, const PlanProgress& p) {
+  if (o.progress && !o.progress(p))
+    throw Cancelled("plan: cancelled by the progress callback during " + p.optimizer);
+}
+
+std::vector<int> random_subset(Rng& rng, int pool_size, int count, std::vector<uint8_t>& in) {
+  std::vector<int> set;
+  set.reserve(count);
+  while (static_cast<int>(set.size()) < count) {
+    const int e = static_cast<int>(rng.index(static_cast<uint64_t>(pool_size)));
+    if (in[e]) continue;
+    in[e] = 1;
+    set.push_back(e);
+  }
+  return set;
+}
+
+template <int MC>
+struct Kernel {
+  static constexpr int kSize = MC > 0 ? MC * MC : kMaxM * kMaxM;
+  const CandidatePool& pool;
+  const Context& ctx;
+  int mm;
+  Kernel(const CandidatePool& p, const Context& c) : pool(p), ctx(c), mm(c.m * c.m) {}
+  // Add (sign +1) or remove (-1) one element's contribution to M (and MJ when needed).
+  void add(int e, double sign, double* M, double* MJ) const {
+    if (ctx.needs_a()) add_element<MC>(pool, e, sign, M);
+    if (ctx.needs_j()) add_jacobian<MC>(pool, e, sign, MJ);
+  }
+  void rebuild(const std::vector<int>& set, double* M, double* MJ) const {
+    std::fill(M, M + mm, 0.0);
+    std::fill(MJ, MJ + mm, 0.0);
+    for (int e : set) add(e, 1.0, M, MJ);
+  }
+  double score_of(const double* M, const double* MJ) const { return score<MC>(ctx, M, MJ); }
+};
+
+template <int MC>
+struct Anneal {
+  static SetSearchResult run(const CandidatePool& pool, const PlanOptions& o, const Context& ctx) {
+    const auto t0 = Clock::now();
+    const Kernel<MC> K(pool, ctx);
+    const int N = o.count, P = pool.size(), mm = K.mm;
+    const AnnealingOptions& ao = o.annealing;
+    Rng rng(o.seed);
+    std::vector<uint8_t> in(P, 0);
+    std::vector<int> set = random_subset(rng, P, N, in);
+    double M[Kernel<MC>::kSize], MJ[Kernel<MC>::kSize], Mn[Kernel<MC>::kSize],
+        MJn[Kernel<MC>::kSize];
+    K.rebuild(set, M, MJ);
+    double sc = K.score_of(M, MJ);
+    double cost = cost_of(ctx.id, sc);
+    SetSearchResult r;
+    r.trace.optimizer = "annealing";
+    r.trace.start_score = sc;
+    std::vector<int> best = set;
+    double best_cost = cost, best_score = sc;
+
+    int k0 = ao.initial_swap_count > 0 ? ao.initial_swap_count : std::max(1, N / 3);
+    k0 = std::min({k0, N, P - N});
+    std::vector<int> pos(N), new_e(std::max(k0, 1));
+    for (int i = 0; i < N; ++i) pos[i] = i;
+    const bool use_j = ctx.needs_j();
+
+    // One k-element swap proposal: Mn = M + sum (G_in - G_out), no rebuild of A.
+    auto propose = [&](int k) {
+      std::copy(M, M + mm, Mn);
+      if (use_j) std::copy(MJ, MJ + mm, MJn);
+      for (int s = 0; s < k; ++s) {
+        const int j = s + static_cast<int>(fast_index(rng, static_cast<uint32_t>(N - s)));
+        std::swap(pos[s], pos[j]);
+        int e;
+        do e = static_cast<int>(fast_index(rng, static_cast<uint32_t>(P)));
+        while (in[e]);
+        in[e] = 2;
+        new_e[s] = e;
+        K.add(e, 1.0, Mn, MJn);
+        K.add(set[pos[s]], -1.0, Mn, MJn);
+      }
+      return K.score_of(Mn, MJn);
+    };
+    auto reject = [&](int k) {
+      for (int s = 0; s < k; ++s) in[new_e[s]] = 0;
+    };
+
+    double T0 = ao.initial_temperature;
+    if (ao.initial_temperature < 0 || !std::isfinite(ao.initial_temperature))
+      throw InvalidArgument("plan: initial temperature must be finite and >= 0");
+    if (ao.iterations < 0) throw InvalidArgument("plan: iterations must be >= 0");
+    if (k0 > 0 && T0 == 0) {
+      // Automatic T0: mean uphill cost change of random k0-swaps from the start set.
+      double sum = 0;
+      int cnt = 0;
+      for (int t = 0; t < 200; ++t) {
+        const double c = cost_of(ctx.id, propose(k0));
+        reject(k0);
+        if (std::isfinite(c) && std::isfinite(cost) && c > cost) {
+          sum += c - cost;
+          ++cnt;
+        }
+      }
+      T0 = cnt > 0 ? sum / cnt : (std::isfinite(cost) ? 1e-3 * std::abs(cost) + 1e-300 : 1.0);
+    }
+    r.trace.initial_temperature = T0;
+    r.trace.initial_swap_count = k0;
+
+    const long iters = k0 > 0 ? ao.iterations : 0;
+    const int refresh = std::max(1, ao.refresh_interval);
+    long accepted = 0, since_refresh = 0;
+    PlanProgress pr;
+    pr.optimizer = "annealing";
+    pr.total = iters;
+    for (long it = 0; it < iters; ++it) {
+      const double frac = static_cast<double>(it) / static_cast<double>(iters);
+      const int k = std::max(1, static_cast<int>(std::ceil(k0 * (1.0 - frac))));
+      const double T = T0 * (1.0 - frac);
+      const double sn = propose(k);
+      const double cn = cost_of(ctx.id, sn);
+      bool accept = false;
+      if (cn < kInf) {
+        if (cn <= cost)
+          accept = true;
+        else if (T > 0)
+          accept = rng.uniform() < std::exp(-(cn - cost) / T);
+      }
+      if (accept) {
+        for (int s = 0; s < k; ++s) {
+          in[set[pos[s]]] = 0;
+          set[pos[s]] = new_e[s];
+          in[new_e[s]] = 1;
+        }
+        std::copy(Mn, Mn + mm, M);
+        if (use_j) std::copy(MJn, MJn + mm, MJ);
+        cost = cn;
+        sc = sn;
+        ++accepted;
+        if (++since_refresh >= refresh) {
+          // Bound the round-off of the rank-3 updates.
+          K.rebuild(set, M, MJ);
+          sc = K.score_of(M, MJ);
+          cost = cost_of(ctx.id, sc);
+          since_refresh = 0;
+        }
+        if (cost < best_cost) {
+          best_cost = cost;
+          best_score = sc;
+          best = set;
+        }
+      } else {
+        reject(k);
+      }
+      if ((it + 1) % o.progress_interval == 0 && o.progress) {
+        pr.iteration = it + 1;
+        pr.best_score = best_score;
+        pr.current_score = sc;
+        pr.temperature = T;
+        report(o, pr);
+      }
+    }
+    r.elements = best;
+    r.score = best_score;
+    r.trace.best_score = best_score;
+    r.trace.iterations = iters;
+    r.trace.evaluations = iters;
+    r.trace.accepted = accepted;
+    r.trace.seconds = seconds_since(t0);
+    return r;
+  }
+};
+
+template <int MC>
+struct Exchange {
+  static SetSearchResult run(const CandidatePool& pool,
+                             const PlanOptions& o,
+                             const Context& ctx,
+                             const std::vector<int>* start) {
+    const auto t0 = Clock::now();
+    const Kernel<MC> K(pool, ctx);
+    const int N = o.count, P = pool.size(), mm = K.mm;
+    const ExchangeOptions& xo = o.exchange;
+    if (xo.max_passes < 0 || xo.max_evaluations_per_pass < N)
+      throw InvalidArgument("plan: exchange needs max_passes >= 0 and max_evaluations_per_pass >= N");
+    Rng rng(o.seed ^ 0x9E3779B97F4A7C15ULL);
+    std::vector<uint8_t> in(P, 0);
+    std::vector<int> set;
+    if (start) {
+      if (static_cast<int>(start->size()) != N)
+        throw InvalidArgument("plan: exchange start set has the wrong size");
+      for (int e : *start) {
+        if (e < 0 || e >= P || in[e]) throw InvalidArgument("plan: bad exchange start set");
+        in[e] = 1;
+      }
+      set = *start;
+    } else {
+      set = random_subset(rng, P, N, in);
+    }
+    double M[Kernel<MC>::kSize], MJ[Kernel<MC>::kSize], Mm[Kernel<MC>::kSize],
+        MJm[Kernel<MC>::kSize], Mt[Kernel<MC>::kSize], MJt[Kernel<MC>::kSize];
+    K.rebuild(set, M, MJ);
+    double sc = K.score_of(M, MJ), cost = cost_of(ctx.id, sc);
+    SetSearchResult r;
+    r.trace.optimizer = "exchange";
+    r.trace.start_score = sc;
+    const bool all = static_cast<long>(N) * P <= xo.max_evaluations_per_pass;
+    const long per_position = all ? P : xo.max_evaluations_per_pass / N;
+    long evals = 0, accepted = 0, passes = 0;
+    PlanProgress pr;
+    pr.optimizer = "exchange";
+    for (; passes < xo.max_passes; ++passes) {
+      bool improved = false;
+      for (int p = 0; p < N; ++p) {
+        std::copy(M, M + mm, Mm);
+        std::copy(MJ, MJ + mm, MJm);
+        K.add(set[p], -1.0, Mm, MJm);
+        double best_c = cost, best_s = sc;
+        int best_e = -1;
+        for (long t = 0; t < per_position; ++t) {
+          const int e = all ? static_cast<int>(t) : static_cast<int>(rng.index(P));
+          if (in[e]) continue;
+          std::copy(Mm, Mm + mm, Mt);
+          std::copy(MJm, MJm + mm, MJt);
+          K.add(e, 1.0, Mt, MJt);
+          const double s = K.score_of(Mt, MJt);
+          const double c = cost_of(ctx.id, s);
+          ++evals;
+          if (c < best_c - 1e-12 * std::abs(best_c)) {
+            best_c = c;
+            best_s = s;
+            best_e = e;
+          }
+          if (o.progress && evals % o.progress_interval == 0) {
+            pr.iteration = evals;
+            pr.best_score = sc;
+            pr.current_score = sc;
+            report(o, pr);
+          }
+        }
+        if (best_e >= 0) {
+          in[set[p]] = 0;
+          set[p] = best_e;
+          in[best_e] = 1;
+          K.rebuild(set, M, MJ);
+          sc = K.score_of(M, MJ);
+          cost = cost_of(ctx.id, sc);
+          (void)best_s;
+          ++accepted;
+          improved = true;
+        }
+      }
+      if (!improved) {
+        ++passes;
+        break;
+      }
+    }
+    r.elements = set;
+    r.score = sc;
+    r.trace.best_score = sc;
+    r.trace.iterations = passes;
+    r.trace.evaluations = evals;
+    r.trace.accepted = accepted;
+    r.trace.seconds = seconds_since(t0);
+    return r;
+  }
+};
+
+template <template <int> class F, typename... Args>
+SetSearchResult dispatch(int m, Args&&... args) {
+  switch (m) {
+    case 1:
+      return F<1>::run(std::forward<Args>(args)...);
+    case 2:
+      return F<2>::run(std::forward<Args>(args)...);
+    case 3:
+      return F<3>::run(std::forward<Args>(args)...);
+    case 4:
+      return F<4>::run(std::forward<Args>(args)...);
+    case 5:
+      return F<5>::run(std::forward<Args>(args)...);
+    case 6:
+      return F<6>::run(std::forward<Args>(args)...);
+    case 7:
+      return F<7>::run(std::forward<Args>(args)...);
+    default:
+      return F<0>::run(std::forward<Args>(args)...);
+  }
+}
+
+void finish_trace(OptimizerTrace& t, const Context& ctx) {
+  const bool larger = ctx.id != Crit::a_opt && ctx.id != Crit::task;
+  t.best_value = larger ? t.best_score : -t.best_score;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+
+IncrementalInformation::IncrementalInformation(const CandidatePool& pool, std::vector<int> elements)
+    : pool_(&pool), elements_(std::move(elements)) {
+  if (pool.packed_gram.empty()) throw InvalidArgument("plan: the pool is not finalized");
+  for (int e : elements_)
+    if (e < 0 || e >= pool.size()) throw InvalidArgument("plan: element index out of range");
+  refresh();
+}
+
+void IncrementalInformation::replace(int position, int element) {
+  if (position < 0 || position >= static_cast<int>(elements_.size()) || element < 0 ||
+      element >= pool_->size())
+    throw InvalidArgument("plan: replace: index out of range");
+  add_element<0>(*pool_, element, 1.0, m_.data());
+  add_element<0>(*pool_, elements_[position], -1.0, m_.data());
+  elements_[position] = element;
+}
+
+Eigen::MatrixXd IncrementalInformation::information() const {
+  return from_lower(m_.data(), pool_->identified_count());
+}
+
+Eigen::MatrixXd IncrementalInformation::recomputed_information() const {
+  const int m = pool_->identified_count();
+  std::vector<double> a(m * m, 0.0);
+  for (int e : elements_) add_element<0>(*pool_, e, 1.0, a.data());
+  return from_lower(a.data(), m);
+}
+
+void IncrementalInformation::refresh() {
+  const int m = pool_->identified_count();
+  m_.assign(m * m, 0.0);
+  for (int e : elements_) add_element<0>(*pool_, e, 1.0, m_.data());
+}
+
+SetSearchResult anneal(const RobotModel& robot, const CandidatePool& pool, const PlanOptions& o) {
+  validate(pool, o);
+  std::vector<double> task;
+  const Context ctx = make_context(robot, pool, o, &task);
+  SetSearchResult r = dispatch<Anneal>(ctx.m, pool, o, ctx);
+  finish_trace(r.trace, ctx);
+  return r;
+}
+
+SetSearchResult exchange(const RobotModel& robot,
+                         const CandidatePool& pool,
+                         const PlanOptions& o,
+                         const std::vector<int>* start) {
+  validate(pool, o);
+  std::vector<double> task;
+  const Context ctx = make_context(robot, pool, o, &task);
+  SetSearchResult r = dispatch<Exchange>(ctx.m, pool, o, ctx, start);
+  finish_trace(r.trace, ctx);
+  return r;
+}
+
+double set_score(const RobotModel& robot,
+                 const CandidatePool& pool,
+                 const std::vector<int>& elements,
+                 const PlanOptions& options) {
+  PlanOptions o = options;
+  o.count = static_cast<int>(elements.size());
+  std::vector<double> task;
+  const Context ctx = make_context(robot, pool, o, &task);
+  const int m = ctx.m;
+  std::vector<double> M(m * m, 0.0), MJ(m * m, 0.0);
+  for (int e : elements) {
+    if (e < 0 || e >= pool.size()) throw InvalidArgument("plan: element index out of range");
+    add_element<0>(pool, e, 1.0, M.data());
+    add_jacobian<0>(pool, e, 1.0, MJ.data());
+  }
+  return score<0>(ctx, M.data(), MJ.data());
+}
+
+
+PlanResult plan_measurements(const RobotModel& robot, const CandidatePool& pool, const PlanOptions& o) {
+  validate(pool, o);
+  if (!o.annealing.enabled && !o.exchange.enabled)
+    throw InvalidArgument("plan: enable annealing and/or exchange");
+  if (pool.dof != robot.dof())
+    throw InvalidArgument("plan: the pool was built for a " + std::to_string(pool.dof) +
+                          "-joint robot");
+  PlanResult r;
+  std::vector<SetSearchResult> runs;
+  if (o.annealing.enabled) runs.push_back(anneal(robot, pool, o));
+  if (o.exchange.enabled) runs.push_back(exchange(robot, pool, o));
+  size_t best = 0;
+  for (size_t i = 0; i < runs.size(); ++i) {
+    r.trace.push_back(runs[i].trace);
+    if (runs[i].score > runs[best].score) best = i;
+  }
+  r.found_by = runs[best].trace.optimizer;
+  std::vector<PlannedMeasurement> ms = to_measurements(pool, runs[best].elements);
+  if (o.refine.enabled) {
+    OptimizerTrace t;
+    std::vector<PlannedMeasurement> refined = refine_plan(robot, pool, ms, o, &t);
+    r.trace.push_back(t);
+    if (t.best_score > t.start_score) {
+      ms = std::move(refined);
+      r.found_by = "nlopt";
+    }
+  }
+  finish_result(robot, pool, o, std::move(ms), r);
+  return r;
+}
+
+PlanResult plan_measurements(const RobotModel& robot,
+                             const PoolOptions& pool_options,
+                             const PlanOptions& options) {
+  const CandidatePool pool = build_pool(robot, pool_options);
+  return plan_measurements(robot, pool, options);
+}
+
+}  // namespace stiff

@@ -1,0 +1,184 @@
+"""ctypes bindings of stiff.h. The only module that knows C signatures; one _check() maps
+status codes to exceptions (as pygit2 does over libgit2)."""
+from __future__ import annotations
+
+import ctypes as C
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .errors import BufferTooSmallError, error_for
+
+_HERE = Path(__file__).resolve().parent
+
+
+def _find_library() -> Path:
+    env = os.environ.get("STIFF_LIBRARY")
+    if env:
+        return Path(env)
+    bundled = _HERE / "_lib" / "libstiff_c.so"
+    if bundled.exists():
+        return bundled
+    build = os.environ.get("STIFF_BUILD_DIR")
+    if build and (Path(build) / "capi" / "libstiff_c.so").exists():
+        return Path(build) / "capi" / "libstiff_c.so"
+    raise ImportError(
+        "libstiff_c.so not found: install the package with its bundled library (make build), "
+        "or set STIFF_LIBRARY to its path"
+    )
+
+
+LIBRARY_PATH = _find_library()
+lib = C.CDLL(str(LIBRARY_PATH))
+
+c_double_p = C.POINTER(C.c_double)
+c_size_p = C.POINTER(C.c_size_t)
+PROGRESS_FN = C.CFUNCTYPE(C.c_int, C.c_uint32, C.c_double, C.c_void_p)
+
+
+class NoiseOptions(C.Structure):
+    _fields_ = [
+        ("struct_size", C.c_uint32),
+        ("tracker_sigma_m", C.c_double),
+        ("tracker_ppm", C.c_double),
+        ("tracker_position_m", C.c_double * 3),
+        ("force_relative", C.c_double),
+        ("force_absolute_N", C.c_double),
+        ("joint_sigma_rad", C.c_double),
+        ("outlier_rate", C.c_double),
+        ("outlier_size_m", C.c_double),
+        ("seed", C.c_uint64),
+    ]
+
+
+class IdentifyOptions(C.Structure):
+    _fields_ = [
+        ("struct_size", C.c_uint32),
+        ("model", C.c_char_p),
+        ("loss", C.c_char_p),
+        ("loss_scale_m", C.c_double),
+        ("max_iterations", C.c_uint32),
+        ("method", C.c_uint32),
+        ("progress", PROGRESS_FN),
+        ("progress_user_data", C.c_void_p),
+    ]
+
+
+class FitStatistics(C.Structure):
+    _fields_ = [
+        ("struct_size", C.c_uint32),
+        ("measurements", C.c_uint32),
+        ("rank", C.c_uint32),
+        ("dof", C.c_uint32),
+        ("rms_m", C.c_double),
+        ("sigma_hat_m", C.c_double),
+        ("noise_floor_m", C.c_double),
+        ("chi2", C.c_double),
+        ("condition_number", C.c_double),
+        ("outliers", C.c_uint32),
+        ("warnings", C.c_uint32),
+    ]
+
+
+def _proto(name, restype, *argtypes):
+    fn = getattr(lib, name)
+    fn.restype = restype
+    fn.argtypes = list(argtypes)
+    return fn
+
+
+H = C.c_void_p  # opaque handle
+HP = C.POINTER(C.c_void_p)
+S = C.c_int  # stiff_status
+
+_proto("stiff_version", C.c_uint32)
+_proto("stiff_version_string", C.c_char_p)
+_proto("stiff_last_error", C.c_char_p)
+_proto("stiff_status_name", C.c_char_p, C.c_int)
+_proto("stiff_robot_load", S, HP, C.c_char_p)
+_proto("stiff_robot_destroy", None, H)
+_proto("stiff_robot_dof", S, c_size_p, H)
+_proto("stiff_robot_name", S, C.c_char_p, C.c_size_t, c_size_p, H)
+_proto("stiff_robot_limits", S, c_double_p, c_double_p, C.c_size_t, c_size_p, H)
+_proto("stiff_robot_tool_pose", S, c_double_p, H, c_double_p, C.c_size_t)
+_proto("stiff_robot_jacobian", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, C.c_size_t)
+_proto("stiff_dataset_read_csv", S, HP, H, C.c_char_p)
+_proto("stiff_dataset_write_csv", S, H, C.c_char_p)
+_proto("stiff_dataset_create", S, HP, C.c_size_t, C.c_size_t, c_double_p, c_double_p, c_double_p,
+       c_double_p, c_double_p)
+_proto("stiff_dataset_destroy", None, H)
+_proto("stiff_dataset_size", S, c_size_p, c_size_p, H)
+_proto("stiff_dataset_has", S, C.POINTER(C.c_int), H, C.c_int)
+_proto("stiff_dataset_get", S, c_double_p, C.c_size_t, c_size_p, H, C.c_int)
+_proto("stiff_dataset_set_displacement", S, H, c_double_p, C.c_size_t)
+_proto("stiff_dataset_id", S, C.c_char_p, C.c_size_t, c_size_p, H, C.c_size_t)
+_proto("stiff_noise_read", S, C.POINTER(NoiseOptions), C.c_char_p)
+_proto("stiff_design_random", S, HP, H, C.c_size_t, C.c_uint64)
+_proto("stiff_simulate", S, HP, H, H, C.c_char_p, c_double_p, C.c_size_t, C.POINTER(NoiseOptions))
+_proto("stiff_identify", S, HP, H, H, C.POINTER(IdentifyOptions))
+_proto("stiff_result_destroy", None, H)
+_proto("stiff_result_read_json", S, HP, C.c_char_p)
+_proto("stiff_result_write_json", S, H, C.c_char_p)
+_proto("stiff_result_json", S, C.c_char_p, C.c_size_t, c_size_p, H)
+_proto("stiff_result_joint_stiffness", S, c_double_p, C.c_size_t, c_size_p, H)
+_proto("stiff_result_joint_stiffness_se", S, c_double_p, C.c_size_t, c_size_p, H)
+_proto("stiff_result_parameters", S, c_double_p, c_double_p, C.c_size_t, c_size_p, H)
+_proto("stiff_result_covariance", S, c_double_p, C.c_size_t, c_size_p, H)
+_proto("stiff_result_residuals", S, c_double_p, C.c_size_t, c_size_p, H)
+_proto("stiff_result_statistics", S, C.POINTER(FitStatistics), H)
+_proto("stiff_result_warning", S, C.c_char_p, C.c_size_t, c_size_p, H, C.c_size_t)
+_proto("stiff_model_create", S, HP, H, H)
+_proto("stiff_model_destroy", None, H)
+_proto("stiff_predict", S, c_double_p, H, c_double_p, C.c_size_t, c_double_p)
+_proto("stiff_predict_batch", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, c_double_p,
+       C.c_size_t, C.c_size_t)
+_proto("stiff_effect_count", C.c_size_t)
+_proto("stiff_effect_name", S, C.c_char_p, C.c_size_t, c_size_p, C.c_size_t)
+_proto("stiff_effect_describe", S, C.c_char_p, C.c_size_t, c_size_p, H, C.c_char_p)
+
+
+def last_error() -> str:
+    return lib.stiff_last_error().decode("utf-8", "replace")
+
+
+def check(status: int) -> None:
+    """Raise the exception matching a failed status, with the library's message."""
+    if status != 0:
+        raise error_for(status, last_error())
+
+
+def ptr(a: np.ndarray):
+    return a.ctypes.data_as(c_double_p)
+
+
+def as_array(values, shape=None) -> np.ndarray:
+    a = np.ascontiguousarray(values, dtype=np.float64)
+    if shape is not None:
+        a = a.reshape(shape)
+    return a
+
+
+def get_doubles(fn, *args) -> np.ndarray:
+    """Call a (values, capacity, needed, ...) function: ask for the size, then fetch."""
+    needed = C.c_size_t(0)
+    st = fn(None, 0, C.byref(needed), *args)
+    if st not in (0, BufferTooSmallError.status):
+        check(st)
+    out = np.empty(needed.value, dtype=np.float64)
+    check(fn(ptr(out), needed.value, C.byref(needed), *args))
+    return out
+
+
+def get_string(fn, *args) -> str:
+    needed = C.c_size_t(0)
+    st = fn(None, 0, C.byref(needed), *args)
+    if st not in (0, BufferTooSmallError.status):
+        check(st)
+    buf = C.create_string_buffer(needed.value)
+    check(fn(buf, needed.value, C.byref(needed), *args))
+    return buf.value.decode("utf-8")
+
+
+def encode(s):
+    return None if s is None else os.fsencode(s) if isinstance(s, os.PathLike) else str(s).encode("utf-8")

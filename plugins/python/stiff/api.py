@@ -1,0 +1,407 @@
+"""numpy-first API over the C ABI. SI units everywhere (m, rad, N, N*m); frames: base frame
+unless stated otherwise."""
+from __future__ import annotations
+
+import ctypes as C
+import json
+import os
+import weakref
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+
+from . import _capi as _c
+from ._capi import check, lib
+
+__all__ = ["Robot", "Dataset", "Fit", "Model", "identify", "simulate", "random_design",
+           "predict", "effects", "describe_effect", "library_version"]
+
+PathLike = "str | os.PathLike[str]"
+
+
+def library_version() -> str:
+    """Version of the loaded libstiff_c."""
+    return lib.stiff_version_string().decode()
+
+
+class _Handle:
+    _destroy = None
+
+    def _own(self, handle: C.c_void_p):
+        self._h = handle
+        self._finalizer = weakref.finalize(self, type(self)._destroy, handle)
+
+    @property
+    def _as_parameter_(self):
+        return self._h
+
+
+class Robot(_Handle):
+    """A robot description (YAML or URDF): kinematics, limits, measured point, masses."""
+
+    _destroy = lib.stiff_robot_destroy
+
+    def __init__(self, path: "str | os.PathLike[str]"):
+        h = C.c_void_p()
+        check(lib.stiff_robot_load(C.byref(h), _c.encode(os.fspath(path))))
+        self._own(h)
+        self.path = os.fspath(path)
+
+    @property
+    def dof(self) -> int:
+        n = C.c_size_t()
+        check(lib.stiff_robot_dof(C.byref(n), self))
+        return n.value
+
+    @property
+    def name(self) -> str:
+        return _c.get_string(lib.stiff_robot_name, self)
+
+    @property
+    def limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) joint limits [rad]."""
+        n = self.dof
+        lo, hi = np.empty(n), np.empty(n)
+        needed = C.c_size_t()
+        check(lib.stiff_robot_limits(_c.ptr(lo), _c.ptr(hi), n, C.byref(needed), self))
+        return lo, hi
+
+    def tool_pose(self, q: Sequence[float]) -> np.ndarray:
+        """4 x 4 pose of the measured point at joint positions q [rad], base frame [m]."""
+        qa = _c.as_array(q)
+        out = np.empty(16)
+        check(lib.stiff_robot_tool_pose(_c.ptr(out), self, _c.ptr(qa), qa.size))
+        return out.reshape(4, 4)
+
+    def jacobian(self, q: Sequence[float]) -> np.ndarray:
+        """6 x n geometric Jacobian at the measured point, base frame."""
+        qa = _c.as_array(q)
+        return _c.get_doubles(lib.stiff_robot_jacobian, self, _c.ptr(qa), qa.size).reshape(6, -1)
+
+    def __repr__(self) -> str:
+        return f"Robot({self.name!r}, dof={self.dof}, path={self.path!r})"
+
+
+class Dataset(_Handle):
+    """One experiment: poses q [rad], loads [N, N*m], displacements [m] (base frame)."""
+
+    _destroy = lib.stiff_dataset_destroy
+
+    def __init__(self, handle: C.c_void_p):
+        self._own(handle)
+
+    @classmethod
+    def read(cls, path, robot: Optional[Robot] = None) -> "Dataset":
+        """Read a measurement CSV (docs/formats.md); ParseError carries path, line, column."""
+        h = C.c_void_p()
+        check(lib.stiff_dataset_read_csv(C.byref(h), robot, _c.encode(os.fspath(path))))
+        return cls(h)
+
+    @classmethod
+    def from_arrays(cls, q, force, moment=None, displacement=None, sigma_d=None) -> "Dataset":
+        """Build from arrays: q (N x n) [rad], force (N x 3) [N], optional moment (N x 3)
+        [N*m], displacement (N x 3) [m], sigma_d (N) [m]."""
+        qa = np.atleast_2d(_c.as_array(q))
+        rows, dof = qa.shape
+        fa = _c.as_array(force, (rows, 3))
+        opt = [None if v is None else _c.as_array(v, (rows, 3) if k < 2 else (rows,))
+               for k, v in enumerate((moment, displacement, sigma_d))]
+        h = C.c_void_p()
+        check(lib.stiff_dataset_create(C.byref(h), rows, dof, _c.ptr(qa), _c.ptr(fa),
+                                       *[None if v is None else _c.ptr(v) for v in opt]))
+        return cls(h)
+
+    def write(self, path) -> None:
+        """Write in SI units, atomically."""
+        check(lib.stiff_dataset_write_csv(self, _c.encode(os.fspath(path))))
+
+    def __len__(self) -> int:
+        rows = C.c_size_t()
+        check(lib.stiff_dataset_size(C.byref(rows), None, self))
+        return rows.value
+
+    @property
+    def dof(self) -> int:
+        d = C.c_size_t()
+        check(lib.stiff_dataset_size(None, C.byref(d), self))
+        return d.value
+
+    def _has(self, column: int) -> bool:
+        p = C.c_int()
+        check(lib.stiff_dataset_has(C.byref(p), self, column))
+        return bool(p.value)
+
+    def _get(self, column: int, width: int) -> Optional[np.ndarray]:
+        if not self._has(column):
+            return None
+        v = _c.get_doubles(lib.stiff_dataset_get, self, column)
+        return v.reshape(-1, width) if width > 1 else v
+
+    @property
+    def q(self) -> np.ndarray:
+        return self._get(0, self.dof)
+
+    @property
+    def force(self) -> np.ndarray:
+        return self._get(1, 3)
+
+    @property
+    def moment(self) -> Optional[np.ndarray]:
+        return self._get(2, 3)
+
+    @property
+    def displacement(self) -> Optional[np.ndarray]:
+        return self._get(3, 3)
+
+    @displacement.setter
+    def displacement(self, d) -> None:
+        da = _c.as_array(d, (len(self), 3))
+        check(lib.stiff_dataset_set_displacement(self, _c.ptr(da), da.shape[0]))
+
+    @property
+    def sigma_d(self) -> Optional[np.ndarray]:
+        return self._get(5, 1)
+
+    @property
+    def wrench(self) -> np.ndarray:
+        """N x 6 (force, moment) at the load point, base frame."""
+        m = self.moment
+        return np.hstack([self.force, m if m is not None else np.zeros((len(self), 3))])
+
+    @property
+    def ids(self) -> list[str]:
+        return [_c.get_string(lib.stiff_dataset_id, self, r) for r in range(len(self))]
+
+    def to_dataframe(self):
+        import pandas as pd  # optional dependency
+
+        cols = {"id": self.ids}
+        for j in range(self.dof):
+            cols[f"q{j + 1}_rad"] = self.q[:, j]
+        for k, a in enumerate("xyz"):
+            cols[f"f{a}_N"] = self.force[:, k]
+        d = self.displacement
+        if d is not None:
+            for k, a in enumerate("xyz"):
+                cols[f"d{a}_m"] = d[:, k]
+        return pd.DataFrame(cols)
+
+    def __repr__(self) -> str:
+        return f"Dataset({len(self)} measurements, dof={self.dof}, displacements={'yes' if self._has(3) else 'no'})"
+
+
+@dataclass
+class FitStatistics:
+    measurements: int
+    rank: int
+    dof: int
+    rms_m: float
+    sigma_hat_m: float
+    noise_floor_m: float
+    chi2: float
+    condition_number: float
+    outliers: int
+    warnings: int
+
+
+class Fit(_Handle):
+    """An identified model: effects, parameters with standard errors, fit statistics."""
+
+    _destroy = lib.stiff_result_destroy
+
+    def __init__(self, handle: C.c_void_p):
+        self._own(handle)
+        self._json = None
+
+    @classmethod
+    def read(cls, path) -> "Fit":
+        h = C.c_void_p()
+        check(lib.stiff_result_read_json(C.byref(h), _c.encode(os.fspath(path))))
+        return cls(h)
+
+    def write(self, path) -> None:
+        check(lib.stiff_result_write_json(self, _c.encode(os.fspath(path))))
+
+    @property
+    def json(self) -> dict:
+        if self._json is None:
+            self._json = json.loads(_c.get_string(lib.stiff_result_json, self))
+        return self._json
+
+    @property
+    def model(self) -> list[str]:
+        return list(self.json["model"])
+
+    @property
+    def stiffness(self) -> np.ndarray:
+        """Joint stiffness [N*m/rad]; NaN for joints the data could not identify."""
+        return _c.get_doubles(lib.stiff_result_joint_stiffness, self)
+
+    @property
+    def stiffness_se(self) -> np.ndarray:
+        return _c.get_doubles(lib.stiff_result_joint_stiffness_se, self)
+
+    @property
+    def identified(self) -> np.ndarray:
+        return np.array([j["identified"] for j in self.json["joints"]], dtype=bool)
+
+    @property
+    def parameters(self) -> np.ndarray:
+        needed = C.c_size_t()
+        lib.stiff_result_parameters(None, None, 0, C.byref(needed), self)
+        v, se = np.empty(needed.value), np.empty(needed.value)
+        check(lib.stiff_result_parameters(_c.ptr(v), _c.ptr(se), needed.value, C.byref(needed), self))
+        return v
+
+    @property
+    def standard_errors(self) -> np.ndarray:
+        needed = C.c_size_t()
+        lib.stiff_result_parameters(None, None, 0, C.byref(needed), self)
+        v, se = np.empty(needed.value), np.empty(needed.value)
+        check(lib.stiff_result_parameters(_c.ptr(v), _c.ptr(se), needed.value, C.byref(needed), self))
+        return se
+
+    @property
+    def parameter_table(self) -> list[dict]:
+        return list(self.json["parameters"])
+
+    @property
+    def covariance(self) -> np.ndarray:
+        c = _c.get_doubles(lib.stiff_result_covariance, self)
+        p = int(round(np.sqrt(c.size)))
+        return c.reshape(p, p)
+
+    @property
+    def residuals(self) -> np.ndarray:
+        return _c.get_doubles(lib.stiff_result_residuals, self).reshape(-1, 3)
+
+    @property
+    def statistics(self) -> FitStatistics:
+        s = _c.FitStatistics()
+        s.struct_size = C.sizeof(s)
+        check(lib.stiff_result_statistics(C.byref(s), self))
+        return FitStatistics(*(getattr(s, f) for f, _ in _c.FitStatistics._fields_[1:]))
+
+    @property
+    def warnings(self) -> list[str]:
+        return [_c.get_string(lib.stiff_result_warning, self, i) for i in range(self.statistics.warnings)]
+
+    @property
+    def outliers(self) -> list[dict]:
+        return list(self.json.get("outliers", []))
+
+    def to_dataframe(self):
+        import pandas as pd
+
+        return pd.DataFrame(self.parameter_table)
+
+    def __repr__(self) -> str:
+        s = self.statistics
+        return (f"Fit(model={'+'.join(self.model)!r}, {s.measurements} measurements, "
+                f"rms={s.rms_m * 1e6:.2f} um, noise floor={s.noise_floor_m * 1e6:.2f} um)")
+
+
+class Model(_Handle):
+    """A robot with an identified fit, ready to predict deflections."""
+
+    _destroy = lib.stiff_model_destroy
+
+    def __init__(self, robot: Robot, fit: Fit):
+        h = C.c_void_p()
+        check(lib.stiff_model_create(C.byref(h), robot, fit))
+        self._own(h)
+        self.robot, self.fit = robot, fit
+
+    def predict(self, q, wrench) -> np.ndarray:
+        """Deflection (dx, dy, dz [m], rx, ry, rz [rad]) of the measured point, base frame,
+        for poses q (n or N x n, rad) and wrenches (6 or N x 6: force [N] and moment [N*m]
+        at the load point, base frame; a 3-vector is a pure force)."""
+        qa = np.atleast_2d(_c.as_array(q))
+        w = np.atleast_2d(_c.as_array(wrench))
+        if w.shape[1] == 3:
+            w = np.hstack([w, np.zeros((w.shape[0], 3))])
+        if w.shape[0] == 1 and qa.shape[0] > 1:
+            w = np.repeat(w, qa.shape[0], axis=0)
+        w = np.ascontiguousarray(w)
+        rows, n = qa.shape
+        out = np.empty((rows, 6))
+        needed = C.c_size_t()
+        check(lib.stiff_predict_batch(_c.ptr(out), out.size, C.byref(needed), self, _c.ptr(qa),
+                                      _c.ptr(w), rows, n))
+        return out[0] if np.ndim(q) == 1 else out
+
+
+def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "none",
+             loss_scale_m: float = 0.0, method: str = "auto", max_iterations: int = 0) -> Fit:
+    """Identify the compliance model (effects joined by '+') from measured displacements."""
+    methods = {"auto": 0, "linear": 1, "ceres": 2}
+    if method not in methods:
+        raise ValueError(f"unknown method {method!r} (use auto, linear, ceres)")
+    o = _c.IdentifyOptions()
+    o.struct_size = C.sizeof(o)
+    o.model = model.encode()
+    o.loss = loss.encode()
+    o.loss_scale_m = loss_scale_m
+    o.max_iterations = max_iterations
+    o.method = methods[method]
+    h = C.c_void_p()
+    check(lib.stiff_identify(C.byref(h), robot, data, C.byref(o)))
+    return Fit(h)
+
+
+def random_design(robot: Robot, count: int = 20, seed: int = 1) -> Dataset:
+    """Random poses in 95% of the joint ranges with loads of 15-35 N per axis."""
+    h = C.c_void_p()
+    check(lib.stiff_design_random(C.byref(h), robot, count, seed))
+    return Dataset(h)
+
+
+def simulate(robot: Robot, design: Optional[Dataset] = None, *, stiffness=None, truth=None,
+             tracker_sigma_m: float = 10e-6, tracker_ppm: float = 0.0, force_relative: float = 0.0,
+             force_absolute_N: float = 0.0, joint_sigma_rad: float = 0.0,
+             outlier_rate: float = 0.0, outlier_size_m: float = 0.0, seed: int = 1,
+             tracker_position_m=None) -> Dataset:
+    """Simulate measurements of `design` on the virtual robot. The truth is a YAML file
+    (`truth`) or the joint stiffness `stiffness` [N*m/rad]."""
+    o = _c.NoiseOptions()
+    o.struct_size = C.sizeof(o)
+    o.tracker_sigma_m, o.tracker_ppm = tracker_sigma_m, tracker_ppm
+    if tracker_position_m is not None:
+        o.tracker_position_m[:] = list(tracker_position_m)
+    o.force_relative, o.force_absolute_N = force_relative, force_absolute_N
+    o.joint_sigma_rad, o.outlier_rate, o.outlier_size_m = joint_sigma_rad, outlier_rate, outlier_size_m
+    o.seed = seed
+    k = None if stiffness is None else _c.as_array(stiffness)
+    h = C.c_void_p()
+    check(lib.stiff_simulate(C.byref(h), robot, design,
+                             None if truth is None else _c.encode(os.fspath(truth)),
+                             None if k is None else _c.ptr(k), 0 if k is None else k.size,
+                             C.byref(o)))
+    return Dataset(h)
+
+
+def read_noise(path) -> dict:
+    """Read a noise YAML file into keyword arguments of simulate()."""
+    o = _c.NoiseOptions()
+    o.struct_size = C.sizeof(o)
+    check(lib.stiff_noise_read(C.byref(o), _c.encode(os.fspath(path))))
+    return dict(tracker_sigma_m=o.tracker_sigma_m, tracker_ppm=o.tracker_ppm,
+                tracker_position_m=list(o.tracker_position_m), force_relative=o.force_relative,
+                force_absolute_N=o.force_absolute_N, joint_sigma_rad=o.joint_sigma_rad,
+                outlier_rate=o.outlier_rate, outlier_size_m=o.outlier_size_m, seed=o.seed)
+
+
+def predict(robot: Robot, fit: Fit, q, wrench) -> np.ndarray:
+    """Predicted deflection for poses and wrenches (see Model.predict)."""
+    return Model(robot, fit).predict(q, wrench)
+
+
+def effects() -> list[str]:
+    """Names of every physical effect the library knows."""
+    return [_c.get_string(lib.stiff_effect_name, i) for i in range(lib.stiff_effect_count())]
+
+
+def describe_effect(name: str, robot: Optional[Robot] = None) -> dict:
+    """Description, reference and parameters (name, unit, meaning, bounds) of an effect."""
+    return json.loads(_c.get_string(lib.stiff_effect_describe, robot, name.encode()))

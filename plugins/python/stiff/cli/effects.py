@@ -1,0 +1,43 @@
+"""stiff effects: the physical effects the model can contain."""
+from __future__ import annotations
+
+import json
+import textwrap
+
+from .. import api
+from .common import Formatter, robot_path
+
+EXAMPLE = """example:
+  stiff effects                      # every effect with a one-line explanation
+  stiff effects backlash --robot rokae   # its parameters, units and reference
+Use the names in --model, joined by '+': stiff identify --model joint+backlash ..."""
+
+
+def register(sub):
+    p = sub.add_parser("effects", help="list the physical effects and their parameters",
+                       description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
+    p.add_argument("name", nargs="?", help="show one effect in detail")
+    p.add_argument("--robot", "-r", help="robot (parameter lists depend on its joints)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=run)
+
+
+def run(args):
+    robot = api.Robot(robot_path(args.robot)) if args.robot else None
+    names = [args.name] if args.name else api.effects()
+    infos = [api.describe_effect(n, robot) for n in names]
+    if args.json:
+        print(json.dumps(infos if not args.name else infos[0], indent=2))
+        return 0
+    for info in infos:
+        needs = f"  (needs: {', '.join(info['needs'])})" if info["needs"] else ""
+        print(f"{info['name']:<20} {info['description']}{needs}")
+        if args.name:
+            print(textwrap.fill(f"reference: {info['reference']}", 100, subsequent_indent="  "))
+            print("parameters:")
+            for p in info["parameters"]:
+                print(f"  {p['name']:<12} [{p['unit']}]  {p['meaning']}")
+        else:
+            units = sorted({p["unit"] for p in info["parameters"]})
+            print(f"{'':<20} {len(info['parameters'])} parameters [{', '.join(units)}]")
+    return 0

@@ -1,0 +1,91 @@
+"""stiff identify: fit the compliance model to measured displacements."""
+from __future__ import annotations
+
+import json
+import math
+
+from .. import api
+from .common import Formatter, add_robot, fmt, robot_path, table
+
+EXAMPLE = """example:
+  stiff identify --robot rokae --data data.csv -o fit.json
+  stiff identify --robot rokae --data data.csv --model joint+link+point_offset --loss huber -o fit.json
+
+--model takes effect names joined by '+' (see `stiff effects`). The model 'joint' without a
+robust loss is solved by linear least squares (method.md eq. 5); anything else by Ceres."""
+
+
+def register(sub):
+    p = sub.add_parser("identify", help="identify joint stiffness (and effects) from measurements",
+                       description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
+    add_robot(p)
+    p.add_argument("--data", "-d", required=True, help="measurement CSV with displacements")
+    p.add_argument("--model", "-m", default="joint", help="effects joined by '+' (default: joint)")
+    p.add_argument("--loss", default="none", help="none, huber, cauchy, soft_l1, tukey (default none)")
+    p.add_argument("--loss-scale-um", type=float, default=0.0,
+                   help="robust loss scale [um] (default: from sigma_d or the data)")
+    p.add_argument("--method", default="auto", choices=["auto", "linear", "ceres"])
+    p.add_argument("-o", "--output", help="fit JSON to write")
+    p.add_argument("--json", action="store_true", help="print the fit as JSON instead of tables")
+    p.set_defaults(func=run)
+
+
+def print_fit(fit: api.Fit, truth_stiffness=None) -> None:
+    js = fit.json
+    k, kse, ident = fit.stiffness, fit.stiffness_se, fit.identified
+    rows = []
+    for j in range(len(k)):
+        row = [f"{j + 1}", fmt(k[j], ".5g") if ident[j] else "not identifiable",
+               fmt(kse[j], ".2g") if ident[j] else "-",
+               fmt(100 * kse[j] / k[j], ".2f", " %") if ident[j] and k[j] > 0 else "-"]
+        if truth_stiffness is not None:
+            t = truth_stiffness[j]
+            row += [fmt(t, ".5g"), fmt(100 * (k[j] - t) / t, "+.2f", " %") if ident[j] else "-",
+                    fmt(abs(k[j] - t) / kse[j], ".2f") if ident[j] and kse[j] > 0 else "-"]
+        rows.append(row)
+    head = ["joint", "k [N*m/rad]", "std. error", "rel. se"]
+    if truth_stiffness is not None:
+        head += ["true k", "error", "|error|/se"]
+    print(table(head, rows))
+    others = [p for p in js["parameters"] if p["effect"] != "joint"]
+    if others:
+        print()
+        print(table(["effect", "parameter", "value", "std. error", "unit", "meaning"],
+                    [[p["effect"], p["name"], fmt(p["value"], ".4g"), fmt(p["standard_error"], ".2g"),
+                      p["unit"], p["meaning"][:60]] for p in others], ["<", "<", ">", ">", "<", "<"]))
+    s = fit.statistics
+    print()
+    floor = f", noise floor {s.noise_floor_m * 1e6:.2f} um" if s.noise_floor_m > 0 else ""
+    print(f"fit: {s.measurements} measurements, {s.rank} parameters identified, residual RMS "
+          f"{s.rms_m * 1e6:.2f} um (sigma_hat {s.sigma_hat_m * 1e6:.2f} um{floor}), "
+          f"condition number {s.condition_number:.3g}")
+    if s.noise_floor_m > 0 and s.dof > 0:
+        ratio = s.sigma_hat_m / s.noise_floor_m
+        verdict = "at the noise floor" if ratio < 1.0 + 3.0 / math.sqrt(2 * s.dof) else \
+            "ABOVE the noise floor: the model misses something (run `stiff diagnose`)"
+        print(f"      residual / noise floor = {ratio:.2f}: {verdict}")
+    bad = [j + 1 for j in range(len(k)) if not ident[j]]
+    if bad:
+        print(f"not identifiable from this data: joint{'s' if len(bad) > 1 else ''} "
+              f"{', '.join(map(str, bad))}")
+    for o in fit.outliers:
+        print(f"outlier: measurement {o['id']} (row {o['row'] + 1}): residual "
+              f"{o['residual_m'] * 1e6:.1f} um, weight {o['weight']:.2f} - {o['reason']}")
+    for w in fit.warnings:
+        print(f"warning: {w}")
+
+
+def run(args):
+    robot = api.Robot(robot_path(args.robot))
+    data = api.Dataset.read(args.data, robot)
+    fit = api.identify(robot, data, model=args.model, loss=args.loss,
+                       loss_scale_m=args.loss_scale_um * 1e-6, method=args.method)
+    if args.output:
+        fit.write(args.output)
+    if args.json:
+        print(json.dumps(fit.json, indent=2))
+    else:
+        print_fit(fit)
+        if args.output:
+            print(f"wrote {args.output}")
+    return 0

@@ -1,0 +1,610 @@
+"""FMU of the compliant-arm deflection model (issue 7), tested with fmpy against an independent
+numpy reference (docs/fmu.md; test cases of /work/shared/spec/fmu-checklist.md)."""
+
+import ctypes
+import pathlib
+import re
+import shutil
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+import zipfile
+
+import numpy as np
+import pytest
+from conftest import STIFFNESS, reference, rodrigues, tool_position, forward
+
+fmpy = pytest.importorskip("fmpy")
+from fmpy import extract, read_model_description, simulate_fmu  # noqa: E402
+from fmpy.fmi1 import FMICallException  # noqa: E402
+from fmpy.fmi2 import (  # noqa: E402
+    FMU2Model,
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+)
+from fmpy.fmi3 import FMU3Model, FMU3Slave  # noqa: E402
+from fmpy.validation import validate_fmu  # noqa: E402
+
+TOL = 1e-12
+Q = [0.3, -0.4, 0.5, 0.2, 0.9, -0.3]  # a pose away from singularities [rad]
+W = [300.0, -200.0, 150.0, 10.0, -5.0, 8.0]  # (F [N], M [N*m])
+WRENCH = ["fx", "fy", "fz", "mx", "my", "mz"]
+DEFL = ["dx", "dy", "dz", "rx", "ry", "rz"]
+
+
+# ---------------------------------------------------------------- helpers
+class Log:
+    """Captures the FMU's log messages (FMI 2 and FMI 3 signatures)."""
+
+    def __init__(self):
+        self.messages = []  # (status, category, message)
+
+    def fmi2(self):
+        def logger(env, name, status, category, message):
+            self.messages.append((status, category.decode(), message.decode()))
+
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(logger)
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
+        try:
+            from fmpy.logging import addLoggerProxy
+
+            addLoggerProxy(ctypes.byref(cb))
+        except Exception:  # pragma: no cover - fmpy without the proxy
+            pass
+        self._keep = (logger, cb)
+        return cb
+
+    def fmi3(self, env, status, category, message):
+        self.messages.append((status, category.decode(), message.decode()))
+
+    def errors(self):
+        return [m for s, c, m in self.messages if s == 3]
+
+
+class Instance:
+    """One fmpy instance with name-based access."""
+
+    def __init__(self, path, kind="cs", name="arm", unzipdir=None, log=None, guid=None,
+                 logging_on=False):
+        self.md = read_model_description(path)
+        self.unzipdir = unzipdir or extract(path)
+        self.v3 = self.md.fmiVersion.startswith("3")
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.log = log or Log()
+        ident = (self.md.coSimulation if kind == "cs" else self.md.modelExchange).modelIdentifier
+        cls = {(False, "cs"): FMU2Slave, (False, "me"): FMU2Model,
+               (True, "cs"): FMU3Slave, (True, "me"): FMU3Model}[(self.v3, kind)]
+        self.fmu = cls(guid=guid or self.md.guid, unzipDirectory=self.unzipdir,
+                       modelIdentifier=ident, instanceName=name)
+        if self.v3:
+            self.fmu.instantiate(loggingOn=logging_on, logMessage=self.log.fmi3)
+        else:
+            self.fmu.instantiate(loggingOn=logging_on, callbacks=self.log.fmi2())
+        self.kind = kind
+        self.time = 0.0
+
+    def init(self):
+        if self.v3:
+            self.fmu.enterInitializationMode(startTime=0.0)
+        else:
+            self.fmu.setupExperiment(startTime=0.0)
+            self.fmu.enterInitializationMode()
+
+    def exit_init(self):
+        self.fmu.exitInitializationMode()
+        if self.kind == "me" and not self.v3:
+            self.fmu.newDiscreteStates()
+            self.fmu.enterContinuousTimeMode()
+        elif self.kind == "me":
+            self.fmu.updateDiscreteStates()
+            self.fmu.enterContinuousTimeMode()
+
+    def start(self):
+        self.init()
+        self.exit_init()
+        return self
+
+    def set(self, **values):
+        vrs = [self.vr[k] for k in values]
+        vals = [float(v) for v in values.values()]
+        if self.v3:
+            self.fmu.setFloat64(vrs, vals)
+        else:
+            self.fmu.setReal(vrs, vals)
+
+    def set_inputs(self, q, w):
+        self.set(**{f"q{j + 1}": x for j, x in enumerate(q)}, **dict(zip(WRENCH, w)))
+
+    def get(self, names):
+        vrs = [self.vr[n] for n in names]
+        return np.array(self.fmu.getFloat64(vrs) if self.v3 else self.fmu.getReal(vrs))
+
+    def deflection(self):
+        return self.get(DEFL)
+
+    def qcmd(self):
+        return self.get([f"q_cmd{j + 1}" for j in range(6)])
+
+    def step(self, h=0.01):
+        self.fmu.doStep(self.time, h)
+        self.time += h
+
+    def free(self):
+        self.fmu.terminate()
+        self.fmu.freeInstance()
+
+
+def both(request, fmu2, fmu3):
+    return fmu2 if request.param == 2 else fmu3
+
+
+@pytest.fixture(params=[2, 3], ids=["fmi2", "fmi3"])
+def fmu(request, fmu2, fmu3):
+    return fmu2 if request.param == 2 else fmu3
+
+
+# ---------------------------------------------------------------- 1, 2: static checks
+def test_validate_fmu_is_clean(fmu):
+    assert validate_fmu(fmu) == []
+    cli = subprocess.run([sys.executable, "-m", "fmpy.cli", "validate", fmu],
+                         capture_output=True, text=True)
+    assert cli.returncode == 0, cli.stdout + cli.stderr
+
+
+def test_static_structure(fmu):
+    md = read_model_description(fmu)
+    with zipfile.ZipFile(fmu) as z:
+        names = z.namelist()
+        root = ET.fromstring(z.read("modelDescription.xml"))
+        model_txt = z.read("resources/model.txt").decode()
+    assert "modelDescription.xml" in names
+    assert all("\\" not in n and not n.startswith("./") and not n.startswith("/") for n in names)
+    platform = "linux64" if md.fmiVersion == "2.0" else "x86_64-linux"
+    assert f"binaries/{platform}/stiff_arm.so" in names
+    assert {"resources/model.txt", "resources/robot.yaml", "documentation/index.html"} <= set(names)
+    assert any("BSD-2" in n for n in names) and any("MPL-2.0" in n for n in names)
+    # Inputs carry a start value and no `initial`.
+    for el in root.iter():
+        if el.get("causality") == "input":
+            assert el.get("initial") is None
+    guid = md.guid
+    assert re.search(r"^guid " + re.escape(guid) + "$", model_txt, re.M)
+    names_ = {v.name for v in md.modelVariables}
+    assert {f"joint_c{j}" for j in range(1, 7)} <= names_
+    assert {"x_tool", "y_tool", "z_tool", "wrench_frame"} <= names_
+    c1 = next(v for v in md.modelVariables if v.name == "joint_c1")
+    assert c1.causality == "parameter" and c1.variability == "tunable"
+    assert float(c1.start) == pytest.approx(1 / STIFFNESS[0], rel=1e-15)
+    assert c1.unit == "rad/(N.m)" and float(c1.min) == 0.0
+    outputs = [v for v in md.modelVariables if v.causality == "output"]
+    assert len(md.outputs) == len(outputs) == 6 + 3 + 6
+    if md.fmiVersion == "3.0":
+        arrays = {v.name: v for v in md.modelVariables if v.dimensions}
+        assert set(arrays) == {"q", "wrench"}
+
+
+# ---------------------------------------------------------------- 3: binary hygiene
+def test_binary_hygiene(fmu, tmp_path):
+    with zipfile.ZipFile(fmu) as z:
+        so = [n for n in z.namelist() if n.endswith(".so")][0]
+        z.extract(so, tmp_path)
+    lib = str(tmp_path / so)
+    dyn = subprocess.run(["readelf", "-d", lib], capture_output=True, text=True).stdout
+    needed = set(re.findall(r"\(NEEDED\).*\[(.*)\]", dyn))
+    assert needed <= {"libc.so.6", "libm.so.6", "ld-linux-x86-64.so.2"}, needed
+    syms = subprocess.run(["nm", "-D", "--defined-only", lib], capture_output=True,
+                          text=True).stdout.split("\n")
+    names = [line.split()[-1] for line in syms if line.strip()]
+    assert names and all(n.startswith(("fmi2", "fmi3")) for n in names), names
+    versions = re.findall(r"GLIBC_(\d+)\.(\d+)", subprocess.run(
+        ["objdump", "-T", lib], capture_output=True, text=True).stdout)
+    assert max((int(a), int(b)) for a, b in versions) <= (2, 36)
+
+
+# ---------------------------------------------------------------- 4: simulation vs reference
+def piecewise_input(fmu):
+    md = read_model_description(fmu)
+    names = [f"q{j + 1}" for j in range(6)] + WRENCH
+    steps = [  # (time, q, wrench): held from `time` on
+        (0.0, Q, W),
+        (0.25, [0.1, 0.2, -0.3, 0.4, -0.8, 0.5], [-100.0, 250.0, 80.0, -3.0, 4.0, 0.0]),
+        (0.55, [-0.5, 0.3, 0.2, -0.6, 1.1, 2.0], [0.0, 0.0, -400.0, 0.0, 12.0, -6.0]),
+    ]
+    rows = []
+    for k, (t, q, w) in enumerate(steps):
+        if k > 0:  # repeat the time with the new value: a step in fmpy's input table
+            rows.append((t, *steps[k - 1][1], *steps[k - 1][2]))
+        rows.append((t, *q, *w))
+    rows.append((1.0, *steps[-1][1], *steps[-1][2]))
+    dtype = [("time", np.float64)] + [(n, np.float64) for n in names]
+    assert md is not None
+    return np.array(rows, dtype=dtype), steps
+
+
+def held(steps, t):
+    cur = steps[0]
+    for s in steps:
+        if t >= s[0] - 1e-12:
+            cur = s
+    return cur
+
+
+@pytest.mark.parametrize("kind,solver", [("CoSimulation", None), ("ModelExchange", "Euler"),
+                                         ("ModelExchange", "CVode")])
+def test_simulation_matches_reference(fmu, kind, solver):
+    signal, steps = piecewise_input(fmu)
+    outs = DEFL + ["x_tool", "y_tool", "z_tool"] + [f"q{j + 1}" for j in range(6)] + WRENCH
+    kw = {"solver": solver} if solver else {}
+    res = simulate_fmu(fmu, fmi_type=kind, start_time=0, stop_time=1.0, output_interval=0.1,
+                       input=signal, output=outs, record_events=False, **kw)
+    assert len(res) >= 10
+    for k, row in enumerate(res):
+        t = row["time"]
+        q = np.array([row[f"q{j + 1}"] for j in range(6)])
+        w = np.array([row[n] for n in WRENCH])
+        # CS: the outputs at t were computed with the input applied at the previous sample.
+        tin = t if kind == "ModelExchange" or k == 0 else res[k - 1]["time"]
+        _, hq, hw = held(steps, tin)
+        np.testing.assert_allclose(q, hq, atol=0, rtol=0)
+        np.testing.assert_allclose(w, hw, atol=0, rtol=0)
+        d = np.array([row[n] for n in DEFL])
+        np.testing.assert_allclose(d, reference(q, w), rtol=0, atol=TOL)
+        p = np.array([row["x_tool"], row["y_tool"], row["z_tool"]])
+        np.testing.assert_allclose(p, tool_position(q) + d[:3], rtol=0, atol=TOL)
+
+
+# ---------------------------------------------------------------- 5: physics
+def test_zero_linear_and_stiffness_scaling(fmu):
+    a = Instance(fmu).start()
+    a.set_inputs(Q, [0] * 6)
+    assert np.all(a.deflection() == 0.0)
+    assert np.all(a.qcmd() == np.array(Q))
+    a.set_inputs(Q, W)
+    d1 = a.deflection()
+    a.set_inputs(Q, 2 * np.array(W))
+    np.testing.assert_allclose(a.deflection(), 2 * d1, rtol=1e-14, atol=1e-18)
+    a.set(**{f"joint_c{j + 1}": 0.5 / STIFFNESS[j] for j in range(6)})  # k x 2
+    np.testing.assert_allclose(a.deflection(), d1, rtol=1e-14, atol=1e-18)
+    a.free()
+
+
+def test_wrench_in_tool_frame(fmu):
+    a = Instance(fmu)
+    if a.v3:
+        a.fmu.setInt32([a.vr["wrench_frame"]], [1])
+    else:
+        a.fmu.setInteger([a.vr["wrench_frame"]], [1])
+    a.start()
+    a.set_inputs(Q, W)
+    np.testing.assert_allclose(a.deflection(), reference(Q, W, tool_frame=True), atol=TOL, rtol=0)
+    a.free()
+
+
+def test_compensation_puts_loaded_tool_on_target(fmu):
+    a = Instance(fmu).start()
+    a.set_inputs(Q, W)
+    qc = a.qcmd()
+    d = reference(qc, W)
+    _, _, f0 = forward(np.array(Q))
+    _, _, fc = forward(qc)
+    np.testing.assert_allclose(fc[:3, 3] + d[:3], f0[:3, 3], rtol=0, atol=TOL)
+    np.testing.assert_allclose(rodrigues(d[3:]) @ fc[:3, :3], f0[:3, :3], rtol=0, atol=TOL)
+    assert np.max(np.abs(qc - Q)) > 1e-5  # it did move
+    a.free()
+
+
+def test_fmi3_array_inputs_alias_scalars(fmu3):
+    a = Instance(fmu3).start()
+    a.fmu.setFloat64([a.vr["q"], a.vr["wrench"]], Q + W)
+    np.testing.assert_allclose(a.get([f"q{j + 1}" for j in range(6)]), Q, rtol=0, atol=0)
+    np.testing.assert_allclose(a.deflection(), reference(Q, W), atol=TOL, rtol=0)
+    with pytest.raises(FMICallException):
+        a.fmu.setFloat64([a.vr["q"]], Q[:5])  # nValues does not match
+    a.fmu.freeInstance()
+
+
+# ---------------------------------------------------------------- 6: start values
+def test_start_values(fmu):
+    base = dict(start_time=0, stop_time=0.1, output_interval=0.05, output=DEFL)
+    sv = {"q1": 0.3, "q2": -0.4, "q5": 0.9, "fx": 100.0, "mz": 3.0}
+    r1 = simulate_fmu(fmu, start_values=sv, apply_default_start_values=True, **base)
+    r2 = simulate_fmu(fmu, start_values=sv, apply_default_start_values=False, **base)
+    assert np.array_equal(r1.view(np.float64), r2.view(np.float64))
+    q = [0.3, -0.4, 0, 0, 0.9, 0]
+    np.testing.assert_allclose([r1[0][n] for n in DEFL], reference(q, [100, 0, 0, 0, 0, 3]),
+                               atol=TOL, rtol=0)
+    r3 = simulate_fmu(fmu, start_values={**sv, "joint_c2": 2 / STIFFNESS[1]}, **base)
+    c = 1 / STIFFNESS
+    c[1] *= 2
+    np.testing.assert_allclose([r3[0][n] for n in DEFL], reference(q, [100, 0, 0, 0, 0, 3], c),
+                               atol=TOL, rtol=0)
+    with pytest.raises(Exception):
+        simulate_fmu(fmu, start_values={"no_such_variable": 1.0}, **base)
+
+
+def test_values_in_initialization_mode(fmu):
+    a = Instance(fmu)
+    a.init()
+    assert a.get(["joint_c3"])[0] == 1 / STIFFNESS[2]
+    a.set_inputs(Q, W)
+    np.testing.assert_allclose(a.deflection(), reference(Q, W), atol=TOL, rtol=0)
+    a.exit_init()
+    a.free()
+
+
+# ---------------------------------------------------------------- 7: bad parameters
+@pytest.mark.parametrize("bad", [-1e-5, float("nan"), float("inf")])
+def test_bad_parameter_is_rejected_and_resettable(fmu, bad):
+    a = Instance(fmu)
+    with pytest.raises(FMICallException) as e:
+        a.set(joint_c2=bad)
+    assert e.value.status == 3
+    assert any("joint_c2" in m for m in a.log.errors()), a.log.messages
+    a.fmu.reset()
+    a.set(joint_c2=2e-5)
+    a.start()
+    a.set_inputs(Q, W)
+    c = 1 / STIFFNESS
+    c[1] = 2e-5
+    np.testing.assert_allclose(a.deflection(), reference(Q, W, c), atol=TOL, rtol=0)
+    a.free()
+
+
+def test_bad_input_and_wrench_frame(fmu):
+    a = Instance(fmu).start()
+    with pytest.raises(FMICallException):
+        a.set(q1=float("nan"))
+    assert a.log.errors()
+    a.fmu.reset()
+    with pytest.raises(FMICallException):
+        if a.v3:
+            a.fmu.setInt32([a.vr["wrench_frame"]], [7])
+        else:
+            a.fmu.setInteger([a.vr["wrench_frame"]], [7])
+    a.fmu.freeInstance()
+
+
+def _corrupt(fmu, tmp_path, edit):
+    d = tmp_path / "x"
+    shutil.rmtree(d, ignore_errors=True)
+    extract(fmu, str(d))
+    p = d / "resources" / "model.txt"
+    edit(p)
+    return str(d)
+
+
+@pytest.mark.parametrize("edit", [
+    lambda p: p.unlink(),
+    lambda p: p.write_text(p.read_text().replace("variables", "variablez")),
+    lambda p: p.write_text(p.read_text().replace("effects 1 joint", "effects 1 no_such_effect")),
+], ids=["missing", "malformed", "unknown_effect"])
+def test_missing_or_malformed_model_file(fmu, tmp_path, edit):
+    d = _corrupt(fmu, tmp_path, edit)
+    log = Log()
+    with pytest.raises(Exception):
+        Instance(fmu, unzipdir=d, log=log)
+    assert log.errors(), "instantiate must say why"
+
+
+# ---------------------------------------------------------------- 8: instantiate arguments
+def test_wrong_guid_and_empty_name(fmu):
+    log = Log()
+    with pytest.raises(Exception):
+        Instance(fmu, guid="{00000000-0000-0000-0000-000000000000}", log=log)
+    assert any("does not match" in m for m in log.errors())
+    with pytest.raises(Exception):
+        Instance(fmu, name="")
+
+
+# ---------------------------------------------------------------- 9: call sequence
+def test_call_sequence_violations(fmu):
+    a = Instance(fmu)
+    with pytest.raises(FMICallException):
+        a.fmu.doStep(0.0, 0.1)  # before initialization
+    with pytest.raises(FMICallException):
+        a.deflection()  # getReal in Instantiated
+    a.start()
+    with pytest.raises(FMICallException):
+        a.fmu.doStep(0.0, 0.0)  # h <= 0
+    with pytest.raises(FMICallException):
+        a.fmu.doStep(0.5, 0.1)  # wrong t
+    with pytest.raises(FMICallException):
+        a.fmu.exitInitializationMode()
+    a.step()
+    a.free()
+
+
+# ---------------------------------------------------------------- 10: instances
+def test_two_instances_are_independent(fmu):
+    unzip = extract(fmu)
+    a = Instance(fmu, name="a", unzipdir=unzip)
+    b = Instance(fmu, name="b", unzipdir=unzip)
+    b.set(**{f"joint_c{j + 1}": 3 / STIFFNESS[j] for j in range(6)})
+    a.start()
+    b.start()
+    for k in range(5):
+        a.set_inputs(Q, np.array(W) * (k + 1))
+        b.set_inputs(Q, W)
+        a.step()
+        b.step()
+        np.testing.assert_allclose(a.deflection(), reference(Q, np.array(W) * (k + 1)), atol=TOL,
+                                   rtol=0)
+        np.testing.assert_allclose(b.deflection(), reference(Q, W, 3 / STIFFNESS), atol=TOL,
+                                   rtol=0)
+    a.free()
+    b.free()
+
+
+# ---------------------------------------------------------------- 11: FMU state
+STATE_SCRIPT = r"""
+import sys, numpy as np
+sys.path.insert(0, {here!r})
+from test_fmu import Instance, DEFL
+a = Instance({fmu!r}).start()
+a.fmu.doStep(0.0, 0.01)
+a.time = 0.01
+st = a.fmu.deserializeFMUstate(open({blob!r}, 'rb').read()) if not a.v3 else \
+     a.fmu.deserializeFMUState(open({blob!r}, 'rb').read())
+(a.fmu.setFMUState if a.v3 else a.fmu.setFMUstate)(st)
+print(' '.join(repr(float(x)) for x in a.get(DEFL + ['q_cmd1', 'joint_c1'])))
+"""
+
+
+def test_fmu_state_roundtrip(fmu, tmp_path):
+    a = Instance(fmu).start()
+    get_state = a.fmu.getFMUState if a.v3 else a.fmu.getFMUstate
+    set_state = a.fmu.setFMUState if a.v3 else a.fmu.setFMUstate
+    free_state = a.fmu.freeFMUState if a.v3 else a.fmu.freeFMUstate
+    ser = a.fmu.serializeFMUState if a.v3 else a.fmu.serializeFMUstate
+    deser = a.fmu.deserializeFMUState if a.v3 else a.fmu.deserializeFMUstate
+    a.set_inputs(Q, W)
+    a.set(joint_c1=3e-5)
+    a.step()
+    names = DEFL + ["q_cmd1", "joint_c1"]
+    before = a.get(names)
+    s = get_state()
+    blob = ser(s)
+    a.set_inputs([0.0] * 6, [1, 2, 3, 0, 0, 0])
+    a.set(joint_c1=1e-6)
+    a.step()
+    assert not np.array_equal(a.get(names), before)
+    set_state(s)
+    assert np.array_equal(a.get(names), before)
+    s2 = deser(blob)
+    a.set_inputs([0.0] * 6, [1, 2, 3, 0, 0, 0])
+    set_state(s2)
+    assert np.array_equal(a.get(names), before)
+    for bad in (blob[:-9], b"XXXX" + blob[4:], blob + b"\0"):
+        with pytest.raises(FMICallException):
+            deser(bad)
+    free_state(s)
+    free_state(s2)
+    # A fresh process restores the same outputs bit for bit.
+    (tmp_path / "state.bin").write_bytes(blob)
+    script = STATE_SCRIPT.format(here=str(pathlib.Path(__file__).parent), fmu=fmu,
+                                 blob=str(tmp_path / "state.bin"))
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         cwd=str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    assert np.array_equal(np.array([float(x) for x in out.stdout.split()]), before)
+    a.free()
+
+
+# ---------------------------------------------------------------- 12: lifecycle
+def test_reset_reproduces_first_run(fmu):
+    a = Instance(fmu)
+
+    def run():
+        a.time = 0.0
+        a.start()
+        out = []
+        for k in range(4):
+            a.set_inputs(np.array(Q) * (1 + 0.1 * k), W)
+            a.step()
+            out.append(np.concatenate([a.deflection(), a.qcmd()]))
+        return np.array(out)
+
+    first = run()
+    a.fmu.terminate()
+    a.fmu.reset()
+    assert np.array_equal(run(), first)
+    a.free()
+
+
+def test_simulate_reuses_instance_for_a_sweep(fmu2):
+    md = read_model_description(fmu2)
+    unzip = extract(fmu2)
+    inst = FMU2Slave(guid=md.guid, unzipDirectory=unzip,
+                     modelIdentifier=md.coSimulation.modelIdentifier, instanceName="sweep")
+    inst.instantiate()
+    sv = {f"q{j + 1}": Q[j] for j in range(6)}
+    sv["fz"] = -500.0
+    for scale in (1.0, 2.0, 4.0):
+        r = simulate_fmu(unzip, model_description=md, fmu_instance=inst, stop_time=0.02,
+                         output_interval=0.01, output=["dz"],
+                         start_values={**sv, "joint_c2": scale / STIFFNESS[1]})
+        c = 1 / STIFFNESS
+        c[1] *= scale
+        assert r[-1]["dz"] == pytest.approx(reference(Q, [0, 0, -500, 0, 0, 0], c)[2], abs=TOL)
+        inst.reset()
+    inst.freeInstance()
+
+
+# ---------------------------------------------------------------- 13: resources and URIs
+def test_resources_under_odd_path(fmu, tmp_path):
+    d = tmp_path / "with space %41 ü"
+    extract(fmu, str(d))
+    a = Instance(fmu, unzipdir=str(d)).start()
+    a.set_inputs(Q, W)
+    np.testing.assert_allclose(a.deflection(), reference(Q, W), atol=TOL, rtol=0)
+    a.free()
+
+
+def test_fmi2_uri_forms(fmu2, tmp_path):
+    d = tmp_path / "uri 100%"
+    extract(fmu2, str(d))
+    md = read_model_description(fmu2)
+    res = (d / "resources").resolve()
+    quoted = pathlib.Path(res).as_uri()  # file:///...%20...%25
+    forms = [quoted, quoted.replace("file:///", "file:/"),
+             quoted.replace("file:///", "file://localhost/")]
+    for uri in forms:
+        f = FMU2Slave(guid=md.guid, unzipDirectory=str(d), modelIdentifier="stiff_arm",
+                      instanceName="u")
+        log = Log()
+        f.callbacks = log.fmi2()
+        comp = f.fmi2Instantiate(b"u", 1, md.guid.encode(), uri.encode(),
+                                 ctypes.byref(f.callbacks), 0, 0)
+        assert comp, (uri, log.messages)
+        f.component = comp
+        f.freeInstance()
+
+
+# ---------------------------------------------------------------- 14: logging
+def test_only_declared_log_categories(fmu):
+    with zipfile.ZipFile(fmu) as z:
+        root = ET.fromstring(z.read("modelDescription.xml"))
+    declared = {c.get("name") for c in root.iter("Category")}
+    a = Instance(fmu, logging_on=True).start()
+    a.set_inputs(Q, W)
+    a.deflection()
+    with pytest.raises(FMICallException):
+        a.set(joint_c1=-1.0)
+    a.fmu.freeInstance()
+    cats = {c for _, c, _ in a.log.messages}
+    assert cats and cats <= declared
+    assert any(s == 0 for s, _, _ in a.log.messages)  # logCalls when on
+    b = Instance(fmu, logging_on=False).start()
+    b.set_inputs(Q, W)
+    b.deflection()
+    b.free()
+    assert not [m for m in b.log.messages if m[0] == 0]
+
+
+# ---------------------------------------------------------------- 16: long run
+def test_long_run_many_instances(fmu2):
+    unzip = extract(fmu2)
+    insts = [Instance(fmu2, name=f"i{k}", unzipdir=unzip).start() for k in range(4)]
+    for k in range(2000):
+        for i, a in enumerate(insts):
+            a.set_inputs(Q, np.array(W) * (i + 1))
+            a.step(1e-3)
+    for i, a in enumerate(insts):
+        np.testing.assert_allclose(a.deflection(), reference(Q, np.array(W) * (i + 1)), atol=TOL,
+                                   rtol=0)
+        a.free()
+
+
+# ---------------------------------------------------------------- export errors (C ABI)
+def test_export_errors(exporter, tmp_path):
+    with pytest.raises(RuntimeError, match="fmi_version"):
+        exporter.export("bad_version", fmi_version=4)
+    with pytest.raises(RuntimeError, match="identifier"):
+        exporter.export("bad_id", model_identifier=b"1 bad")
+    with pytest.raises(RuntimeError, match="outside"):
+        exporter.export("bad_c", compliance=-1 / STIFFNESS)

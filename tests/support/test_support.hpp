@@ -1,0 +1,34 @@
+// Shared helpers of the C++ tests: paths of built-in files, the paper's robot and designs.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "stiff/dataset.hpp"
+#include "stiff/robot_io.hpp"
+
+namespace stiff::test {
+
+inline std::string source_path(const std::string& rel) {
+  return std::string(STIFF_SOURCE_DIR) + "/" + rel;
+}
+
+inline RobotModel rokae() { return load_robot(source_path("examples/robots/rokae.yaml")); }
+
+/// The paper's identified stiffness (method.md), N*m/rad; joint 6 assumed 4000 (not identified).
+inline Eigen::VectorXd paper_stiffness() {
+  Eigen::VectorXd k(6);
+  k << 5.0914e4, 1.6382e4, 3.1311e4, 7.7911e3, 5.6136e3, 4.0e3;
+  return k;
+}
+
+/// The paper's kappa_F^-1(A) design: 10 poses (deg) and loads (N, base frame).
+inline Dataset paper_design_a() {
+  return read_measurements_csv(source_path("examples/paper/design_kappa_a.csv"), 6);
+}
+inline Dataset paper_design_j() {
+  return read_measurements_csv(source_path("examples/paper/design_kappa_j.csv"), 6);
+}
+
+}  // namespace stiff::test

@@ -1,0 +1,200 @@
+// Every effect: registry texts, automatic derivatives against central differences, and the
+// physics of the second-order (complementary) term against the exact loaded equilibrium.
+#include <gtest/gtest.h>
+
+#include <set>
+
+#include "effect_truths.hpp"
+#include "stiff/error.hpp"
+#include "stiff/model.hpp"
+#include "test_support.hpp"
+
+namespace stiff {
+namespace {
+
+const std::vector<std::string> kEffects = {"complementary",   "link",        "gravity_compensator",
+                                           "nonlinear_joint", "backlash",    "coupling",
+                                           "tracker_frame",   "force_frame", "point_offset",
+                                           "tool_compliance", "drift"};
+
+TEST(Effects, RegistryHasEveryEffectWithTexts) {
+  const auto names = effect_names();
+  const RobotModel robot = test::rokae();
+  const Dataset data = test::design60(1, 5);
+  EffectSetup setup;
+  setup.robot = &robot;
+  setup.data = &data;
+  for (const auto& name : kEffects) {
+    ASSERT_NE(std::find(names.begin(), names.end(), name), names.end()) << name;
+    const auto e = make_effect(name, setup);
+    EXPECT_EQ(e->name(), name);
+    EXPECT_FALSE(e->description().empty()) << name;
+    EXPECT_FALSE(e->reference().empty()) << name;
+    EXPECT_GT(e->size(), 0) << name;
+    std::set<std::string> seen;
+    for (const auto& p : e->parameters()) {
+      EXPECT_TRUE(seen.insert(p.name).second) << name << "." << p.name << " twice";
+      EXPECT_FALSE(p.unit.empty()) << name << "." << p.name;
+      EXPECT_FALSE(p.meaning.empty()) << name << "." << p.name;
+      EXPECT_LE(p.lower, p.null_value) << name << "." << p.name;
+      EXPECT_GE(p.upper, p.null_value) << name << "." << p.name;
+      EXPECT_GE(p.start, p.lower) << name << "." << p.name;
+      EXPECT_LE(p.start, p.upper) << name << "." << p.name;
+      EXPECT_GT(p.typical, 0) << name << "." << p.name;
+    }
+  }
+}
+
+TEST(Effects, LinkKeepsOnlyDirectionsTheJointsCannotAbsorb) {
+  // Upper arm: bending out of plane and torsion; forearm: torsion is joint 4's axis, dropped.
+  const RobotModel robot = test::rokae();
+  DeflectionModel m(robot, {"link"});
+  std::vector<std::string> names;
+  for (const auto& p : m.effects()[0]->parameters()) names.push_back(p.name);
+  EXPECT_EQ(names, (std::vector<std::string>{"c_link2_x", "c_link2_y", "c_link3_x"}));
+}
+
+TEST(Effects, NullParametersSwitchEveryEffectOff) {
+  const RobotModel robot = test::rokae();
+  const Dataset data = test::design60(2, 8);
+  for (const auto& name : kEffects) {
+    DeflectionModel base(robot, {"joint"}, &data), full(robot, {"joint", name}, &data);
+    Eigen::VectorXd t = full.null_parameters();
+    t.head(6) = test::paper_stiffness().cwiseInverse();
+    const auto ctx = full.contexts(data);
+    for (size_t r = 0; r < data.size(); ++r) {
+      const Eigen::Vector3d d0 = base.predict(t.head(6), data.rows[r], ctx[r]).head<3>();
+      const Eigen::Vector3d d1 = full.predict(t, data.rows[r], ctx[r]).head<3>();
+      EXPECT_LT((d1 - d0).norm(), 1e-12 * d0.norm()) << name << " row " << r;
+    }
+  }
+}
+
+// The autodiff Jacobian of the displacement equals central differences of predict() for every
+// effect alone with the joint effect, and for all effects in one model (stage interplay).
+void expect_jacobian_matches(const std::vector<std::string>& effects,
+                             const Eigen::VectorXd& theta,
+                             const DeflectionModel& m,
+                             const Dataset& data) {
+  const auto ctx = m.contexts(data);
+  for (size_t r = 0; r < data.size(); ++r) {
+    const auto ad = m.displacement_jacobian(theta, data.rows[r], ctx[r]);
+    const Eigen::Vector3d d = m.predict(theta, data.rows[r], ctx[r]).head<3>();
+    for (int k = 0; k < m.parameter_count(); ++k) {
+      const double h = 1e-5 * std::max(std::abs(theta(k)), m.spec(k).typical);
+      Eigen::VectorXd tp = theta, tm = theta;
+      tp(k) += h;
+      tm(k) -= h;
+      const Eigen::Vector3d fd = (m.predict(tp, data.rows[r], ctx[r]).head<3>() -
+                                  m.predict(tm, data.rows[r], ctx[r]).head<3>()) /
+                                 (2 * h);
+      // Truncation ~ (h/theta)^2 ~ 1e-10 relative; rounding ~ 1e-16 |d| / h.
+      const double tol = 1e-6 * ad.col(k).norm() + 1e-13 * d.norm() / h;
+      EXPECT_LT((ad.col(k) - fd).norm(), tol)
+          << m.model_string() << " " << m.spec(k).name << " row " << r << ": ad "
+          << ad.col(k).transpose() << " fd " << fd.transpose();
+    }
+  }
+  (void)effects;
+}
+
+TEST(Effects, AutodiffJacobianMatchesCentralDifferences) {
+  const RobotModel robot = test::rokae();
+  const Dataset data = test::design60(3, 6);
+  for (const auto& name : kEffects) {
+    DeflectionModel m(robot, {"joint", name}, &data);
+    Eigen::VectorXd theta = test::effect_truth(name, robot).theta;
+    // Move every parameter off its null value so that every derivative is exercised.
+    for (int k = 0; k < m.parameter_count(); ++k)
+      if (theta(k) == m.spec(k).null_value)
+        theta(k) = std::min(m.spec(k).upper, m.spec(k).null_value + 0.3 * m.spec(k).typical);
+    expect_jacobian_matches({"joint", name}, theta, m, data);
+  }
+}
+
+TEST(Effects, AutodiffJacobianOfAllEffectsTogether) {
+  const RobotModel robot = test::rokae();
+  const Dataset data = test::design60(4, 6);
+  std::vector<std::string> all = {"joint"};
+  all.insert(all.end(), kEffects.begin(), kEffects.end());
+  DeflectionModel m(robot, all, &data);
+  Eigen::VectorXd theta(m.parameter_count());
+  for (int k = 0; k < m.parameter_count(); ++k)
+    theta(k) = std::min(m.spec(k).upper, m.spec(k).null_value + 0.5 * m.spec(k).typical);
+  theta.head(6) = test::paper_stiffness().cwiseInverse();
+  expect_jacobian_matches(all, theta, m, data);
+}
+
+// Exact loaded equilibrium K dtheta = J(L(q + dtheta))^T F by fixed-point iteration (no
+// gravity): d_exact = P(q + dtheta) - P(q). The complementary term with gamma = 1 must account
+// for the second-order part, leaving a third-order remainder.
+TEST(Effects, ComplementaryIsTheSecondOrderOfTheExactEquilibrium) {
+  RobotModel robot = test::rokae();
+  robot.measured_point = Eigen::Vector3d(0.03, -0.02, 0.05);
+  robot.load_point = Eigen::Vector3d(0.04, 0.01, 0.06);
+  const Dataset data = test::design60(5, 10);
+  DeflectionModel m(robot, {"joint", "complementary"}, &data);
+  // 20x the paper's compliance so that the second-order part is well above round-off.
+  Eigen::VectorXd c = 20.0 * test::paper_stiffness().cwiseInverse();
+  Eigen::VectorXd t1(7), t0(7);
+  t1 << c, 1.0;
+  t0 << c, 0.0;
+  const auto ctx = m.contexts(data);
+  double second = 0, remainder = 0;
+  for (size_t r = 0; r < data.size(); ++r) {
+    const auto& meas = data.rows[r];
+    Eigen::VectorXd dth = Eigen::VectorXd::Zero(6);
+    for (int it = 0; it < 200; ++it) {
+      const ChainState s = robot.chain(meas.q + dth);
+      const Eigen::Vector3d l = robot.point_position(s, robot.load_point);
+      const Matrix6X<double> j = robot.jacobian_at(s, l);
+      Eigen::Matrix<double, 6, 1> w;
+      w << meas.force, meas.moment;
+      dth = c.asDiagonal() * (j.transpose() * w);
+    }
+    const Eigen::Vector3d p0 = robot.point_position(robot.chain(meas.q), robot.measured_point);
+    const Eigen::Vector3d p1 =
+        robot.point_position(robot.chain(meas.q + dth), robot.measured_point);
+    const Eigen::Vector3d exact = p1 - p0;
+    const Eigen::Vector3d lin = m.predict(t0, meas, ctx[r]).head<3>();
+    const Eigen::Vector3d quad = m.predict(t1, meas, ctx[r]).head<3>();
+    second += (exact - lin).squaredNorm();
+    remainder += (exact - quad).squaredNorm();
+  }
+  // The remainder is third order: smaller than the second-order part by ~ |dtheta| (~1e-2).
+  EXPECT_GT(std::sqrt(second), 1e-7);
+  EXPECT_LT(std::sqrt(remainder), 0.05 * std::sqrt(second));
+}
+
+TEST(Effects, RequirementsAreChecked) {
+  RobotModel robot = test::rokae();
+  for (auto& j : robot.joints) j.mass = 0;
+  robot.tool_mass = 0;
+  for (const std::string name : {"nonlinear_joint", "backlash"}) {
+    try {
+      DeflectionModel m(robot, {"joint", name});
+      FAIL() << name << " accepted a robot without masses";
+    } catch (const InvalidArgument& e) {
+      EXPECT_NE(std::string(e.what()).find("masses"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW(DeflectionModel(robot, {"joint", "no_such_effect"}), InvalidArgument);
+}
+
+TEST(Effects, DriftHasOneBlockPerSession) {
+  const RobotModel robot = test::rokae();
+  Dataset data = test::design60(6, 10);
+  data.has_session = true;
+  for (size_t r = 0; r < data.size(); ++r) data.rows[r].session = r < 5 ? "monday" : "tuesday";
+  DeflectionModel m(robot, {"drift"}, &data);
+  ASSERT_EQ(m.parameter_count(), 12);
+  EXPECT_EQ(m.spec(6).name, "offset_x_s2");
+  Eigen::VectorXd t = m.null_parameters();
+  t(6) = 1e-5;  // offset x of the second session only
+  const auto ctx = m.contexts(data);
+  EXPECT_DOUBLE_EQ(m.predict(t, data.rows[0], ctx[0])(0), 0.0);
+  EXPECT_DOUBLE_EQ(m.predict(t, data.rows[7], ctx[7])(0), 1e-5);
+}
+
+}  // namespace
+}  // namespace stiff

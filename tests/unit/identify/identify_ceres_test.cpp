@@ -1,0 +1,256 @@
+// identify(): robust nonlinear identification with Ceres — agreement with the linear
+// solution, robust losses against gross tracker errors, identifiability reports, errors.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <set>
+
+#include "../effects/effect_truths.hpp"
+#include "stiff/error.hpp"
+#include "stiff/identify.hpp"
+
+namespace stiff {
+namespace {
+
+constexpr double kNoise = 10e-6;
+
+Dataset simulated(const Truth& truth,
+                  uint64_t seed,
+                  double outlier_rate = 0.0,
+                  std::vector<int>* outliers = nullptr,
+                  int count = 60) {
+  NoiseModel noise;
+  noise.tracker_sigma_m = kNoise;
+  noise.outlier_rate = outlier_rate;
+  noise.outlier_size_m = 0.5e-3;
+  noise.seed = 7000 + seed;
+  return simulate(test::rokae(), truth, test::design60(seed, count), noise, outliers);
+}
+
+double validation_rms(const FitResult& fit, const Dataset& val) {
+  const Eigen::MatrixXd pred = predict_dataset(test::rokae(), fit, val);
+  double ss = 0;
+  for (size_t r = 0; r < val.size(); ++r)
+    ss += (val.rows[r].displacement - pred.row(r).head<3>().transpose()).squaredNorm();
+  return std::sqrt(ss / (3.0 * val.size()));
+}
+
+bool has_warning(const FitResult& f, const std::string& text) {
+  for (const auto& w : f.warnings)
+    if (w.find(text) != std::string::npos) return true;
+  return false;
+}
+
+TEST(IdentifyCeres, JointModelEqualsTheLinearSolution) {
+  const Truth truth = joint_truth(test::paper_stiffness());
+  const Dataset data = simulated(truth, 1);
+  const FitResult lin = identify_joint_linear(test::rokae(), data);
+  const FitResult fit = identify(test::rokae(), data, {"joint"});
+  EXPECT_EQ(fit.method, "ceres");
+  EXPECT_EQ(fit.loss, "none");
+  EXPECT_EQ(fit.measurements, 60);
+  EXPECT_EQ(fit.rank, 5);
+  EXPECT_EQ(fit.dof, 175);
+  ASSERT_EQ(fit.parameters.size(), 6u);
+  for (int j = 0; j < 5; ++j) {
+    // Same least-squares problem: agreement far below the standard errors.
+    EXPECT_NEAR(fit.parameters[j].value, lin.parameters[j].value,
+                1e-4 * lin.parameters[j].standard_error);
+    EXPECT_NEAR(fit.parameters[j].standard_error, lin.parameters[j].standard_error,
+                1e-3 * lin.parameters[j].standard_error);
+  }
+  EXPECT_NEAR(fit.rms_m, lin.rms_m, 1e-3 * lin.rms_m);
+  EXPECT_NEAR(fit.sigma_hat_m, lin.sigma_hat_m, 1e-3 * lin.sigma_hat_m);
+  EXPECT_NEAR(fit.condition_number, lin.condition_number, 1e-3 * lin.condition_number);
+  EXPECT_GT(fit.chi2, 0.0);
+  EXPECT_EQ(fit.weights.size(), 60);
+  EXPECT_EQ(fit.residuals.size(), 180);
+}
+
+TEST(IdentifyCeres, JointSixOnTheFlangeAxisIsHeldAndReported) {
+  const Dataset data = simulated(joint_truth(test::paper_stiffness()), 2);
+  const FitResult fit = identify(test::rokae(), data, {"joint"});
+  EXPECT_FALSE(fit.parameters[5].identified);
+  EXPECT_EQ(fit.parameters[5].value, 0.0);
+  EXPECT_TRUE(std::isnan(fit.parameters[5].standard_error));
+  EXPECT_TRUE(std::isnan(fit.covariance(5, 5)));
+  EXPECT_TRUE(has_warning(fit, "joint.c6 is not identifiable")) << fit.warnings.size();
+  for (int j = 0; j < 5; ++j) EXPECT_TRUE(fit.parameters[j].identified);
+}
+
+TEST(IdentifyCeres, CommonForceScaleIsNamedAndHeld) {
+  const RobotModel robot = test::rokae();
+  const Truth truth = test::effect_truth("force_frame", robot);
+  const FitResult fit = identify(robot, simulated(truth, 3), truth.effects);
+  const auto& sz = fit.parameters[6 + 5];
+  ASSERT_EQ(sz.name, "scale_z");
+  EXPECT_FALSE(sz.identified);
+  bool named = false;
+  for (const auto& w : fit.warnings)
+    if (w.find("force_frame.scale_z") != std::string::npos &&
+        w.find("joint.c1") != std::string::npos &&
+        w.find("force_frame.scale_x") != std::string::npos)
+      named = true;
+  EXPECT_TRUE(named) << "warning must name the combination";
+}
+
+// 5 % gross tracker errors of 0.5 mm (50 sigma): Huber keeps the validation error at the
+// clean fit's level; plain least squares is pulled away; the flagged rows are the outliers.
+TEST(IdentifyCeres, RobustLossResistsGrossOutliers) {
+  const Truth truth = joint_truth(test::paper_stiffness());
+  const int seeds = 12;
+  double clean_ss = 0, huber_ss = 0, lsq_ss = 0;
+  int tp = 0, fp = 0, fn = 0;
+  for (int seed = 1; seed <= seeds; ++seed) {
+    std::vector<int> bad;
+    const Dataset dirty = simulated(truth, seed, 0.05, &bad);
+    const Dataset clean = simulated(truth, seed, 0.0);
+    const Dataset val = simulated(truth, 500 + seed);
+    IdentifyOptions huber;
+    huber.loss = "huber";
+    const FitResult fc = identify(test::rokae(), clean, {"joint"});
+    const FitResult fh = identify(test::rokae(), dirty, {"joint"}, huber);
+    const FitResult fl = identify(test::rokae(), dirty, {"joint"});
+    clean_ss += std::pow(validation_rms(fc, val), 2);
+    huber_ss += std::pow(validation_rms(fh, val), 2);
+    lsq_ss += std::pow(validation_rms(fl, val), 2);
+    EXPECT_EQ(fh.loss, "huber");
+    EXPECT_NEAR(fh.loss_scale_m, 3 * kNoise, 1e-12);
+    std::set<int> truth_rows(bad.begin(), bad.end()), flagged;
+    for (const auto& o : fh.outliers) {
+      flagged.insert(o.row);
+      EXPECT_LT(o.weight, 0.5);
+      EXPECT_FALSE(o.reason.empty());
+    }
+    for (int r : flagged) (truth_rows.count(r) ? tp : fp)++;
+    for (int r : truth_rows) fn += flagged.count(r) ? 0 : 1;
+  }
+  const double clean = std::sqrt(clean_ss / seeds), hub = std::sqrt(huber_ss / seeds),
+               lsq = std::sqrt(lsq_ss / seeds);
+  const double precision = tp / double(tp + fp), recall = tp / double(tp + fn);
+  std::printf("  validation RMS: clean LSQ %.2f um, Huber %.2f um, LSQ with outliers %.2f um\n",
+              clean * 1e6, hub * 1e6, lsq * 1e6);
+  std::printf("  outliers: %d true, %d flagged correctly, %d false; precision %.3f recall %.3f\n",
+              tp + fn, tp, fp, precision, recall);
+  ASSERT_GT(tp + fn, 10) << "too few outliers drawn to test";
+  EXPECT_LT(hub, 1.2 * clean);
+  // Least squares is pulled by the outliers: its estimation error (the part of the validation
+  // error above the noise floor) is several times the clean one.
+  const double excess_clean = std::sqrt(std::max(0.0, clean * clean - kNoise * kNoise));
+  const double excess_lsq = std::sqrt(std::max(0.0, lsq * lsq - kNoise * kNoise));
+  std::printf("  estimation error above the noise: clean %.2f um, LSQ with outliers %.2f um\n",
+              excess_clean * 1e6, excess_lsq * 1e6);
+  EXPECT_GT(lsq, 1.3 * clean);
+  EXPECT_GT(excess_lsq, 3 * excess_clean);
+  EXPECT_GE(precision, 0.9);
+  EXPECT_GE(recall, 0.9);
+}
+
+TEST(IdentifyCeres, EveryLossRuns) {
+  const Dataset data = simulated(joint_truth(test::paper_stiffness()), 4, 0.05);
+  for (const auto& loss : loss_names()) {
+    IdentifyOptions o;
+    o.loss = loss;
+    const FitResult f = identify(test::rokae(), data, {"joint"}, o);
+    EXPECT_EQ(f.loss, loss);
+    for (int j = 0; j < 5; ++j) EXPECT_TRUE(std::isfinite(f.parameters[j].standard_error)) << loss;
+  }
+}
+
+TEST(IdentifyCeres, LeastSquaresListsGrossResidualsToo) {
+  std::vector<int> bad;
+  const Dataset data = simulated(joint_truth(test::paper_stiffness()), 5, 0.1, &bad);
+  ASSERT_FALSE(bad.empty());
+  const FitResult f = identify(test::rokae(), data, {"joint"});
+  EXPECT_FALSE(f.outliers.empty());
+  for (const auto& o : f.outliers) EXPECT_NE(o.reason.find("robust loss"), std::string::npos);
+}
+
+TEST(IdentifyCeres, ClearErrors) {
+  const RobotModel robot = test::rokae();
+  const Dataset data = simulated(joint_truth(test::paper_stiffness()), 6);
+  IdentifyOptions bad_loss;
+  bad_loss.loss = "l1";
+  try {
+    identify(robot, data, {"joint"}, bad_loss);
+    FAIL();
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("huber"), std::string::npos) << e.what();
+  }
+  try {
+    identify(robot, data, {"joint", "pedestal_tilt"});
+    FAIL();
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("known effects"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("backlash"), std::string::npos) << e.what();
+  }
+  RobotModel massless = robot;
+  for (auto& j : massless.joints) j.mass = 0;
+  massless.tool_mass = 0;
+  try {
+    identify(massless, data, {"joint", "nonlinear_joint"});
+    FAIL();
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("masses"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(identify(robot, data, {}), InvalidArgument);
+  IdentifyOptions o;
+  o.max_iterations = 0;
+  EXPECT_THROW(identify(robot, data, {"joint"}, o), InvalidArgument);
+  o = {};
+  o.loss_scale_m = NAN;
+  EXPECT_THROW(identify(robot, data, {"joint"}, o), InvalidArgument);
+  o = {};
+  o.outlier_weight = 0;
+  EXPECT_THROW(identify(robot, data, {"joint"}, o), InvalidArgument);
+  Dataset zero_sigma = data;
+  zero_sigma.rows[3].sigma_d = 0;
+  EXPECT_THROW(identify(robot, zero_sigma, {"joint"}), InvalidArgument);
+  Dataset nan = data;
+  nan.rows[2].displacement(1) = NAN;
+  EXPECT_THROW(identify(robot, nan, {"joint"}), InvalidArgument);
+  Dataset few = simulated(joint_truth(test::paper_stiffness()), 6, 0.0, nullptr, 1);
+  EXPECT_THROW(identify(robot, few, {"joint", "tool_compliance"}), InvalidArgument);
+}
+
+TEST(IdentifyCeres, NoLoadMeansNothingIdentifiable) {
+  Dataset data = simulated(joint_truth(test::paper_stiffness()), 7);
+  for (auto& m : data.rows) m.force.setZero();
+  EXPECT_THROW(identify(test::rokae(), data, {"joint"}), NumericalError);
+}
+
+TEST(IdentifyCeres, ComplementaryWithoutJointIsReportedNotFitted) {
+  const Dataset data = simulated(joint_truth(test::paper_stiffness()), 8);
+  const FitResult f = identify(test::rokae(), data, {"complementary", "tool_compliance"});
+  EXPECT_FALSE(f.parameters[0].identified);
+  EXPECT_TRUE(has_warning(f, "complementary.gamma is not identifiable"));
+}
+
+TEST(IdentifyCeres, ProgressCanCancel) {
+  const Dataset data = simulated(joint_truth(test::paper_stiffness()), 9);
+  IdentifyOptions o;
+  int calls = 0;
+  o.progress = [&](int, double) { return ++calls < 1; };
+  EXPECT_THROW(identify(test::rokae(), data, {"joint", "force_frame"}, o), Cancelled);
+  EXPECT_GE(calls, 1);
+  o.progress = [&](int, double cost) { return std::isfinite(cost); };
+  EXPECT_NO_THROW(identify(test::rokae(), data, {"joint", "force_frame"}, o));
+}
+
+TEST(IdentifyCeres, WithoutSigmaUsesRobustScale) {
+  Dataset data = simulated(joint_truth(test::paper_stiffness()), 10, 0.05);
+  data.has_sigma = false;
+  for (auto& m : data.rows) m.sigma_d = 0;
+  data.metadata.clear();
+  IdentifyOptions o;
+  o.loss = "huber";
+  const FitResult f = identify(test::rokae(), data, {"joint"}, o);
+  EXPECT_EQ(f.noise_floor_m, 0.0);
+  // 3 x a MAD estimate of the 10 um noise (taken at the least-squares start).
+  EXPECT_GT(f.loss_scale_m, 2.0 * kNoise);
+  EXPECT_LT(f.loss_scale_m, 5.0 * kNoise);
+  EXPECT_NEAR(f.sigma_hat_m, kNoise, 0.25 * kNoise);
+}
+
+}  // namespace
+}  // namespace stiff

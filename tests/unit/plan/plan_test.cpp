@@ -1,0 +1,228 @@
+// Measurement planning: pool, criteria, incremental updates, errors, output.
+#include "stiff/plan.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "stiff/error.hpp"
+#include "stiff/model.hpp"
+#include "stiff/random.hpp"
+#include "test_support.hpp"
+
+namespace stiff {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+PoolOptions paper_pool(int poses, int loads, uint64_t seed = 1) {
+  PoolOptions o;
+  o.pose_count = poses;
+  o.load_count = loads;
+  o.q_fixed = {kNaN, kNaN, kNaN, kNaN, kNaN, 0.0};
+  o.seed = seed;
+  return o;
+}
+
+TEST(PlanPool, BlocksEqualObservationBlockAndJoint6Drops) {
+  const RobotModel robot = test::rokae();
+  const CandidatePool pool = build_pool(robot, paper_pool(20, 10));
+  EXPECT_EQ(pool.size(), 200);
+  ASSERT_EQ(pool.identified_joints, (std::vector<int>{0, 1, 2, 3, 4}));
+  for (int e = 0; e < pool.size(); e += 17) {
+    const Eigen::VectorXd& q = pool.poses[pool.element_pose[e]];
+    EXPECT_EQ(q(5), 0.0);
+    const ChainState s = robot.chain(q);
+    const Matrix6X<double> j = robot.jacobian_at(s, robot.point_position(s, robot.measured_point));
+    Eigen::Matrix<double, 6, 1> w;
+    w << pool.forces[pool.element_load[e]], Eigen::Vector3d::Zero();
+    const Eigen::Matrix<double, 3, Eigen::Dynamic> full = observation_block(j, j, w);
+    EXPECT_LT((pool.block(e) - full.leftCols(5)).norm(), 1e-12 * full.norm());
+    EXPECT_LT(pool.sigma_min_m[pool.element_pose[e]] + 1e-15, 1e9);
+    EXPECT_GE(pool.sigma_min_m[pool.element_pose[e]], pool.min_sigma_m);
+  }
+  for (const auto& f : pool.forces)
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_GE(std::abs(f(k)), 15.0);
+      EXPECT_LE(std::abs(f(k)), 35.0);
+      EXPECT_EQ(std::fmod(std::abs(f(k)), 5.0), 0.0);
+    }
+}
+
+TEST(PlanPool, FullGridFixtureAndCandidateFile) {
+  const RobotModel robot = test::rokae();
+  PoolOptions o = paper_pool(3, 0);
+  o.load_max_magnitude_N = 40.0;
+  const CandidatePool grid = build_pool(robot, o);
+  for (const auto& f : grid.forces) EXPECT_LE(f.norm(), 40.0 + 1e-9);
+  EXPECT_GT(grid.forces.size(), 0u);
+  EXPECT_LT(grid.forces.size(), 1000u);
+
+  PoolOptions fx = paper_pool(3, 0);
+  fx.fixture_directions = {Eigen::Vector3d::UnitX(), -Eigen::Vector3d::UnitY(),
+                           Eigen::Vector3d(1, 1, 1)};
+  fx.fixture_forces_N = {20.0, 30.0};
+  EXPECT_EQ(build_pool(robot, fx).forces.size(), 6u);
+
+  PoolOptions file = paper_pool(0, 5);
+  file.candidate_file = test::source_path("examples/paper/design_kappa_a.csv");
+  const CandidatePool fp = build_pool(robot, file);
+  EXPECT_EQ(fp.poses.size(), 10u);
+  EXPECT_EQ(fp.size(), 50);
+  file.candidate_loads_from_file = true;
+  file.min_sigma_m = 0.0;
+  EXPECT_EQ(build_pool(robot, file).size(), 10);
+}
+
+TEST(PlanIncremental, EqualsFullRecomputationOverLongSwapSequences) {
+  const RobotModel robot = test::rokae();
+  const CandidatePool pool = build_pool(robot, paper_pool(200, 50));
+  Rng rng(7);
+  std::vector<int> set;
+  for (int i = 0; i < 10; ++i) set.push_back(static_cast<int>(rng.index(pool.size())));
+  IncrementalInformation inc(pool, set);
+  double worst = 0.0;
+  for (int step = 1; step <= 20000; ++step) {
+    inc.replace(static_cast<int>(rng.index(10)), static_cast<int>(rng.index(pool.size())));
+    if (step % 1000 == 0) {
+      const Eigen::MatrixXd full = inc.recomputed_information();
+      worst = std::max(worst, (inc.information() - full).norm() / full.norm());
+    }
+  }
+  std::printf("max relative difference after up to 20000 rank-3 updates: %.3g\n", worst);
+  EXPECT_LT(worst, 1e-12);
+  // A single rank-3 update equals A_in^T A_in - A_out^T A_out of observation blocks.
+  const Eigen::MatrixXd before = inc.recomputed_information();
+  const int out = inc.elements()[3];
+  inc.replace(3, 5);
+  const Eigen::MatrixXd expect = before + pool.information(5) - pool.information(out);
+  EXPECT_LT((inc.information() - expect).norm(), 1e-12 * expect.norm());
+}
+
+TEST(PlanCriteria, RegistryAndEvaluateAgreeWithPoolKernel) {
+  const RobotModel robot = test::rokae();
+  const Dataset design = test::paper_design_a();
+  const auto values = evaluate_criteria(robot, design);
+  EXPECT_EQ(values.at("m"), 5.0);
+  EXPECT_EQ(values.at("count"), 10.0);
+  EXPECT_TRUE(std::isnan(values.at("task")));
+  const CandidatePool pool = pool_from_dataset(robot, design);
+  std::vector<int> all(10);
+  for (int i = 0; i < 10; ++i) all[i] = i;
+  PlanOptions o;
+  for (const auto& name : criterion_names()) {
+    if (name == "task") continue;
+    o.criterion = name;
+    const double s = set_score(robot, pool, all, o);
+    const double v = find_criterion(name).larger_is_better ? s : -s;
+    EXPECT_NEAR(v, values.at(name), 1e-9 * std::abs(values.at(name))) << name;
+  }
+  // kappa_a by its definition on the stacked (unweighted) A: weighting by a constant sigma
+  // does not change it.
+  const Eigen::MatrixXd a = observation_matrix(robot, design).leftCols(5);
+  const Eigen::MatrixXd ata = a.transpose() * a;
+  const double kappa = 5.0 / std::sqrt(ata.trace() * ata.inverse().trace());
+  EXPECT_NEAR(values.at("kappa_a"), kappa, 1e-10);
+  // O1 from the singular values of the weighted A.
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(a / 10e-6);
+  const double o1 = std::pow(svd.singularValues().prod(), 1.0 / 5) / std::sqrt(10.0);
+  EXPECT_NEAR(values.at("o1"), o1, 1e-9 * o1);
+  // Task criterion: sqrt(mean_t tr(B_t M^-1 B_t^T) / 3).
+  CriteriaOptions co;
+  co.task = test::paper_design_j();
+  const double task = evaluate_criteria(robot, design, co).at("task");
+  const Eigen::MatrixXd cov = (ata / (10e-6 * 10e-6)).inverse();
+  const Eigen::MatrixXd b = observation_matrix(robot, co.task).leftCols(5);
+  const double expect = std::sqrt((b * cov * b.transpose()).trace() / (3.0 * co.task.size()));
+  EXPECT_NEAR(task, expect, 1e-9 * expect);
+  std::printf("paper kappa_F^-1(A) design: kappa_a %.5f kappa_j %.5f d_opt %.4f o1 %.4g task %.3g m\n",
+              values.at("kappa_a"), values.at("kappa_j"), values.at("d_opt"), values.at("o1"), task);
+}
+
+TEST(PlanErrors, BadRequestsAreInvalidArgument) {
+  const RobotModel robot = test::rokae();
+  const CandidatePool pool = build_pool(robot, paper_pool(4, 4));
+  PlanOptions o;
+  o.annealing.iterations = 100;
+  o.count = 17;
+  EXPECT_THROW(plan_measurements(robot, pool, o), InvalidArgument);
+  o.count = 1;  // 3 rows < 5 compliances
+  try {
+    plan_measurements(robot, pool, o);
+    FAIL();
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("too small"), std::string::npos);
+  }
+  o.count = 4;
+  o.criterion = "kappa_x";
+  try {
+    plan_measurements(robot, pool, o);
+    FAIL();
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("kappa_a, kappa_j, d_opt"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(find_criterion("nope"), InvalidArgument);
+  o.criterion = "task";  // no task given
+  EXPECT_THROW(plan_measurements(robot, pool, o), InvalidArgument);
+
+  PoolOptions bad = paper_pool(4, 4);
+  bad.load_min_N = 30;
+  bad.load_max_N = 20;
+  EXPECT_THROW(build_pool(robot, bad), InvalidArgument);
+  bad = paper_pool(4, 4);
+  bad.load_min_N = 16;
+  bad.load_max_N = 19;  // no multiple of 5 N inside
+  EXPECT_THROW(build_pool(robot, bad), InvalidArgument);
+  bad = paper_pool(4, 4);
+  bad.min_sigma_m = 10.0;  // every pose "singular"
+  try {
+    build_pool(robot, bad);
+    FAIL();
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("near-singular"), std::string::npos);
+  }
+}
+
+TEST(PlanOutput, DatasetAndJson) {
+  const RobotModel robot = test::rokae();
+  const CandidatePool pool = build_pool(robot, paper_pool(30, 20));
+  PlanOptions o;
+  o.annealing.iterations = 3000;
+  const PlanResult r = plan_measurements(robot, pool, o);
+  ASSERT_EQ(r.measurements.size(), 10u);
+  double leverage = 0;
+  for (const auto& m : r.measurements) {
+    leverage += m.contribution;
+    const Eigen::Matrix3d rot = robot.chain(m.q_rad).flange.block<3, 3>(0, 0);
+    EXPECT_LT((rot * m.force_flange_N - m.force_base_N).norm(), 1e-9);
+  }
+  EXPECT_NEAR(leverage, 5.0, 1e-8);  // leverages sum to m
+  const Dataset d = plan_to_dataset(r);
+  const Dataset back = parse_measurements_csv(format_measurements_csv(d), "plan.csv", 6);
+  EXPECT_FALSE(back.has_displacement);
+  EXPECT_GE(back.extra_index("fx_flange_N"), 0);
+  EXPECT_GE(back.extra_index("contribution"), 0);
+  const auto again = evaluate_criteria(robot, back);
+  EXPECT_NEAR(again.at("kappa_a"), r.criteria.at("kappa_a"), 1e-9);
+  const std::string json = plan_summary_json(r);
+  for (const auto& name : criterion_names()) EXPECT_NE(json.find("\"" + name + "\""), std::string::npos);
+  EXPECT_NE(json.find("\"found_by\""), std::string::npos);
+}
+
+TEST(PlanProgress, CallbackCanCancel) {
+  const RobotModel robot = test::rokae();
+  const CandidatePool pool = build_pool(robot, paper_pool(30, 20));
+  PlanOptions o;
+  o.annealing.iterations = 100000;
+  long calls = 0;
+  o.progress = [&](const PlanProgress& p) {
+    ++calls;
+    EXPECT_EQ(p.optimizer, "annealing");
+    return p.iteration < 5000;
+  };
+  EXPECT_THROW(plan_measurements(robot, pool, o), Cancelled);
+  EXPECT_EQ(calls, 5);
+}
+
+}  // namespace
+}  // namespace stiff
