@@ -10,8 +10,12 @@
 
 #include "fmi2Functions.h"
 
-static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
-                   fmi2String category, fmi2String message, ...) {
+static void logger(fmi2ComponentEnvironment env,
+                   fmi2String name,
+                   fmi2Status status,
+                   fmi2String category,
+                   fmi2String message,
+                   ...) {
   (void)env, (void)name, (void)status;
   va_list ap;
   va_start(ap, message);

@@ -20,7 +20,8 @@ namespace {
 using namespace stiff;
 
 const RobotModel& robot() {
-  static const RobotModel r = load_robot(std::string(STIFF_SOURCE_DIR) + "/examples/robots/rokae.yaml");
+  static const RobotModel r =
+      load_robot(std::string(STIFF_SOURCE_DIR) + "/examples/robots/rokae.yaml");
   return r;
 }
 
@@ -55,7 +56,8 @@ void BM_AnnealSwaps(benchmark::State& state) {
     score = r.score;
     benchmark::DoNotOptimize(r.elements.data());
   }
-  state.counters["swaps_per_s"] = benchmark::Counter(static_cast<double>(swaps), benchmark::Counter::kIsRate);
+  state.counters["swaps_per_s"] =
+      benchmark::Counter(static_cast<double>(swaps), benchmark::Counter::kIsRate);
   state.counters["kappa_a"] = score;
   state.counters["pool"] = static_cast<double>(pl.size());
   state.SetLabel("N=10 m=5 iterations=1e5");
@@ -89,7 +91,8 @@ void BM_Exchange(benchmark::State& state) {
     evals += r.trace.evaluations;
     state.counters["kappa_a"] = r.score;
   }
-  state.counters["evals_per_s"] = benchmark::Counter(static_cast<double>(evals), benchmark::Counter::kIsRate);
+  state.counters["evals_per_s"] =
+      benchmark::Counter(static_cast<double>(evals), benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_Exchange)->Unit(benchmark::kMillisecond);
 
@@ -110,8 +113,8 @@ int dump_pool(const char* path, int poses, int loads) {
   std::ofstream f(path, std::ios::binary);
   if (!f) return 1;
   const int m = p.identified_count();
-  const int32_t head[4] = {static_cast<int32_t>(p.poses.size()), static_cast<int32_t>(p.forces.size()),
-                           p.size(), m};
+  const int32_t head[4] = {static_cast<int32_t>(p.poses.size()),
+                           static_cast<int32_t>(p.forces.size()), p.size(), m};
   f.write("STIFFPOOL", 9);
   f.write(reinterpret_cast<const char*>(head), sizeof head);
   for (size_t i = 0; i < p.poses.size(); ++i) {
@@ -123,7 +126,8 @@ int dump_pool(const char* path, int poses, int loads) {
         }
     f.write(reinterpret_cast<const char*>(&p.weight2[i]), sizeof(double));
   }
-  for (const auto& F : p.forces) f.write(reinterpret_cast<const char*>(F.data()), 3 * sizeof(double));
+  for (const auto& F : p.forces)
+    f.write(reinterpret_cast<const char*>(F.data()), 3 * sizeof(double));
   for (int e = 0; e < p.size(); ++e) {
     const int32_t pe[2] = {p.element_pose[e], p.element_load[e]};
     f.write(reinterpret_cast<const char*>(pe), sizeof pe);

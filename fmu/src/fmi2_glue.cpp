@@ -27,8 +27,8 @@ enum State : unsigned {
   kError = 1u << 6,
 };
 constexpr unsigned kAnyState = ~0u;
-constexpr unsigned kGetMask = kInitializationMode | kEventMode | kContinuousTimeMode |
-                              kStepComplete | kTerminated | kError;
+constexpr unsigned kGetMask =
+    kInitializationMode | kEventMode | kContinuousTimeMode | kStepComplete | kTerminated | kError;
 constexpr unsigned kSetMask =
     kInstantiated | kInitializationMode | kEventMode | kContinuousTimeMode | kStepComplete;
 
@@ -101,8 +101,8 @@ fmi2Status guarded(fmi2Component c, const char* f, unsigned mask, Body&& body) {
   }
 }
 
-fmi2Status check_array(Instance& inst, const char* f, const fmi2ValueReference* vr, size_t nvr,
-                       const void* value) {
+fmi2Status check_array(
+    Instance& inst, const char* f, const fmi2ValueReference* vr, size_t nvr, const void* value) {
   if (nvr > 0 && (!vr || !value)) return inst.reject(std::string(f) + ": NULL argument");
   return fmi2OK;
 }
@@ -133,25 +133,28 @@ extern "C" {
 const char* fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char* fmi2GetVersion(void) { return fmi2Version; }
 
-fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+fmi2Component fmi2Instantiate(fmi2String instanceName,
+                              fmi2Type fmuType,
+                              fmi2String fmuGUID,
                               fmi2String fmuResourceLocation,
-                              const fmi2CallbackFunctions* functions, fmi2Boolean visible,
+                              const fmi2CallbackFunctions* functions,
+                              fmi2Boolean visible,
                               fmi2Boolean loggingOn) {
   (void)visible;
   if (!functions || !functions->logger) return nullptr;
   auto say = [&](const std::string& msg) {
-    functions->logger(functions->componentEnvironment, instanceName ? instanceName : "",
-                      fmi2Error, kCategories[kLogError], "%s", msg.c_str());
+    functions->logger(functions->componentEnvironment, instanceName ? instanceName : "", fmi2Error,
+                      kCategories[kLogError], "%s", msg.c_str());
   };
-  if (!instanceName || !*instanceName) return say("fmi2Instantiate: missing instance name"), nullptr;
+  if (!instanceName || !*instanceName)
+    return say("fmi2Instantiate: missing instance name"), nullptr;
   if (!fmuGUID || !*fmuGUID) return say("fmi2Instantiate: missing GUID"), nullptr;
   if (fmuType != fmi2ModelExchange && fmuType != fmi2CoSimulation)
     return say("fmi2Instantiate: unknown FMU type"), nullptr;
   const std::string dir = stiff::fmu::uri_to_path(fmuResourceLocation);
   if (dir.empty())
     return say(std::string("fmi2Instantiate: resource location '") +
-               (fmuResourceLocation ? fmuResourceLocation : "(null)") +
-               "' is not a file: URI"),
+               (fmuResourceLocation ? fmuResourceLocation : "(null)") + "' is not a file: URI"),
            nullptr;
   try {
     auto layout = stiff::fmu::read_layout(dir);
@@ -183,7 +186,9 @@ void fmi2FreeInstance(fmi2Component c) {
   delete inst;
 }
 
-fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+fmi2Status fmi2SetDebugLogging(fmi2Component c,
+                               fmi2Boolean loggingOn,
+                               size_t nCategories,
                                const fmi2String categories[]) {
   return guarded(c, "fmi2SetDebugLogging", kAnyState, [&](Instance& inst) {
     if (nCategories > 0 && !categories) return inst.reject("fmi2SetDebugLogging: NULL categories");
@@ -203,8 +208,11 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
   });
 }
 
-fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
-                               fmi2Real startTime, fmi2Boolean stopTimeDefined,
+fmi2Status fmi2SetupExperiment(fmi2Component c,
+                               fmi2Boolean toleranceDefined,
+                               fmi2Real tolerance,
+                               fmi2Real startTime,
+                               fmi2Boolean stopTimeDefined,
                                fmi2Real stopTime) {
   (void)toleranceDefined, (void)tolerance, (void)stopTimeDefined, (void)stopTime;
   return guarded(c, "fmi2SetupExperiment", kInstantiated, [&](Instance& inst) {
@@ -246,7 +254,9 @@ fmi2Status fmi2Reset(fmi2Component c) {
   });
 }
 
-fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status fmi2GetReal(fmi2Component c,
+                       const fmi2ValueReference vr[],
+                       size_t nvr,
                        fmi2Real value[]) {
   return guarded(c, "fmi2GetReal", kGetMask, [&](Instance& inst) {
     if (check_array(inst, "fmi2GetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
@@ -266,7 +276,9 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
   });
 }
 
-fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status fmi2GetInteger(fmi2Component c,
+                          const fmi2ValueReference vr[],
+                          size_t nvr,
                           fmi2Integer value[]) {
   return guarded(c, "fmi2GetInteger", kGetMask, [&](Instance& inst) {
     if (check_array(inst, "fmi2GetInteger", vr, nvr, value) != fmi2OK) return fmi2Error;
@@ -279,7 +291,9 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
   });
 }
 
-fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status fmi2GetBoolean(fmi2Component c,
+                          const fmi2ValueReference vr[],
+                          size_t nvr,
                           fmi2Boolean value[]) {
   (void)vr, (void)value;
   return guarded(c, "fmi2GetBoolean", kGetMask, [&](Instance& inst) {
@@ -287,7 +301,9 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
   });
 }
 
-fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status fmi2GetString(fmi2Component c,
+                         const fmi2ValueReference vr[],
+                         size_t nvr,
                          fmi2String value[]) {
   (void)vr, (void)value;
   return guarded(c, "fmi2GetString", kGetMask, [&](Instance& inst) {
@@ -295,7 +311,9 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
   });
 }
 
-fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status fmi2SetReal(fmi2Component c,
+                       const fmi2ValueReference vr[],
+                       size_t nvr,
                        const fmi2Real value[]) {
   return guarded(c, "fmi2SetReal", kSetMask, [&](Instance& inst) {
     if (check_array(inst, "fmi2SetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
@@ -313,7 +331,9 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
   });
 }
 
-fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status fmi2SetInteger(fmi2Component c,
+                          const fmi2ValueReference vr[],
+                          size_t nvr,
                           const fmi2Integer value[]) {
   return guarded(c, "fmi2SetInteger", kSetMask & ~unsigned{kContinuousTimeMode},
                  [&](Instance& inst) {
@@ -330,7 +350,9 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
                  });
 }
 
-fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status fmi2SetBoolean(fmi2Component c,
+                          const fmi2ValueReference vr[],
+                          size_t nvr,
                           const fmi2Boolean value[]) {
   (void)vr, (void)value;
   return guarded(c, "fmi2SetBoolean", kSetMask, [&](Instance& inst) {
@@ -338,7 +360,9 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
   });
 }
 
-fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status fmi2SetString(fmi2Component c,
+                         const fmi2ValueReference vr[],
+                         size_t nvr,
                          const fmi2String value[]) {
   (void)vr, (void)value;
   return guarded(c, "fmi2SetString", kSetMask, [&](Instance& inst) {
@@ -408,24 +432,27 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, si
   });
 }
 
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[],
+fmi2Status fmi2SerializeFMUstate(fmi2Component c,
+                                 fmi2FMUstate FMUstate,
+                                 fmi2Byte serializedState[],
                                  size_t size) {
   return guarded(c, "fmi2SerializeFMUstate", kAnyState, [&](Instance& inst) {
     if (!FMUstate || !serializedState) return inst.reject("fmi2SerializeFMUstate: NULL argument");
     const auto b = serialize_state(inst, *static_cast<const StateCopy*>(FMUstate));
     if (size < b.size())
-      return inst.reject("fmi2SerializeFMUstate: buffer of " + std::to_string(size) +
-                         " bytes, " + std::to_string(b.size()) + " needed");
+      return inst.reject("fmi2SerializeFMUstate: buffer of " + std::to_string(size) + " bytes, " +
+                         std::to_string(b.size()) + " needed");
     std::memcpy(serializedState, b.data(), b.size());
     return fmi2OK;
   });
 }
 
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c,
+                                   const fmi2Byte serializedState[],
+                                   size_t size,
                                    fmi2FMUstate* FMUstate) {
   return guarded(c, "fmi2DeSerializeFMUstate", kAnyState, [&](Instance& inst) {
-    if (!serializedState || !FMUstate)
-      return inst.reject("fmi2DeSerializeFMUstate: NULL argument");
+    if (!serializedState || !FMUstate) return inst.reject("fmi2DeSerializeFMUstate: NULL argument");
     if (size < 4) return inst.reject("fmi2DeSerializeFMUstate: blob too short");
     const auto* bytes = reinterpret_cast<const uint8_t*>(serializedState);
     uint32_t st = 0;
@@ -447,9 +474,12 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
   });
 }
 
-fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[],
-                                        size_t nUnknown, const fmi2ValueReference vKnown_ref[],
-                                        size_t nKnown, const fmi2Real dvKnown[],
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c,
+                                        const fmi2ValueReference vUnknown_ref[],
+                                        size_t nUnknown,
+                                        const fmi2ValueReference vKnown_ref[],
+                                        size_t nKnown,
+                                        const fmi2Real dvKnown[],
                                         fmi2Real dvUnknown[]) {
   (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown,
       (void)dvUnknown;
@@ -484,8 +514,10 @@ fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) {
   });
 }
 
-fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
-                                       fmi2Boolean* enterEventMode, fmi2Boolean* terminateSimulation) {
+fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
+                                       fmi2Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi2Boolean* enterEventMode,
+                                       fmi2Boolean* terminateSimulation) {
   (void)noSetFMUStatePriorToCurrentPoint;
   return guarded(c, "fmi2CompletedIntegratorStep", kContinuousTimeMode, [&](Instance& inst) {
     if (!enterEventMode || !terminateSimulation)
@@ -542,26 +574,34 @@ fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal
 }
 
 // Co-Simulation.
-fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                                       const fmi2Integer order[], const fmi2Real value[]) {
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c,
+                                       const fmi2ValueReference vr[],
+                                       size_t nvr,
+                                       const fmi2Integer order[],
+                                       const fmi2Real value[]) {
   (void)vr, (void)nvr, (void)order, (void)value;
   return not_supported(c, "fmi2SetRealInputDerivatives");
 }
 
-fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                                        const fmi2Integer order[], fmi2Real value[]) {
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c,
+                                        const fmi2ValueReference vr[],
+                                        size_t nvr,
+                                        const fmi2Integer order[],
+                                        fmi2Real value[]) {
   (void)vr, (void)nvr, (void)order, (void)value;
   return not_supported(c, "fmi2GetRealOutputDerivatives");
 }
 
-fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
-                      fmi2Real communicationStepSize, fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
+fmi2Status fmi2DoStep(fmi2Component c,
+                      fmi2Real currentCommunicationPoint,
+                      fmi2Real communicationStepSize,
+                      fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
   (void)noSetFMUStatePriorToCurrentPoint;
   return guarded(c, "fmi2DoStep", kStepComplete, [&](Instance& inst) {
     if (inst.type != fmi2CoSimulation) return inst.reject("fmi2DoStep: instance is not CS");
     if (!(communicationStepSize > 0) || !std::isfinite(communicationStepSize))
-      return inst.reject(stiff::fmu::format("fmi2DoStep: step size %g must be > 0",
-                                            communicationStepSize));
+      return inst.reject(
+          stiff::fmu::format("fmi2DoStep: step size %g must be > 0", communicationStepSize));
     const double t = inst.model->values().time;
     if (!(std::fabs(currentCommunicationPoint - t) <= 1e-9 * std::max(1.0, std::fabs(t))))
       return inst.reject(stiff::fmu::format(

@@ -103,8 +103,13 @@ fmi3Status guarded(fmi3Instance c, const char* f, unsigned mask, Body&& body) {
 enum class Type { float64, int32 };
 
 // Look up the variables, check their type and that nValues is the sum of their sizes.
-bool check_refs(Instance& inst, const char* f, const fmi3ValueReference* vr, size_t nvr,
-                const void* values, size_t nValues, Type type) {
+bool check_refs(Instance& inst,
+                const char* f,
+                const fmi3ValueReference* vr,
+                size_t nvr,
+                const void* values,
+                size_t nValues,
+                Type type) {
   if (nvr > 0 && (!vr || !values)) return inst.reject(std::string(f) + ": NULL argument"), false;
   size_t total = 0;
   for (size_t i = 0; i < nvr; ++i) {
@@ -130,13 +135,18 @@ fmi3Status not_supported(fmi3Instance c, const char* f) {
   return static_cast<Instance*>(c)->reject(std::string(f) + " is not supported by this FMU");
 }
 
-fmi3Instance instantiate(Kind kind, fmi3String instanceName, fmi3String token,
-                         fmi3String resourcePath, fmi3Boolean loggingOn,
-                         fmi3InstanceEnvironment env, fmi3LogMessageCallback logger) {
+fmi3Instance instantiate(Kind kind,
+                         fmi3String instanceName,
+                         fmi3String token,
+                         fmi3String resourcePath,
+                         fmi3Boolean loggingOn,
+                         fmi3InstanceEnvironment env,
+                         fmi3LogMessageCallback logger) {
   auto say = [&](const std::string& msg) {
     if (logger) logger(env, fmi3Error, kCategories[kLogError], msg.c_str());
   };
-  if (!instanceName || !*instanceName) return say("fmi3Instantiate: missing instance name"), nullptr;
+  if (!instanceName || !*instanceName)
+    return say("fmi3Instantiate: missing instance name"), nullptr;
   if (!token || !*token) return say("fmi3Instantiate: missing instantiationToken"), nullptr;
   if (!resourcePath || !*resourcePath) return say("fmi3Instantiate: missing resourcePath"), nullptr;
   try {
@@ -194,8 +204,10 @@ extern "C" {
 
 const char* fmi3GetVersion(void) { return fmi3Version; }
 
-fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
-                                          fmi3String resourcePath, fmi3Boolean visible,
+fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName,
+                                          fmi3String instantiationToken,
+                                          fmi3String resourcePath,
+                                          fmi3Boolean visible,
                                           fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage) {
@@ -204,25 +216,36 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                      instanceEnvironment, logMessage);
 }
 
-fmi3Instance fmi3InstantiateCoSimulation(
-    fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
-    fmi3Boolean visible, fmi3Boolean loggingOn, fmi3Boolean eventModeUsed,
-    fmi3Boolean earlyReturnAllowed, const fmi3ValueReference requiredIntermediateVariables[],
-    size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
-    fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate) {
+fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName,
+                                         fmi3String instantiationToken,
+                                         fmi3String resourcePath,
+                                         fmi3Boolean visible,
+                                         fmi3Boolean loggingOn,
+                                         fmi3Boolean eventModeUsed,
+                                         fmi3Boolean earlyReturnAllowed,
+                                         const fmi3ValueReference requiredIntermediateVariables[],
+                                         size_t nRequiredIntermediateVariables,
+                                         fmi3InstanceEnvironment instanceEnvironment,
+                                         fmi3LogMessageCallback logMessage,
+                                         fmi3IntermediateUpdateCallback intermediateUpdate) {
   (void)visible, (void)eventModeUsed, (void)earlyReturnAllowed, (void)requiredIntermediateVariables,
       (void)nRequiredIntermediateVariables, (void)intermediateUpdate;
   return instantiate(Kind::cs, instanceName, instantiationToken, resourcePath, loggingOn,
                      instanceEnvironment, logMessage);
 }
 
-fmi3Instance fmi3InstantiateScheduledExecution(
-    fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
-    fmi3Boolean visible, fmi3Boolean loggingOn, fmi3InstanceEnvironment instanceEnvironment,
-    fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
-    fmi3LockPreemptionCallback lockPreemption, fmi3UnlockPreemptionCallback unlockPreemption) {
-  (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible,
-      (void)loggingOn, (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
+fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName,
+                                               fmi3String instantiationToken,
+                                               fmi3String resourcePath,
+                                               fmi3Boolean visible,
+                                               fmi3Boolean loggingOn,
+                                               fmi3InstanceEnvironment instanceEnvironment,
+                                               fmi3LogMessageCallback logMessage,
+                                               fmi3ClockUpdateCallback clockUpdate,
+                                               fmi3LockPreemptionCallback lockPreemption,
+                                               fmi3UnlockPreemptionCallback unlockPreemption) {
+  (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible, (void)loggingOn,
+      (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
   if (logMessage)
     logMessage(instanceEnvironment, fmi3Error, kCategories[kLogError],
                "fmi3InstantiateScheduledExecution: not supported by this FMU");
@@ -236,7 +259,9 @@ void fmi3FreeInstance(fmi3Instance c) {
   delete inst;
 }
 
-fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean loggingOn, size_t nCategories,
+fmi3Status fmi3SetDebugLogging(fmi3Instance c,
+                               fmi3Boolean loggingOn,
+                               size_t nCategories,
                                const fmi3String categories[]) {
   return guarded(c, "fmi3SetDebugLogging", kAnyState, [&](Instance& inst) {
     if (nCategories > 0 && !categories) return inst.reject("fmi3SetDebugLogging: NULL categories");
@@ -256,9 +281,12 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean loggingOn, size_t nCa
   });
 }
 
-fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean toleranceDefined,
-                                       fmi3Float64 tolerance, fmi3Float64 startTime,
-                                       fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
+fmi3Status fmi3EnterInitializationMode(fmi3Instance c,
+                                       fmi3Boolean toleranceDefined,
+                                       fmi3Float64 tolerance,
+                                       fmi3Float64 startTime,
+                                       fmi3Boolean stopTimeDefined,
+                                       fmi3Float64 stopTime) {
   (void)toleranceDefined, (void)tolerance, (void)stopTimeDefined, (void)stopTime;
   return guarded(c, "fmi3EnterInitializationMode", kInstantiated, [&](Instance& inst) {
     if (!std::isfinite(startTime))
@@ -304,8 +332,11 @@ fmi3Status fmi3Reset(fmi3Instance c) {
   });
 }
 
-fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
-                          fmi3Float64 values[], size_t nValues) {
+fmi3Status fmi3GetFloat64(fmi3Instance c,
+                          const fmi3ValueReference vr[],
+                          size_t nvr,
+                          fmi3Float64 values[],
+                          size_t nValues) {
   return guarded(c, "fmi3GetFloat64", kGetMask, [&](Instance& inst) {
     if (!check_refs(inst, "fmi3GetFloat64", vr, nvr, values, nValues, Type::float64))
       return fmi3Error;
@@ -326,8 +357,11 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
   });
 }
 
-fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
-                          const fmi3Float64 values[], size_t nValues) {
+fmi3Status fmi3SetFloat64(fmi3Instance c,
+                          const fmi3ValueReference vr[],
+                          size_t nvr,
+                          const fmi3Float64 values[],
+                          size_t nValues) {
   return guarded(c, "fmi3SetFloat64", kSetMask, [&](Instance& inst) {
     if (!check_refs(inst, "fmi3SetFloat64", vr, nvr, values, nValues, Type::float64))
       return fmi3Error;
@@ -346,8 +380,8 @@ fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
   });
 }
 
-fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
-                        fmi3Int32 values[], size_t nValues) {
+fmi3Status fmi3GetInt32(
+    fmi3Instance c, const fmi3ValueReference vr[], size_t nvr, fmi3Int32 values[], size_t nValues) {
   return guarded(c, "fmi3GetInt32", kGetMask, [&](Instance& inst) {
     if (!check_refs(inst, "fmi3GetInt32", vr, nvr, values, nValues, Type::int32)) return fmi3Error;
     for (size_t i = 0; i < nvr; ++i)
@@ -356,8 +390,11 @@ fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nv
   });
 }
 
-fmi3Status fmi3SetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
-                        const fmi3Int32 values[], size_t nValues) {
+fmi3Status fmi3SetInt32(fmi3Instance c,
+                        const fmi3ValueReference vr[],
+                        size_t nvr,
+                        const fmi3Int32 values[],
+                        size_t nValues) {
   return guarded(c, "fmi3SetInt32", kInstantiated | kInitializationMode | kEventMode | kStepMode,
                  [&](Instance& inst) {
                    if (!check_refs(inst, "fmi3SetInt32", vr, nvr, values, nValues, Type::int32))
@@ -393,37 +430,52 @@ STIFF_NO_VARIABLES(fmi3SetUInt64, const fmi3UInt64)
 STIFF_NO_VARIABLES(fmi3SetBoolean, const fmi3Boolean)
 STIFF_NO_VARIABLES(fmi3SetString, const fmi3String)
 
-fmi3Status fmi3GetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
-                         size_t valueSizes[], fmi3Binary values[], size_t nValues) {
+fmi3Status fmi3GetBinary(fmi3Instance c,
+                         const fmi3ValueReference vr[],
+                         size_t nvr,
+                         size_t valueSizes[],
+                         fmi3Binary values[],
+                         size_t nValues) {
   (void)vr, (void)nvr, (void)valueSizes, (void)values, (void)nValues;
   return not_supported(c, "fmi3GetBinary");
 }
-fmi3Status fmi3SetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
-                         const size_t valueSizes[], const fmi3Binary values[], size_t nValues) {
+fmi3Status fmi3SetBinary(fmi3Instance c,
+                         const fmi3ValueReference vr[],
+                         size_t nvr,
+                         const size_t valueSizes[],
+                         const fmi3Binary values[],
+                         size_t nValues) {
   (void)vr, (void)nvr, (void)valueSizes, (void)values, (void)nValues;
   return not_supported(c, "fmi3SetBinary");
 }
-fmi3Status fmi3GetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
+fmi3Status fmi3GetClock(fmi3Instance c,
+                        const fmi3ValueReference vr[],
+                        size_t nvr,
                         fmi3Clock values[]) {
   (void)vr, (void)nvr, (void)values;
   return not_supported(c, "fmi3GetClock");
 }
-fmi3Status fmi3SetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
+fmi3Status fmi3SetClock(fmi3Instance c,
+                        const fmi3ValueReference vr[],
+                        size_t nvr,
                         const fmi3Clock values[]) {
   (void)vr, (void)nvr, (void)values;
   return not_supported(c, "fmi3SetClock");
 }
 
-fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance c, fmi3ValueReference vr,
+fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance c,
+                                               fmi3ValueReference vr,
                                                size_t* nDependencies) {
   (void)vr, (void)nDependencies;
   return not_supported(c, "fmi3GetNumberOfVariableDependencies");
 }
-fmi3Status fmi3GetVariableDependencies(fmi3Instance c, fmi3ValueReference dependent,
+fmi3Status fmi3GetVariableDependencies(fmi3Instance c,
+                                       fmi3ValueReference dependent,
                                        size_t elementIndicesOfDependent[],
                                        fmi3ValueReference independents[],
                                        size_t elementIndicesOfIndependents[],
-                                       fmi3DependencyKind dependencyKinds[], size_t nDependencies) {
+                                       fmi3DependencyKind dependencyKinds[],
+                                       size_t nDependencies) {
   (void)dependent, (void)elementIndicesOfDependent, (void)independents,
       (void)elementIndicesOfIndependents, (void)dependencyKinds, (void)nDependencies;
   return not_supported(c, "fmi3GetVariableDependencies");
@@ -473,24 +525,27 @@ fmi3Status fmi3SerializedFMUStateSize(fmi3Instance c, fmi3FMUState FMUState, siz
   });
 }
 
-fmi3Status fmi3SerializeFMUState(fmi3Instance c, fmi3FMUState FMUState,
-                                 fmi3Byte serializedState[], size_t size) {
+fmi3Status fmi3SerializeFMUState(fmi3Instance c,
+                                 fmi3FMUState FMUState,
+                                 fmi3Byte serializedState[],
+                                 size_t size) {
   return guarded(c, "fmi3SerializeFMUState", kAnyState, [&](Instance& inst) {
     if (!FMUState || !serializedState) return inst.reject("fmi3SerializeFMUState: NULL argument");
     const auto b = serialize_state(inst, *static_cast<const StateCopy*>(FMUState));
     if (size < b.size())
-      return inst.reject("fmi3SerializeFMUState: buffer of " + std::to_string(size) +
-                         " bytes, " + std::to_string(b.size()) + " needed");
+      return inst.reject("fmi3SerializeFMUState: buffer of " + std::to_string(size) + " bytes, " +
+                         std::to_string(b.size()) + " needed");
     std::memcpy(serializedState, b.data(), b.size());
     return fmi3OK;
   });
 }
 
-fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte serializedState[], size_t size,
+fmi3Status fmi3DeserializeFMUState(fmi3Instance c,
+                                   const fmi3Byte serializedState[],
+                                   size_t size,
                                    fmi3FMUState* FMUState) {
   return guarded(c, "fmi3DeserializeFMUState", kAnyState, [&](Instance& inst) {
-    if (!serializedState || !FMUState)
-      return inst.reject("fmi3DeserializeFMUState: NULL argument");
+    if (!serializedState || !FMUState) return inst.reject("fmi3DeserializeFMUState: NULL argument");
     if (size < 4) return inst.reject("fmi3DeserializeFMUState: blob too short");
     uint32_t st = 0;
     std::memcpy(&st, serializedState + size - 4, 4);
@@ -510,18 +565,28 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte serializedStat
   });
 }
 
-fmi3Status fmi3GetDirectionalDerivative(fmi3Instance c, const fmi3ValueReference unknowns[],
-                                        size_t nUnknowns, const fmi3ValueReference knowns[],
-                                        size_t nKnowns, const fmi3Float64 seed[], size_t nSeed,
-                                        fmi3Float64 sensitivity[], size_t nSensitivity) {
+fmi3Status fmi3GetDirectionalDerivative(fmi3Instance c,
+                                        const fmi3ValueReference unknowns[],
+                                        size_t nUnknowns,
+                                        const fmi3ValueReference knowns[],
+                                        size_t nKnowns,
+                                        const fmi3Float64 seed[],
+                                        size_t nSeed,
+                                        fmi3Float64 sensitivity[],
+                                        size_t nSensitivity) {
   (void)unknowns, (void)nUnknowns, (void)knowns, (void)nKnowns, (void)seed, (void)nSeed,
       (void)sensitivity, (void)nSensitivity;
   return not_supported(c, "fmi3GetDirectionalDerivative");
 }
-fmi3Status fmi3GetAdjointDerivative(fmi3Instance c, const fmi3ValueReference unknowns[],
-                                    size_t nUnknowns, const fmi3ValueReference knowns[],
-                                    size_t nKnowns, const fmi3Float64 seed[], size_t nSeed,
-                                    fmi3Float64 sensitivity[], size_t nSensitivity) {
+fmi3Status fmi3GetAdjointDerivative(fmi3Instance c,
+                                    const fmi3ValueReference unknowns[],
+                                    size_t nUnknowns,
+                                    const fmi3ValueReference knowns[],
+                                    size_t nKnowns,
+                                    const fmi3Float64 seed[],
+                                    size_t nSeed,
+                                    fmi3Float64 sensitivity[],
+                                    size_t nSensitivity) {
   (void)unknowns, (void)nUnknowns, (void)knowns, (void)nKnowns, (void)seed, (void)nSeed,
       (void)sensitivity, (void)nSensitivity;
   return not_supported(c, "fmi3GetAdjointDerivative");
@@ -533,44 +598,65 @@ fmi3Status fmi3EnterConfigurationMode(fmi3Instance c) {
 fmi3Status fmi3ExitConfigurationMode(fmi3Instance c) {
   return not_supported(c, "fmi3ExitConfigurationMode");
 }
-fmi3Status fmi3GetIntervalDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
-                                  fmi3Float64 intervals[], fmi3IntervalQualifier qualifiers[]) {
+fmi3Status fmi3GetIntervalDecimal(fmi3Instance c,
+                                  const fmi3ValueReference vr[],
+                                  size_t nvr,
+                                  fmi3Float64 intervals[],
+                                  fmi3IntervalQualifier qualifiers[]) {
   (void)vr, (void)nvr, (void)intervals, (void)qualifiers;
   return not_supported(c, "fmi3GetIntervalDecimal");
 }
-fmi3Status fmi3GetIntervalFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
-                                   fmi3UInt64 counters[], fmi3UInt64 resolutions[],
+fmi3Status fmi3GetIntervalFraction(fmi3Instance c,
+                                   const fmi3ValueReference vr[],
+                                   size_t nvr,
+                                   fmi3UInt64 counters[],
+                                   fmi3UInt64 resolutions[],
                                    fmi3IntervalQualifier qualifiers[]) {
   (void)vr, (void)nvr, (void)counters, (void)resolutions, (void)qualifiers;
   return not_supported(c, "fmi3GetIntervalFraction");
 }
-fmi3Status fmi3GetShiftDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
+fmi3Status fmi3GetShiftDecimal(fmi3Instance c,
+                               const fmi3ValueReference vr[],
+                               size_t nvr,
                                fmi3Float64 shifts[]) {
   (void)vr, (void)nvr, (void)shifts;
   return not_supported(c, "fmi3GetShiftDecimal");
 }
-fmi3Status fmi3GetShiftFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
-                                fmi3UInt64 counters[], fmi3UInt64 resolutions[]) {
+fmi3Status fmi3GetShiftFraction(fmi3Instance c,
+                                const fmi3ValueReference vr[],
+                                size_t nvr,
+                                fmi3UInt64 counters[],
+                                fmi3UInt64 resolutions[]) {
   (void)vr, (void)nvr, (void)counters, (void)resolutions;
   return not_supported(c, "fmi3GetShiftFraction");
 }
-fmi3Status fmi3SetIntervalDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
+fmi3Status fmi3SetIntervalDecimal(fmi3Instance c,
+                                  const fmi3ValueReference vr[],
+                                  size_t nvr,
                                   const fmi3Float64 intervals[]) {
   (void)vr, (void)nvr, (void)intervals;
   return not_supported(c, "fmi3SetIntervalDecimal");
 }
-fmi3Status fmi3SetIntervalFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
-                                   const fmi3UInt64 counters[], const fmi3UInt64 resolutions[]) {
+fmi3Status fmi3SetIntervalFraction(fmi3Instance c,
+                                   const fmi3ValueReference vr[],
+                                   size_t nvr,
+                                   const fmi3UInt64 counters[],
+                                   const fmi3UInt64 resolutions[]) {
   (void)vr, (void)nvr, (void)counters, (void)resolutions;
   return not_supported(c, "fmi3SetIntervalFraction");
 }
-fmi3Status fmi3SetShiftDecimal(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
+fmi3Status fmi3SetShiftDecimal(fmi3Instance c,
+                               const fmi3ValueReference vr[],
+                               size_t nvr,
                                const fmi3Float64 shifts[]) {
   (void)vr, (void)nvr, (void)shifts;
   return not_supported(c, "fmi3SetShiftDecimal");
 }
-fmi3Status fmi3SetShiftFraction(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
-                                const fmi3UInt64 counters[], const fmi3UInt64 resolutions[]) {
+fmi3Status fmi3SetShiftFraction(fmi3Instance c,
+                                const fmi3ValueReference vr[],
+                                size_t nvr,
+                                const fmi3UInt64 counters[],
+                                const fmi3UInt64 resolutions[]) {
   (void)vr, (void)nvr, (void)counters, (void)resolutions;
   return not_supported(c, "fmi3SetShiftFraction");
 }
@@ -580,11 +666,13 @@ fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance c) {
                  [&](Instance&) { return fmi3OK; });
 }
 
-fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean* discreteStatesNeedUpdate,
+fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c,
+                                    fmi3Boolean* discreteStatesNeedUpdate,
                                     fmi3Boolean* terminateSimulation,
                                     fmi3Boolean* nominalsOfContinuousStatesChanged,
                                     fmi3Boolean* valuesOfContinuousStatesChanged,
-                                    fmi3Boolean* nextEventTimeDefined, fmi3Float64* nextEventTime) {
+                                    fmi3Boolean* nextEventTimeDefined,
+                                    fmi3Float64* nextEventTime) {
   return guarded(c, "fmi3UpdateDiscreteStates", kEventMode, [&](Instance& inst) {
     if (!discreteStatesNeedUpdate || !terminateSimulation || !nominalsOfContinuousStatesChanged ||
         !valuesOfContinuousStatesChanged || !nextEventTimeDefined || !nextEventTime)
@@ -606,8 +694,10 @@ fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance c) {
   });
 }
 
-fmi3Status fmi3CompletedIntegratorStep(fmi3Instance c, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
-                                       fmi3Boolean* enterEventMode, fmi3Boolean* terminateSimulation) {
+fmi3Status fmi3CompletedIntegratorStep(fmi3Instance c,
+                                       fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi3Boolean* enterEventMode,
+                                       fmi3Boolean* terminateSimulation) {
   (void)noSetFMUStatePriorToCurrentPoint;
   return guarded(c, "fmi3CompletedIntegratorStep", kContinuousTimeMode, [&](Instance& inst) {
     if (!enterEventMode || !terminateSimulation)
@@ -688,24 +778,32 @@ fmi3Status fmi3EnterStepMode(fmi3Instance c) {
   });
 }
 
-fmi3Status fmi3GetOutputDerivatives(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
-                                    const fmi3Int32 orders[], fmi3Float64 values[], size_t nValues) {
+fmi3Status fmi3GetOutputDerivatives(fmi3Instance c,
+                                    const fmi3ValueReference vr[],
+                                    size_t nvr,
+                                    const fmi3Int32 orders[],
+                                    fmi3Float64 values[],
+                                    size_t nValues) {
   (void)vr, (void)nvr, (void)orders, (void)values, (void)nValues;
   return not_supported(c, "fmi3GetOutputDerivatives");
 }
 
-fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint,
-                      fmi3Float64 communicationStepSize, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
-                      fmi3Boolean* eventHandlingNeeded, fmi3Boolean* terminateSimulation,
-                      fmi3Boolean* earlyReturn, fmi3Float64* lastSuccessfulTime) {
+fmi3Status fmi3DoStep(fmi3Instance c,
+                      fmi3Float64 currentCommunicationPoint,
+                      fmi3Float64 communicationStepSize,
+                      fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                      fmi3Boolean* eventHandlingNeeded,
+                      fmi3Boolean* terminateSimulation,
+                      fmi3Boolean* earlyReturn,
+                      fmi3Float64* lastSuccessfulTime) {
   (void)noSetFMUStatePriorToCurrentPoint;
   return guarded(c, "fmi3DoStep", kStepMode, [&](Instance& inst) {
     if (inst.kind != Kind::cs) return inst.reject("fmi3DoStep: instance is not CS");
     if (!eventHandlingNeeded || !terminateSimulation || !earlyReturn || !lastSuccessfulTime)
       return inst.reject("fmi3DoStep: NULL argument");
     if (!(communicationStepSize > 0) || !std::isfinite(communicationStepSize))
-      return inst.reject(stiff::fmu::format("fmi3DoStep: step size %g must be > 0",
-                                            communicationStepSize));
+      return inst.reject(
+          stiff::fmu::format("fmi3DoStep: step size %g must be > 0", communicationStepSize));
     const double t = inst.model->values().time;
     if (!(std::fabs(currentCommunicationPoint - t) <= 1e-9 * std::max(1.0, std::fabs(t))))
       return inst.reject(stiff::fmu::format(
@@ -720,7 +818,8 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint,
   });
 }
 
-fmi3Status fmi3ActivateModelPartition(fmi3Instance c, fmi3ValueReference clockReference,
+fmi3Status fmi3ActivateModelPartition(fmi3Instance c,
+                                      fmi3ValueReference clockReference,
                                       fmi3Float64 activationTime) {
   (void)clockReference, (void)activationTime;
   return not_supported(c, "fmi3ActivateModelPartition");

@@ -54,5 +54,4 @@ inline std::string format(const char* fmt, ...) {
   return buf;
 }
 
-
 }  // namespace stiff::fmu

@@ -35,8 +35,8 @@ class LineReader {
       while (s >> t) tokens->push_back(t);
       if (tokens->empty()) continue;
       if (rest_after_first) {
-        const size_t p = line.find_first_not_of(" \t", line.find(tokens->front()) +
-                                                           tokens->front().size());
+        const size_t p =
+            line.find_first_not_of(" \t", line.find(tokens->front()) + tokens->front().size());
         *rest_after_first = p == std::string::npos ? std::string() : line.substr(p);
       }
       return true;
@@ -318,10 +318,13 @@ Eigen::Matrix<double, 6, 1> Model::base_wrench(const Eigen::Matrix3d& r_tool) co
   return w;
 }
 
-Eigen::Matrix<double, 6, 1> Model::predict_at(const Eigen::VectorXd& q, Eigen::Vector3d* p) {
+Eigen::Matrix<double, 6, 1> Model::predict_at(const Eigen::VectorXd& q,
+                                              Eigen::Vector3d* p,
+                                              MeasurementContext* context) {
   const DeflectionModel& model = *layout_->model;
   measurement_.q = q;
-  MeasurementContext c = model.context(measurement_, 0);
+  MeasurementContext& c = *context;
+  c = model.context(measurement_, 0);
   if (p) *p = layout_->robot.point_position(c.chain, layout_->robot.measured_point);
   c.time = values_.time;
   const Eigen::Matrix<double, 6, 1> w = base_wrench(c.chain.flange.block<3, 3>(0, 0));
@@ -337,7 +340,10 @@ Status Model::deflection(const double** d6, std::string* msg) {
       theta_(static_cast<Eigen::Index>(k)) = values_.theta[k];
     const Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(values_.q.data(), dof());
     Eigen::Vector3d p;
-    const Eigen::Matrix<double, 6, 1> d = predict_at(q, &p);
+    MeasurementContext c;
+    const Eigen::Matrix<double, 6, 1> d = predict_at(q, &p, &c);
+    flange_rotation_ = c.chain.flange.block<3, 3>(0, 0);
+    p_unloaded_ = p;
     for (int i = 0; i < 6; ++i) out_[i] = d(i);
     for (int i = 0; i < 3; ++i) out_[6 + i] = p(i) + d(i);
     for (double x : out_)
@@ -352,9 +358,9 @@ Status Model::deflection(const double** d6, std::string* msg) {
 }
 
 // Compensated joint targets: solve p(qc) + d(qc, W) = p(q) and exp(rot(qc, W)) R(qc) = R(q)
-// (n >= 6; position only for n < 6) by Newton steps with the geometric Jacobian of the unloaded
-// arm, damped least squares dq = J^T (J J^T + lambda^2 I)^-1 e. The neglected derivative of the
-// deflection is ~1e-4 of J, so the iteration contracts by ~1e-4 per step.
+// (n >= 6; position only for n < 6) by quasi-Newton steps, damped least squares
+// dq = B^T (B B^T + lambda^2 I)^-1 e, B = geometric Jacobian of the unloaded arm + Broyden
+// updates.
 Status Model::compensation(const double** qcmd, std::string* msg) {
   const double* d6 = nullptr;
   if (!compensation_valid_) {
@@ -364,28 +370,40 @@ Status Model::compensation(const double** qcmd, std::string* msg) {
     const int n = dof();
     const int rows = n >= 6 ? 6 : 3;
     const Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(values_.q.data(), n);
-    const ChainState s0 = robot.chain(q);
-    const Eigen::Vector3d p0 = robot.point_position(s0, robot.measured_point);
-    const Eigen::Matrix3d r0 = s0.flange.block<3, 3>(0, 0);
+    const Eigen::Vector3d p0 = p_unloaded_;
+    const Eigen::Matrix3d r0 = flange_rotation_;
     Eigen::VectorXd qc = q;
-    double err = INFINITY;
+    double err = INFINITY, previous = INFINITY;
     constexpr double kLambda2 = 1e-12;
+    MeasurementContext c;
+    Eigen::MatrixXd jac;  // Broyden estimate of d(loaded pose)/dq, started at the geometric J
+    Eigen::VectorXd e_prev, dq;
     for (int it = 0; it < 30; ++it) {
-      const ChainState sc = robot.chain(qc);
       Eigen::Vector3d pc;
-      const Eigen::Matrix<double, 6, 1> d = predict_at(qc, &pc);
-      Eigen::Matrix<double, 6, 1> e;
-      e.head<3>() = p0 - (pc + d.head<3>());
-      e.tail<3>() = log_so3(r0 * (exp_so3(d.tail<3>()) * sc.flange.block<3, 3>(0, 0)).transpose());
-      err = rows == 6 ? std::max(e.head<3>().norm(), e.tail<3>().norm()) : e.head<3>().norm();
-      if (!std::isfinite(err)) break;
-      if (err < 1e-15) break;
-      const Eigen::MatrixXd j = robot.jacobian_at(sc, pc).topRows(rows);
-      Eigen::MatrixXd a = j * j.transpose();
+      const Eigen::Matrix<double, 6, 1> d = predict_at(qc, &pc, &c);
+      Eigen::Matrix<double, 6, 1> e6;
+      e6.head<3>() = p0 - (pc + d.head<3>());
+      e6.tail<3>() =
+          log_so3(r0 * (exp_so3(d.tail<3>()) * c.chain.flange.block<3, 3>(0, 0)).transpose());
+      const Eigen::VectorXd e = e6.head(rows);
+      err = rows == 6 ? std::max(e6.head<3>().norm(), e6.tail<3>().norm()) : e6.head<3>().norm();
+      // Converged to round-off, or stagnating there (the residual cannot fall below ~1e-16).
+      if (!std::isfinite(err) || err < 1e-15 || (err < 1e-12 && err > 0.1 * previous)) break;
+      previous = err;
+      if (it == 0) {
+        jac = robot.jacobian_at(c.chain, pc).topRows(rows);
+      } else {
+        // Broyden update with the observed change of the pose, y = -(e - e_prev): the
+        // deflection's own dependence on q (~1e-2 of J under large loads) is learned, so the
+        // iteration converges superlinearly instead of by a factor ~1e-2 per step.
+        const Eigen::VectorXd y = e_prev - e;
+        jac += (y - jac * dq) * dq.transpose() / dq.squaredNorm();
+      }
+      Eigen::MatrixXd a = jac * jac.transpose();
       a.diagonal().array() += kLambda2;
-      const Eigen::VectorXd dq = j.transpose() * a.ldlt().solve(e.head(rows));
+      dq = jac.transpose() * a.ldlt().solve(e);
       qc += dq;
-      if (dq.norm() < 1e-16) break;
+      e_prev = e;
     }
     compensation_status_ = Status::ok;
     compensation_message_.clear();

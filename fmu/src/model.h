@@ -49,7 +49,7 @@ std::shared_ptr<const Layout> read_layout(const std::string& resources_dir);
 /// Values of one instance. Plain data, so that an FMU state is a copy of it.
 struct Values {
   double time = 0.0;
-  std::vector<double> q;       ///< [rad]
+  std::vector<double> q;                  ///< [rad]
   double wrench[6] = {0, 0, 0, 0, 0, 0};  ///< as given, in the frame wrench_frame
   int wrench_frame = 0;
   std::vector<double> theta;  ///< model parameters
@@ -99,7 +99,9 @@ class Model {
   Eigen::Matrix<double, 6, 1> base_wrench(const Eigen::Matrix3d& r_tool) const;
   /// Deflection at joint vector q (base-frame wrench computed at q); `p` (optional) receives
   /// the unloaded tool point position [m].
-  Eigen::Matrix<double, 6, 1> predict_at(const Eigen::VectorXd& q, Eigen::Vector3d* p);
+  Eigen::Matrix<double, 6, 1> predict_at(const Eigen::VectorXd& q,
+                                         Eigen::Vector3d* p,
+                                         MeasurementContext* context);
 
   std::shared_ptr<const Layout> layout_;
   Values values_;
@@ -109,7 +111,9 @@ class Model {
   bool compensation_valid_ = false;
   Status compensation_status_ = Status::ok;
   std::string compensation_message_;
-  double out_[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};  ///< d (6) and tool position (3)
+  double out_[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};  ///< d (6) and loaded tool position (3)
+  Eigen::Matrix3d flange_rotation_ = Eigen::Matrix3d::Identity();  ///< unloaded, at q
+  Eigen::Vector3d p_unloaded_ = Eigen::Vector3d::Zero();           ///< tool point at q
   std::vector<double> qcmd_;
 };
 

@@ -250,8 +250,9 @@ def test_simulation_matches_reference(fmu, kind, solver):
         # CS: the outputs at t were computed with the input applied at the previous sample.
         tin = t if kind == "ModelExchange" or k == 0 else res[k - 1]["time"]
         _, hq, hw = held(steps, tin)
-        np.testing.assert_allclose(q, hq, atol=0, rtol=0)
-        np.testing.assert_allclose(w, hw, atol=0, rtol=0)
+        # (fmpy interpolates the table linearly: equal ends may differ in the last bit)
+        np.testing.assert_allclose(q, hq, atol=1e-15, rtol=0)
+        np.testing.assert_allclose(w, hw, atol=1e-12, rtol=0)
         d = np.array([row[n] for n in DEFL])
         np.testing.assert_allclose(d, reference(q, w), rtol=0, atol=TOL)
         p = np.array([row["x_tool"], row["y_tool"], row["z_tool"]])
@@ -448,7 +449,7 @@ from test_fmu import Instance, DEFL
 a = Instance({fmu!r}).start()
 a.fmu.doStep(0.0, 0.01)
 a.time = 0.01
-st = a.fmu.deserializeFMUstate(open({blob!r}, 'rb').read()) if not a.v3 else \
+st = a.fmu.deSerializeFMUstate(open({blob!r}, 'rb').read()) if not a.v3 else \
      a.fmu.deserializeFMUState(open({blob!r}, 'rb').read())
 (a.fmu.setFMUState if a.v3 else a.fmu.setFMUstate)(st)
 print(' '.join(repr(float(x)) for x in a.get(DEFL + ['q_cmd1', 'joint_c1'])))
@@ -461,7 +462,7 @@ def test_fmu_state_roundtrip(fmu, tmp_path):
     set_state = a.fmu.setFMUState if a.v3 else a.fmu.setFMUstate
     free_state = a.fmu.freeFMUState if a.v3 else a.fmu.freeFMUstate
     ser = a.fmu.serializeFMUState if a.v3 else a.fmu.serializeFMUstate
-    deser = a.fmu.deserializeFMUState if a.v3 else a.fmu.deserializeFMUstate
+    deser = a.fmu.deserializeFMUState if a.v3 else a.fmu.deSerializeFMUstate
     a.set_inputs(Q, W)
     a.set(joint_c1=3e-5)
     a.step()

@@ -226,6 +226,9 @@ typedef struct stiff_identify_options {
   stiff_progress_fn progress; /**< may be NULL */
   void* progress_user_data;
 } stiff_identify_options;
+/* Every field spelled out: a bare {sizeof(...)} trips -Wmissing-field-initializers. */
+#define STIFF_IDENTIFY_OPTIONS_INIT \
+  {sizeof(stiff_identify_options), NULL, NULL, 0.0, 0, 0, NULL, NULL}
 
 /** Identify the model from data with measured displacements. Joints or parameters that the
  *  data cannot identify are named in the result's warnings and held fixed. Errors:

@@ -309,11 +309,11 @@ struct PlanOptions {
 struct OptimizerTrace {
   std::string optimizer;  ///< "annealing", "exchange", "nlopt"
   double start_score = 0.0;
-  double best_score = 0.0;   ///< score of its best set (larger is better)
-  double best_value = 0.0;   ///< the criterion's value of that set
-  long iterations = 0;       ///< annealing steps, exchange passes, NLopt evaluations
-  long evaluations = 0;      ///< evaluated swaps (criterion evaluations)
-  long accepted = 0;         ///< accepted steps / exchanges
+  double best_score = 0.0;  ///< score of its best set (larger is better)
+  double best_value = 0.0;  ///< the criterion's value of that set
+  long iterations = 0;      ///< annealing steps, exchange passes, NLopt evaluations
+  long evaluations = 0;     ///< evaluated swaps (criterion evaluations)
+  long accepted = 0;        ///< accepted steps / exchanges
   double seconds = 0.0;
   double initial_temperature = 0.0;  ///< annealing
   int initial_swap_count = 0;        ///< annealing

@@ -50,7 +50,8 @@ double registry_value(Crit id, bool larger, const CriterionInput& in) {
   const int m = static_cast<int>(in.information.rows());
   if (m == 0 || m > kMaxM || in.information.cols() != m)
     throw InvalidArgument("criterion: information matrix must be m x m with 1 <= m <= 16");
-  if (id == Crit::kappa_j && (in.jacobian_information.rows() != m || in.jacobian_information.cols() != m))
+  if (id == Crit::kappa_j &&
+      (in.jacobian_information.rows() != m || in.jacobian_information.cols() != m))
     throw InvalidArgument("criterion kappa_j: jacobian_information must be m x m");
   if (id == Crit::task && in.task_information.size() == 0)
     return std::numeric_limits<double>::quiet_NaN();
@@ -109,7 +110,8 @@ std::vector<double> task_information(const RobotModel& robot,
   Eigen::MatrixXd s = Eigen::MatrixXd::Zero(m, m);
   for (const auto& row : task.rows) {
     const ChainState cs = robot.chain(row.q);
-    const Matrix6X<double> jm = robot.jacobian_at(cs, robot.point_position(cs, robot.measured_point));
+    const Matrix6X<double> jm =
+        robot.jacobian_at(cs, robot.point_position(cs, robot.measured_point));
     const Matrix6X<double> jl = robot.jacobian_at(cs, robot.point_position(cs, robot.load_point));
     Eigen::Matrix<double, 6, 1> w;
     w << row.force, row.moment;
@@ -198,11 +200,13 @@ std::map<std::string, double> evaluate_criteria(const RobotModel& robot,
   }
   for (int j : identified)
     if (j < 0 || j >= n) throw InvalidArgument("evaluate_criteria: identified joint out of range");
-  if (identified.empty()) throw InvalidArgument("evaluate_criteria: no joint compliance is identifiable");
+  if (identified.empty())
+    throw InvalidArgument("evaluate_criteria: no joint compliance is identifiable");
   std::vector<plan_detail::Row> rows;
   for (const auto& r : data.rows) rows.push_back({r.q, r.force, r.moment});
   const auto task = plan_detail::task_information(robot, options.task, identified);
-  const CriterionInput in = plan_detail::criterion_input(robot, rows, identified, options.noise, task);
+  const CriterionInput in =
+      plan_detail::criterion_input(robot, rows, identified, options.noise, task);
   std::map<std::string, double> out;
   for (const auto& c : criterion_registry()) out[c.name] = c.value(in);
   out["count"] = static_cast<double>(data.rows.size());

@@ -31,7 +31,8 @@ Context make_context(const RobotModel& robot,
   c.count = o.count;
   if (c.id == Crit::task) {
     if (o.task.rows.empty())
-      throw InvalidArgument("plan: criterion 'task' needs task poses and loads (PlanOptions::task)");
+      throw InvalidArgument(
+          "plan: criterion 'task' needs task poses and loads (PlanOptions::task)");
     *task = task_information(robot, o.task, pool.identified_joints);
     c.task = task->data();
   }
@@ -49,8 +50,8 @@ void validate(const CandidatePool& pool, const PlanOptions& o) {
                           std::to_string(pool.size()) + " elements)");
   if (3 * o.count < m)
     throw InvalidArgument("plan: count " + std::to_string(o.count) + " is too small to identify " +
-                          std::to_string(m) + " compliances (need 3N >= m, N >= " +
-                          std::to_string((m + 2) / 3) + ")");
+                          std::to_string(m) +
+                          " compliances (need 3N >= m, N >= " + std::to_string((m + 2) / 3) + ")");
   if (o.progress_interval < 1) throw InvalidArgument("plan: progress_interval must be >= 1");
 }
 
@@ -73,7 +74,7 @@ std::vector<int> random_subset(Rng& rng, int pool_size, int count, std::vector<u
 
 template <int MC>
 struct Kernel {
-  static constexpr int kSize = MC > 0 ? MC * MC : kMaxM * kMaxM;
+  static constexpr int kSize = MC > 0 ? MC* MC : kMaxM* kMaxM;
   const CandidatePool& pool;
   const Context& ctx;
   int mm;
@@ -235,7 +236,8 @@ struct Exchange {
     const int N = o.count, P = pool.size(), mm = K.mm;
     const ExchangeOptions& xo = o.exchange;
     if (xo.max_passes < 0 || xo.max_evaluations_per_pass < N)
-      throw InvalidArgument("plan: exchange needs max_passes >= 0 and max_evaluations_per_pass >= N");
+      throw InvalidArgument(
+          "plan: exchange needs max_passes >= 0 and max_evaluations_per_pass >= N");
     Rng rng(o.seed ^ 0x9E3779B97F4A7C15ULL);
     std::vector<uint8_t> in(P, 0);
     std::vector<int> set;
@@ -423,8 +425,9 @@ double set_score(const RobotModel& robot,
   return score<0>(ctx, M.data(), MJ.data());
 }
 
-
-PlanResult plan_measurements(const RobotModel& robot, const CandidatePool& pool, const PlanOptions& o) {
+PlanResult plan_measurements(const RobotModel& robot,
+                             const CandidatePool& pool,
+                             const PlanOptions& o) {
   validate(pool, o);
   if (!o.annealing.enabled && !o.exchange.enabled)
     throw InvalidArgument("plan: enable annealing and/or exchange");

@@ -140,7 +140,7 @@ inline double log_det(const double* L, int m_runtime) {
 template <int MC>
 inline double kappa_inverse(const double* M, int m_runtime) {
   const int m = dim<MC>(m_runtime);
-  double L[(MC > 0 ? MC * MC : kMaxM * kMaxM)];
+  double L[(MC > 0 ? MC * MC : kMaxM * kMaxM)] = {};
   double Li[(MC > 0 ? MC * MC : kMaxM * kMaxM)];
   if (!cholesky<MC>(M, L, m)) return 0.0;
   invert_lower<MC>(L, Li, m);

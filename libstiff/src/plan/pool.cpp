@@ -81,7 +81,8 @@ std::vector<Eigen::Vector3d> make_loads(const PoolOptions& o, Rng& rng) {
         if (f <= max_mag) loads.push_back(f * d.normalized());
       }
     }
-    if (loads.empty()) throw InvalidArgument("plan pool: empty load range (every fixture force > max magnitude)");
+    if (loads.empty())
+      throw InvalidArgument("plan pool: empty load range (every fixture force > max magnitude)");
     return loads;
   }
   if (!(o.load_min_N >= 0 && o.load_max_N >= o.load_min_N && o.load_max_N > 0) ||
@@ -101,11 +102,15 @@ std::vector<Eigen::Vector3d> make_loads(const PoolOptions& o, Rng& rng) {
                             " N in [" + num(o.load_min_N) + ", " + num(o.load_max_N) + "] N");
     std::sort(axis.begin(), axis.end());
   }
-  auto ok = [&](const Eigen::Vector3d& f) { return f.norm() > 0 && f.norm() <= max_mag * (1 + 1e-12); };
+  auto ok = [&](const Eigen::Vector3d& f) {
+    return f.norm() > 0 && f.norm() <= max_mag * (1 + 1e-12);
+  };
   if (o.load_count == 0) {
-    if (axis.empty()) throw InvalidArgument("plan pool: load_count 0 (whole grid) needs load_step_N > 0");
+    if (axis.empty())
+      throw InvalidArgument("plan pool: load_count 0 (whole grid) needs load_step_N > 0");
     const double total = std::pow(static_cast<double>(axis.size()), 3);
-    if (total > 1e5) throw InvalidArgument("plan pool: load grid has " + num(total) + " loads (> 1e5)");
+    if (total > 1e5)
+      throw InvalidArgument("plan pool: load grid has " + num(total) + " loads (> 1e5)");
     for (double x : axis)
       for (double y : axis)
         for (double z : axis)
@@ -128,8 +133,8 @@ std::vector<Eigen::Vector3d> make_loads(const PoolOptions& o, Rng& rng) {
   }
   if (loads.empty())
     throw InvalidArgument("plan pool: empty load range: no load with per-axis magnitude in [" +
-                          num(o.load_min_N) + ", " + num(o.load_max_N) + "] N and |F| <= " +
-                          num(max_mag) + " N");
+                          num(o.load_min_N) + ", " + num(o.load_max_N) +
+                          "] N and |F| <= " + num(max_mag) + " N");
   return loads;
 }
 
@@ -141,7 +146,8 @@ CandidatePool build_pool(const RobotModel& robot, const PoolOptions& o) {
   if (!(o.range_fraction > 0 && o.range_fraction <= 1))
     throw InvalidArgument("plan pool: range_fraction must be in (0, 1]");
   if (!o.q_fixed.empty() && static_cast<int>(o.q_fixed.size()) != n)
-    throw InvalidArgument("plan pool: q_fixed needs one value per joint (" + std::to_string(n) + ")");
+    throw InvalidArgument("plan pool: q_fixed needs one value per joint (" + std::to_string(n) +
+                          ")");
   if (!(o.min_sigma_m >= 0)) throw InvalidArgument("plan pool: min_sigma_m must be >= 0");
   if (o.use_workspace_box && !(o.box_min_m.array() < o.box_max_m.array()).all())
     throw InvalidArgument("plan pool: workspace box needs min < max on every axis");
@@ -216,8 +222,9 @@ CandidatePool build_pool(const RobotModel& robot, const PoolOptions& o) {
   if (p.poses.empty())
     throw InvalidArgument("plan pool: all " + std::to_string(p.poses_drawn) +
                           " candidate poses are near-singular (sigma_min of the translational "
-                          "Jacobian < " + num(o.min_sigma_m) + " m: " +
-                          std::to_string(p.rejected_singular) + ") or outside the workspace box (" +
+                          "Jacobian < " +
+                          num(o.min_sigma_m) + " m: " + std::to_string(p.rejected_singular) +
+                          ") or outside the workspace box (" +
                           std::to_string(p.rejected_workspace) + ")");
 
   if (o.candidate_loads_from_file && !o.candidate_file.empty()) {
@@ -252,7 +259,9 @@ CandidatePool build_pool(const RobotModel& robot, const PoolOptions& o) {
   return p;
 }
 
-CandidatePool pool_from_dataset(const RobotModel& robot, const Dataset& data, const NoiseModel& noise) {
+CandidatePool pool_from_dataset(const RobotModel& robot,
+                                const Dataset& data,
+                                const NoiseModel& noise) {
   validate_dataset(data, robot.dof(), false);
   if (data.rows.empty()) throw InvalidArgument("plan pool: the dataset has no rows");
   CandidatePool p;
@@ -261,7 +270,8 @@ CandidatePool pool_from_dataset(const RobotModel& robot, const Dataset& data, co
   p.options.min_sigma_m = 0.0;
   for (const auto& row : data.rows) {
     if (row.moment.norm() != 0)
-      throw InvalidArgument("plan pool: row '" + row.id + "' has a moment; plan loads are forces only");
+      throw InvalidArgument("plan pool: row '" + row.id +
+                            "' has a moment; plan loads are forces only");
     const PoseData d = pose_data(robot, row.q);
     const double s = noise.tracker_sigma_at(d.tool);
     if (!(s > 0)) throw InvalidArgument("plan pool: tracker sigma must be > 0");
@@ -311,7 +321,8 @@ void CandidatePool::finalize() {
       for (int l = 0; l < m; ++l)
         packed_gram[i * m * m + k * m + l] =
             jacobian_meas[i].col(jk).dot(jacobian_meas[i].col(identified_joints[l]));
-      for (int r = 0; r < 3; ++r) packed_load_jacobian[i * 3 * m + 3 * k + r] = jacobian_load[i](r, jk);
+      for (int r = 0; r < 3; ++r)
+        packed_load_jacobian[i * 3 * m + 3 * k + r] = jacobian_load[i](r, jk);
     }
     weight2[i] = 1.0 / (sigma_m[i] * sigma_m[i]);
   }

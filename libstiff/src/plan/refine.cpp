@@ -1,10 +1,9 @@
 // Continuous NLopt refinement of a discrete plan, and the final report of a plan.
-#include <nlopt.hpp>
-
 #include <Eigen/Eigenvalues>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <nlopt.hpp>
 
 #include "plan_internal.hpp"
 #include "stiff/error.hpp"
@@ -16,7 +15,8 @@ using namespace plan_detail;
 
 namespace plan_detail {
 
-std::vector<PlannedMeasurement> to_measurements(const CandidatePool& pool, const std::vector<int>& set) {
+std::vector<PlannedMeasurement> to_measurements(const CandidatePool& pool,
+                                                const std::vector<int>& set) {
   std::vector<PlannedMeasurement> ms;
   const int width = set.size() >= 100 ? 3 : 2;
   for (size_t i = 0; i < set.size(); ++i) {
@@ -70,8 +70,8 @@ void finish_result(const RobotModel& robot,
     minus.information -= one.information;
     minus.jacobian_information -= one.jacobian_information;
     minus.count -= 1;
-    ms[i].contribution = regular ? (ldlt.solve(one.information)).trace()
-                                 : std::numeric_limits<double>::quiet_NaN();
+    ms[i].contribution =
+        regular ? (ldlt.solve(one.information)).trace() : std::numeric_limits<double>::quiet_NaN();
     const double s_minus = minus.count > 0 ? criterion_score(crit, crit.value(minus)) : -kInf;
     ms[i].criterion_drop = r.score - s_minus;
   }
@@ -126,11 +126,12 @@ struct RefineProblem {
       if (r.force.norm() > po.load_max_magnitude_N * (1 + 1e-12)) return -1e300;
       const ChainState cs = robot->chain(r.q);
       const Eigen::Vector3d p = robot->point_position(cs, robot->measured_point);
-      if (po.use_workspace_box && !((p.array() >= po.box_min_m.array()).all() &&
-                                    (p.array() <= po.box_max_m.array()).all()))
+      if (po.use_workspace_box &&
+          !((p.array() >= po.box_min_m.array()).all() && (p.array() <= po.box_max_m.array()).all()))
         return -1e300;
       const Eigen::Matrix3Xd jp = robot->jacobian_at(cs, p).topRows<3>();
-      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(jp * jp.transpose(), Eigen::EigenvaluesOnly);
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(jp * jp.transpose(),
+                                                        Eigen::EigenvaluesOnly);
       if (std::sqrt(std::max(0.0, es.eigenvalues()(0))) < pool->min_sigma_m) return -1e300;
     }
     const CriterionInput in =
@@ -176,7 +177,8 @@ std::vector<PlannedMeasurement> refine_plan(const RobotModel& robot,
   const int n = robot.dof();
   if (pool.dof != n) throw InvalidArgument("plan refine: pool and robot differ in joint count");
   if (start.empty()) throw InvalidArgument("plan refine: nothing to refine");
-  if (o.refine.max_evaluations < 1) throw InvalidArgument("plan refine: max_evaluations must be >= 1");
+  if (o.refine.max_evaluations < 1)
+    throw InvalidArgument("plan refine: max_evaluations must be >= 1");
   const nlopt_algorithm alg = nlopt_algorithm_from_string(o.refine.algorithm.c_str());
   if (static_cast<int>(alg) < 0 || o.refine.algorithm.rfind("LN_", 0) != 0)
     throw InvalidArgument("plan refine: '" + o.refine.algorithm +

@@ -54,8 +54,9 @@ TEST(PlanAnnealing, FindsExhaustiveOptimumOnSmallPool) {
       const SetSearchResult x = exchange(robot, pool, o);
       if (x.score >= best - 1e-12 * std::abs(best)) ++exchange_hits;
     }
-    std::printf("%s: exhaustive optimum %.6g; annealing found it in %d/%d seeds, exchange in %d/%d\n",
-                crit.c_str(), crit == "kappa_a" ? best : best, hits, seeds, exchange_hits, seeds);
+    std::printf(
+        "%s: exhaustive optimum %.6g; annealing found it in %d/%d seeds, exchange in %d/%d\n",
+        crit.c_str(), crit == "kappa_a" ? best : best, hits, seeds, exchange_hits, seeds);
     EXPECT_GE(hits, 38);  // >= 95 %
   }
 }
@@ -86,10 +87,12 @@ TEST(PlanAnnealing, RokaeSetAtLeastAsGoodAsPaperDesign) {
   std::printf("ROKAE, N = 10, pool %d x %d = %d, %ld iterations in %.3f s (plan %.3f s)\n",
               r.pool_poses, r.pool_loads, r.pool_size, r.trace[0].iterations, r.trace[0].seconds,
               sec);
-  std::printf("kappa_F^-1(A): annealed %.5f | paper kappa_A design %.5f | paper kappa_J design %.5f\n",
-              ours.at("kappa_a"), paper.at("kappa_a"), paper_j.at("kappa_a"));
-  std::printf("kappa_F^-1(J): annealed %.5f | paper kappa_A design %.5f | paper kappa_J design %.5f\n",
-              ours.at("kappa_j"), paper.at("kappa_j"), paper_j.at("kappa_j"));
+  std::printf(
+      "kappa_F^-1(A): annealed %.5f | paper kappa_A design %.5f | paper kappa_J design %.5f\n",
+      ours.at("kappa_a"), paper.at("kappa_a"), paper_j.at("kappa_a"));
+  std::printf(
+      "kappa_F^-1(J): annealed %.5f | paper kappa_A design %.5f | paper kappa_J design %.5f\n",
+      ours.at("kappa_j"), paper.at("kappa_j"), paper_j.at("kappa_j"));
   EXPECT_GE(ours.at("kappa_a"), paper.at("kappa_a"));
   EXPECT_NEAR(ours.at("kappa_a"), r.value, 1e-9);
   EXPECT_EQ(r.found_by, "annealing");

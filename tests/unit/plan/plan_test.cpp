@@ -135,8 +135,9 @@ TEST(PlanCriteria, RegistryAndEvaluateAgreeWithPoolKernel) {
   const Eigen::MatrixXd b = observation_matrix(robot, co.task).leftCols(5);
   const double expect = std::sqrt((b * cov * b.transpose()).trace() / (3.0 * co.task.size()));
   EXPECT_NEAR(task, expect, 1e-9 * expect);
-  std::printf("paper kappa_F^-1(A) design: kappa_a %.5f kappa_j %.5f d_opt %.4f o1 %.4g task %.3g m\n",
-              values.at("kappa_a"), values.at("kappa_j"), values.at("d_opt"), values.at("o1"), task);
+  std::printf(
+      "paper kappa_F^-1(A) design: kappa_a %.5f kappa_j %.5f d_opt %.4f o1 %.4g task %.3g m\n",
+      values.at("kappa_a"), values.at("kappa_j"), values.at("d_opt"), values.at("o1"), task);
 }
 
 TEST(PlanErrors, BadRequestsAreInvalidArgument) {
@@ -205,7 +206,8 @@ TEST(PlanOutput, DatasetAndJson) {
   const auto again = evaluate_criteria(robot, back);
   EXPECT_NEAR(again.at("kappa_a"), r.criteria.at("kappa_a"), 1e-9);
   const std::string json = plan_summary_json(r);
-  for (const auto& name : criterion_names()) EXPECT_NE(json.find("\"" + name + "\""), std::string::npos);
+  for (const auto& name : criterion_names())
+    EXPECT_NE(json.find("\"" + name + "\""), std::string::npos);
   EXPECT_NE(json.find("\"found_by\""), std::string::npos);
 }
 

@@ -1,0 +1,81 @@
+"""The Python API over the C ABI: every test here also exercises the ABI."""
+import subprocess
+
+import numpy as np
+import pytest
+
+import stiff
+from conftest import PAPER_K
+
+
+def test_c_program_and_python_identify_the_same_to_1e12(build_dir, root, rokae_path, design_a, tmp_path):
+    exe = build_dir / "tests" / "c" / "stiff_c_usage_test"
+    if not exe.exists():
+        pytest.skip(f"{exe} not built")
+    out = subprocess.run([str(exe), str(root), str(tmp_path / "fit.json")], check=True,
+                         capture_output=True, text=True).stdout
+    c_values = np.array([float(line.split()[1]) for line in out.splitlines() if line.startswith("c")])
+    robot = stiff.Robot(rokae_path)
+    data = stiff.simulate(robot, stiff.Dataset.read(design_a, robot), stiffness=PAPER_K,
+                          tracker_sigma_m=10e-6, seed=42)
+    fit = stiff.identify(robot, data)
+    np.testing.assert_allclose(fit.parameters, c_values, rtol=1e-12, atol=0)
+
+
+def test_noise_free_round_trip_recovers_stiffness(rokae_path, design_a):
+    robot = stiff.Robot(rokae_path)
+    data = stiff.simulate(robot, stiff.Dataset.read(design_a, robot), stiffness=PAPER_K, tracker_sigma_m=0.0)
+    fit = stiff.identify(robot, data)
+    np.testing.assert_allclose(fit.stiffness[:5], PAPER_K[:5], rtol=1e-9)
+    assert np.isnan(fit.stiffness[5]) and not fit.identified[5]
+    assert "joint 6" in fit.warnings[0]
+
+
+def test_prediction_matches_the_paper_model(rokae_path):
+    # d = J C J^T F computed here in numpy from the Jacobian the library exports.
+    robot = stiff.Robot(rokae_path)
+    fit_data = stiff.simulate(robot, stiff.random_design(robot, 30, seed=3), stiffness=PAPER_K, tracker_sigma_m=0)
+    fit = stiff.identify(robot, fit_data)
+    model = stiff.Model(robot, fit)
+    rng = np.random.default_rng(1)
+    lo, hi = robot.limits
+    for _ in range(5):
+        q = rng.uniform(np.maximum(lo, -3), np.minimum(hi, 3))
+        f = rng.uniform(-30, 30, 3)
+        jt = robot.jacobian(q)[:3]
+        c = np.nan_to_num(1.0 / fit.stiffness)
+        expected = jt @ np.diag(c) @ jt.T @ f
+        np.testing.assert_allclose(model.predict(q, f)[:3], expected, rtol=1e-10, atol=1e-15)
+
+
+def test_errors_carry_status_and_location(tmp_path, rokae_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("id,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,fx_N,fy_N,fz_N\na,1,2,3,4,5,6,1,2,zz\n")
+    robot = stiff.Robot(rokae_path)
+    with pytest.raises(stiff.ParseError) as e:
+        stiff.Dataset.read(bad, robot)
+    assert e.value.path == str(bad) and e.value.line == 2 and e.value.column == 19
+    assert "not a number" in str(e.value)
+    with pytest.raises(stiff.StiffIOError):
+        stiff.Robot(tmp_path / "missing.yaml")
+    with pytest.raises(stiff.InvalidArgumentError, match="unknown effect 'warp'"):
+        stiff.identify(robot, stiff.simulate(robot, stiff.random_design(robot, 10), stiffness=PAPER_K), model="joint+warp")
+
+
+def test_dataset_from_arrays_round_trip(tmp_path):
+    q = np.arange(12.0).reshape(2, 6) * 0.1
+    f = np.array([[1.0, 2, 3], [4, 5, 6]])
+    d = np.array([[1e-4, 2e-4, 3e-4], [4e-4, 5e-4, 6e-4]])
+    ds = stiff.Dataset.from_arrays(q, f, displacement=d)
+    ds.write(tmp_path / "x.csv")
+    back = stiff.Dataset.read(tmp_path / "x.csv")
+    np.testing.assert_array_equal(back.q, q)
+    np.testing.assert_array_equal(back.displacement, d)
+    assert repr(back).startswith("Dataset(2 measurements")
+
+
+def test_effect_registry_lists_every_effect():
+    names = stiff.effects()
+    assert "joint" in names
+    info = stiff.describe_effect("joint")
+    assert info["parameters"][0]["unit"] == "rad/(N*m)"

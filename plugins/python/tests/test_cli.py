@@ -1,0 +1,52 @@
+"""The `stiff` command line, run as a user runs it."""
+import json
+import subprocess
+import sys
+
+import pytest
+
+STIFF = [sys.executable, "-m", "stiff.cli"]
+
+
+def run(*args, check=True):
+    p = subprocess.run(STIFF + [str(a) for a in args], capture_output=True, text=True)
+    if check and p.returncode != 0:
+        raise AssertionError(f"stiff {' '.join(map(str, args))} failed ({p.returncode}):\n{p.stderr}")
+    return p
+
+
+def test_version():
+    assert run("--version").stdout.startswith("stiff 0.1.0")
+
+
+def test_simulate_identify_predict(tmp_path, rokae_path, design_a):
+    data = tmp_path / "data.csv"
+    run("simulate", "--robot", rokae_path, "--plan", design_a,
+        "--stiffness", "50914,16382,31311,7791.1,5613.6,4000", "-o", data)
+    out = run("identify", "--robot", "rokae", "--data", data, "-o", tmp_path / "fit.json").stdout
+    assert "not identifiable from this data: joint 6" in out
+    fit = json.loads((tmp_path / "fit.json").read_text())
+    assert fit["format"] == "stiff-fit" and fit["joints"][5]["identified"] is False
+    pred = run("predict", "--robot", "rokae", "--fit", tmp_path / "fit.json", "--data", data,
+               "-o", tmp_path / "pred.csv").stdout
+    assert "RMS" in pred
+    lines = (tmp_path / "pred.csv").read_text().splitlines()
+    assert any(line.startswith("a01,") for line in lines)  # ids kept
+
+
+@pytest.mark.parametrize("args, message", [
+    (["identify", "--robot", "nosuchrobot", "--data", "x.csv"], "no robot file 'nosuchrobot'"),
+    (["identify", "--robot", "rokae", "--data", "/nonexistent.csv"], "/nonexistent.csv"),
+    (["simulate", "--robot", "rokae", "-o", "x.csv"], "give the truth"),
+])
+def test_user_errors_are_one_line_and_exit_2(args, message, tmp_path):
+    p = subprocess.run(STIFF + args, capture_output=True, text=True, cwd=tmp_path)
+    assert p.returncode == 2
+    assert message in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert "Traceback" not in p.stderr
+
+
+def test_demo_runs(tmp_path):
+    out = run("demo", "--out", tmp_path / "demo").stdout
+    assert "not identifiable" in out and (tmp_path / "demo" / "fit.json").exists()
