@@ -39,7 +39,7 @@ test-cpp:
 	@cd $(BUILD) && $(CTEST) --output-on-failure -j $(JOBS) -LE "slow|python"
 
 test-python:
-	@STIFF_BUILD_DIR=$(CURDIR)/$(BUILD) $(PY) -m pytest -q plugins/python/tests tests/python
+	@STIFF_BUILD_DIR=$(CURDIR)/$(BUILD) $(PY) -m pytest -q plugins/python/tests tests/fmu
 
 bench: build
 	@bash bench/run

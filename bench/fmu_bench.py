@@ -23,7 +23,7 @@ import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "fmu"))
-from conftest import STIFFNESS, Exporter, fit_json, load_capi, ROBOT  # noqa: E402
+from fmu_reference import STIFFNESS, Exporter, fit_json, load_capi, ROBOT  # noqa: E402
 
 from fmpy import extract, read_model_description, simulate_fmu  # noqa: E402
 

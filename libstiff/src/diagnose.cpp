@@ -64,9 +64,48 @@ struct Noise {
   bool known = false;
   double floor_m = 0.0;
   std::string source = "none";
+  double force_part_m = 0.0;  ///< mean displacement error from the stated force error
+  double tracker_m = 0.0;     ///< stated tracker sigma (median)
 };
 
+Noise noise_of_tracker(const Dataset& data);
+
+double meta_number(const Dataset& data, const std::string& key) {
+  const std::string meta = data.meta(key);
+  if (meta.empty()) return 0.0;
+  char* end = nullptr;
+  const double v = std::strtod(meta.c_str(), &end);
+  return end != meta.c_str() && std::isfinite(v) && v > 0 ? v : 0.0;
+}
+
+/// Add the displacement error caused by the stated force-sensor error (metadata
+/// force_relative, force_absolute_N): a force error dF moves the measured point by about
+/// |d| |dF| / |F|, so per axis sigma_F^2 = |d|^2 (rel^2 + 3 abs^2 / |F|^2) / 3.
+void add_force_noise(const Dataset& data, Noise& n) {
+  const double rel = meta_number(data, "force_relative");
+  const double abs_n = meta_number(data, "force_absolute_N");
+  if (!(rel > 0 || abs_n > 0)) return;
+  double sum = 0;
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    const auto& m = data.rows[r];
+    const double f = m.force.norm();
+    if (!(f > 0)) continue;
+    const double v = m.displacement.squaredNorm() * (rel * rel + 3 * abs_n * abs_n / (f * f)) / 3;
+    n.sigma(r) = std::sqrt(n.sigma(r) * n.sigma(r) + v);
+    sum += std::sqrt(v);
+  }
+  n.force_part_m = sum / std::max<size_t>(1, data.rows.size());
+  n.floor_m = std::sqrt(n.sigma.squaredNorm() / std::max<Eigen::Index>(1, n.sigma.size()));
+}
+
 Noise noise_of(const Dataset& data) {
+  Noise n = noise_of_tracker(data);
+  n.tracker_m = n.floor_m;
+  if (n.known) add_force_noise(data, n);
+  return n;
+}
+
+Noise noise_of_tracker(const Dataset& data) {
   Noise n;
   const int rows = static_cast<int>(data.rows.size());
   n.sigma = VectorXd::Ones(rows);
@@ -187,13 +226,16 @@ struct Context {
   bool had_time = true;  ///< the calibration data has a `t` column
 };
 
-Analysis analyse(const Context& cx, const std::vector<std::string>& effects) {
+/// `fixed` (may be null): use these outlier flags instead of detecting them.
+Analysis analyse(const Context& cx, const std::vector<std::string>& effects,
+                 const std::vector<bool>* fixed = nullptr) {
   const Dataset& calib = *cx.calib;
   const int rows = static_cast<int>(calib.rows.size());
   const Noise& noise = *cx.noise;
   Analysis a;
   a.effects = effects;
   a.outlier.assign(rows, false);
+  if (fixed) a.outlier = *fixed;
   FitResult fit;
   for (int round = 0; round < 4; ++round) {
     a.used_rows.clear();
@@ -215,7 +257,7 @@ Analysis analyse(const Context& cx, const std::vector<std::string>& effects) {
       if (!a.outlier[r])
         for (int k = 0; k < 3; ++k) comps.push_back(e(k));
     }
-    if (!(cx.opt->outlier_alpha > 0)) break;
+    if (fixed || !(cx.opt->outlier_alpha > 0)) break;
     // Robust scale of the inlier residual components (MAD); never below the stated noise.
     const double med = median(comps);
     for (auto& v : comps) v = std::abs(v - med);
@@ -238,7 +280,7 @@ Analysis analyse(const Context& cx, const std::vector<std::string>& effects) {
       if (round == 0) break;
       flag = a.outlier;  // keep the previous round's flags
     }
-    if (flag == a.outlier) break;
+    if (flag == a.outlier || round == 3) break;  // the fit above used a.outlier
     a.outlier = flag;
   }
   for (const auto& w : fit.warnings)
@@ -302,7 +344,7 @@ Analysis analyse(const Context& cx, const std::vector<std::string>& effects) {
     }
     q.has_validation = true;
     q.validation_rms_m = std::sqrt(ss / (3.0 * v.rows.size()));
-    const double vs = cx.vnoise->known ? cx.vnoise->floor_m : noise.floor_m;
+    const double vs = cx.vnoise->known ? cx.vnoise->floor_m : noise.floor_m;  // RMS sigma
     q.validation_floor_m = vs * std::sqrt(1.0 + static_cast<double>(a.p) / a.n);
   }
   return a;
@@ -701,61 +743,105 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
   d.covariates = tests;
 }
 
-/// Verdict of a level, given the level after adding its top (may be null).
-std::string decide(const Context& cx, const Level& L, const Level* next, std::string* why,
-                   std::string* signature) {
-  const Noise& noise = *cx.noise;
-  const double alpha = cx.opt->alpha;
-  const ModelQuality& q = L.a.quality;
-  const bool omnibus = noise.known && q.chi2_p < alpha;
-  if (!claims(L)) {
-    if (omnibus) {
-      *why = "the residual is above the noise floor (chi2 = " + num(q.chi2, 4) + " for " +
-             std::to_string(q.dof) + " dof, p = " + num(q.chi2_p, 2) +
-             ") but no candidate effect explains it";
+/// The levels of the loop: level 0 is the given model, level i+1 adds level i's top effect.
+struct Chain {
+  const Context* cx;
+  std::vector<std::string> candidates;
+  std::vector<Level> levels;
+  std::vector<std::string> warnings;
+  const std::vector<bool>* fixed = nullptr;  ///< outlier flags shared by every level
+
+  /// Level i+1 (computed on demand), or null when level i claims nothing or the re-fit fails.
+  const Level* next(size_t i) {
+    if (!claims(levels[i])) return nullptr;
+    if (levels.size() <= i + 1) {
+      std::vector<std::string> eff = levels[i].a.effects;
+      const std::string top = levels[i].scores[0].effect;
+      eff.push_back(top);
+      std::vector<std::string> rest;
+      for (const auto& c : candidates)
+        if (std::find(eff.begin(), eff.end(), c) == eff.end()) rest.push_back(c);
+      try {
+        Analysis a = analyse(*cx, eff, fixed);
+        levels.push_back(score_level(*cx, std::move(a), rest));
+      } catch (const NumericalError& e) {
+        warnings.push_back("re-fit with " + top + " failed: " + e.what());
+        return nullptr;
+      }
+    }
+    return &levels[i + 1];
+  }
+
+  /// Does adding level i's top (and, while the evidence holds, the following tops) bring the
+  /// residual to the noise floor, with the validation error falling at every step?
+  bool explained_by_chain(size_t i, int depth, std::string* why) {
+    const Level* n = next(i);
+    if (!n) {
+      *why = "the re-fit with " + levels[i].scores[0].effect + " failed";
+      return false;
+    }
+    const ModelQuality& q = levels[i].a.quality;
+    const ModelQuality& nq = n->a.quality;
+    if (q.has_validation && nq.validation_rms_m >= q.validation_rms_m) {
+      *why = "adding " + levels[i].scores[0].effect +
+             " does not improve the validation error (" + um(q.validation_rms_m) + " -> " +
+             um(nq.validation_rms_m) + ")";
+      return false;
+    }
+    if (!cx->noise->known || nq.chi2_p >= cx->opt->alpha) return true;
+    if (claims(*n) && n->separable && depth > 1) return explained_by_chain(i + 1, depth - 1, why);
+    *why = "after adding " + levels[i].scores[0].effect + " the residual is still above the noise " +
+           "floor (chi2 = " + num(nq.chi2, 4) + " for " + std::to_string(nq.dof) + " dof, p = " +
+           num(nq.chi2_p, 2) + ") and no further candidate explains the rest";
+    return false;
+  }
+
+  /// Verdict of level i.
+  std::string decide(size_t i, std::string* why) {
+    const Level& L = levels[i];
+    const double alpha = cx->opt->alpha;
+    const ModelQuality& q = L.a.quality;
+    const bool known = cx->noise->known;
+    const bool omnibus = known && q.chi2_p < alpha;
+    const std::string chi = "chi2 = " + num(q.chi2, 4) + " for " + std::to_string(q.dof) +
+                            " dof, p = " + num(q.chi2_p, 2);
+    auto nothing = [&](const std::string& extra) {
+      if (omnibus) {
+        *why = "the residual is above the noise floor (" + chi + ") but no candidate effect " +
+               "explains it" + extra;
+        return std::string("unexplained");
+      }
+      *why = known ? "the residuals are at the noise floor (" + chi + ") and no candidate " +
+                         "effect is significant" + extra
+                   : "no candidate effect is significant (the noise level is unknown: give "
+                     "sigma_d, # tracker_sigma_m or replicated measurements for an absolute "
+                     "check)" + extra;
+      return std::string("adequate");
+    };
+    if (!claims(L)) return nothing("");
+    const CandidateScore& top = L.scores[0];
+    if (!L.separable) {
+      *why = "these candidates explain the same part of the residual and this data cannot tell "
+             "them apart: " + join(L.group, ", ");
+      return "ambiguous";
+    }
+    std::string reason;
+    if (!explained_by_chain(i, cx->opt->max_steps, &reason)) {
+      // A marginal candidate that does not validate on a model at the noise floor: no claim.
+      if (!omnibus && top.p_adjusted > alpha / 10)
+        return nothing(" (" + top.effect + " reached p_adj = " + num(top.p_adjusted, 2) +
+                       " but " + reason + ")");
+      *why = top.effect + " explains part of the misfit (partial F = " + num(top.statistic, 4) +
+             ", p_adj = " + num(top.p_adjusted, 2) + ") but " + reason +
+             ": the missing effect is probably not in the candidate list";
       return "unexplained";
     }
-    *why = noise.known ? "the residuals are at the noise floor (chi2 = " + num(q.chi2, 4) +
-                             " for " + std::to_string(q.dof) + " dof, p = " + num(q.chi2_p, 2) +
-                             ") and no candidate effect is significant"
-                       : "no candidate effect is significant (the noise level is unknown: give "
-                         "sigma_d, # tracker_sigma_m or replicated measurements for an "
-                         "absolute check)";
-    return "adequate";
+    *why = top.effect + " is missing (partial F = " + num(top.statistic, 4) +
+           ", Holm-adjusted p = " + num(top.p_adjusted, 2) + ", expected RMS drop " +
+           um(top.expected_rms_drop_m) + ")";
+    return "missing_effect";
   }
-  const CandidateScore& top = L.scores[0];
-  if (!L.separable) {
-    *why = "these candidates explain the same part of the residual and this data cannot tell "
-           "them apart: " +
-           join(L.group, ", ");
-    return "ambiguous";
-  }
-  if (next) {
-    const ModelQuality& n = next->a.quality;
-    // Validation must improve.
-    if (q.has_validation && n.validation_rms_m >= q.validation_rms_m) {
-      *why = "adding " + top.effect + " fits the calibration data better but does not improve "
-             "the validation error (" + um(q.validation_rms_m) + " -> " + um(n.validation_rms_m) +
-             "): the structure is not this effect";
-      return "unexplained";
-    }
-    // Structure left: post-fit chi2 still fails while the effect explains little of the excess
-    // and nothing else is significant.
-    const bool still = noise.known && n.chi2_p < alpha;
-    const double explained = top.excess_explained;
-    if (still && !claims(*next) && std::isfinite(explained) && explained < 0.6) {
-      *why = top.effect + " explains only " + num(100 * explained, 2) +
-             " % of the excess misfit; after adding it the residual is still above the noise "
-             "floor (chi2 p = " + num(n.chi2_p, 2) + ") and no other candidate explains the rest";
-      return "unexplained";
-    }
-  }
-  *why = top.effect + " is missing (partial F = " + num(top.statistic, 4) +
-         ", Holm-adjusted p = " + num(top.p_adjusted, 2) + ", expected RMS drop " +
-         um(top.expected_rms_drop_m) + ")";
-  (void)signature;
-  return "missing_effect";
-}
+};
 
 std::string signature_of(const Diagnosis& d) {
   std::vector<std::string> parts;
@@ -828,32 +914,22 @@ Diagnosis diagnose(const RobotModel& robot, const Dataset& calibration, const Da
         "the noise level is unknown (no sigma_d, no # tracker_sigma_m, no replicated "
         "measurements): tests use the residual variance; the absolute (chi2) check is skipped");
 
-  std::vector<Level> levels;
-  levels.push_back(score_level(cx, analyse(cx, model), candidates));
-  auto next_of = [&](size_t i) -> Level* {
-    if (!claims(levels[i])) return nullptr;
-    if (levels.size() <= i + 1) {
-      std::vector<std::string> eff = levels[i].a.effects;
-      const std::string top = levels[i].scores[0].effect;
-      eff.push_back(top);
-      std::vector<std::string> rest;
-      for (const auto& c : candidates)
-        if (std::find(eff.begin(), eff.end(), c) == eff.end()) rest.push_back(c);
-      try {
-        Analysis a = analyse(cx, eff);
-        levels.push_back(score_level(cx, std::move(a), rest));
-      } catch (const NumericalError& e) {
-        d.warnings.push_back("re-fit with " + top + " failed: " + e.what());
-        return nullptr;
-      }
-    }
-    return &levels[i + 1];
-  };
-
-  const Level* next = next_of(0);
-  const Level& L0 = levels[0];
-  std::string why, sig;
-  d.verdict = decide(cx, L0, next, &why, &sig);
+  Chain chain{&cx, candidates, {}, {}};
+  chain.levels.push_back(score_level(cx, analyse(cx, model), candidates));
+  std::string why;
+  d.verdict = chain.decide(0, &why);
+  // Outliers are judged under the best explanation found: rows the given model calls outliers
+  // only because an effect is missing are not outliers. Redo the chain with the last level's
+  // flags, shared by every level (so that the steps compare like with like).
+  std::vector<bool> final_flags = chain.levels.back().a.outlier;
+  if (final_flags != chain.levels[0].a.outlier || chain.levels.size() > 1) {
+    chain.levels.clear();
+    chain.fixed = &final_flags;
+    chain.levels.push_back(score_level(cx, analyse(cx, model, &final_flags), candidates));
+    d.verdict = chain.decide(0, &why);
+  }
+  const Level* next = chain.next(0);
+  const Level& L0 = chain.levels[0];
   d.fit = L0.a.quality;
   d.omnibus_rejects = noise.known && d.fit.chi2_p < options.alpha;
   d.candidates = L0.scores;
@@ -884,15 +960,16 @@ Diagnosis diagnose(const RobotModel& robot, const Dataset& calibration, const Da
 
   // Step 0 and the loop.
   auto step_of = [&](size_t i, const std::string& added, const std::string& verdict) {
+    const Level& L = chain.levels[i];
     DiagnosisStep s;
     s.step = static_cast<int>(i);
     s.added = added;
-    s.quality = levels[i].a.quality;
+    s.quality = L.a.quality;
     s.verdict = verdict;
-    if (claims(levels[i])) {
-      s.top = levels[i].scores[0].effect;
-      s.top_p_adjusted = levels[i].scores[0].p_adjusted;
-      s.top_expected_rms_drop_m = levels[i].scores[0].expected_rms_drop_m;
+    if (claims(L)) {
+      s.top = L.scores[0].effect;
+      s.top_p_adjusted = L.scores[0].p_adjusted;
+      s.top_expected_rms_drop_m = L.scores[0].expected_rms_drop_m;
     }
     return s;
   };
@@ -903,16 +980,16 @@ Diagnosis diagnose(const RobotModel& robot, const Dataset& calibration, const Da
     std::string verdict = d.verdict;
     for (size_t i = 0; verdict == "missing_effect" && static_cast<int>(i) < options.max_steps;
          ++i) {
-      if (!next_of(i)) break;
-      const std::string added = levels[i].scores[0].effect;
-      const Level* nn = next_of(i + 1);
-      std::string w2, s2;
-      verdict = decide(cx, levels[i + 1], nn, &w2, &s2);
+      if (!chain.next(i)) break;
+      const std::string added = chain.levels[i].scores[0].effect;
+      std::string w2;
+      verdict = chain.decide(i + 1, &w2);
       d.steps.push_back(step_of(i + 1, added, verdict));
-      d.final_model = levels[i + 1].a.quality.model;
+      d.final_model = chain.levels[i + 1].a.quality.model;
       d.final_verdict = verdict;
     }
   }
+  d.warnings.insert(d.warnings.end(), chain.warnings.begin(), chain.warnings.end());
   return d;
 }
 

@@ -2,6 +2,7 @@
 numpy reference (docs/fmu.md; test cases of /work/shared/spec/fmu-checklist.md)."""
 
 import ctypes
+import json
 import pathlib
 import re
 import shutil
@@ -12,7 +13,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from conftest import STIFFNESS, reference, rodrigues, tool_position, forward
+from fmu_reference import STIFFNESS, reference, rodrigues, tool_position, forward
 
 fmpy = pytest.importorskip("fmpy")
 from fmpy import extract, read_model_description, simulate_fmu  # noqa: E402
@@ -137,10 +138,6 @@ class Instance:
     def free(self):
         self.fmu.terminate()
         self.fmu.freeInstance()
-
-
-def both(request, fmu2, fmu3):
-    return fmu2 if request.param == 2 else fmu3
 
 
 @pytest.fixture(params=[2, 3], ids=["fmi2", "fmi3"])
@@ -609,3 +606,92 @@ def test_export_errors(exporter, tmp_path):
         exporter.export("bad_id", model_identifier=b"1 bad")
     with pytest.raises(RuntimeError, match="outside"):
         exporter.export("bad_c", compliance=-1 / STIFFNESS)
+
+
+# ---------------------------------------------------------------- every effect vs the C ABI
+def test_all_effects_match_c_abi(exporter, tmp_path):
+    """The FMU evaluates whatever effects the fit names with the library's own code: compare a
+    fit with every effect that needs no data against stiff_predict of the C ABI."""
+    lib = exporter.lib
+    lib.stiff_effect_count.restype = ctypes.c_size_t
+    lib.stiff_effect_name.argtypes = [ctypes.c_char_p, ctypes.c_size_t,
+                                      ctypes.POINTER(ctypes.c_size_t), ctypes.c_size_t]
+    lib.stiff_effect_describe.argtypes = [ctypes.c_char_p, ctypes.c_size_t,
+                                          ctypes.POINTER(ctypes.c_size_t), ctypes.c_void_p,
+                                          ctypes.c_char_p]
+    buf = ctypes.create_string_buffer(1 << 16)
+    model, params = [], []
+    for i in range(lib.stiff_effect_count()):
+        assert lib.stiff_effect_name(buf, len(buf), None, i) == 0
+        name = buf.value.decode()
+        assert lib.stiff_effect_describe(buf, len(buf), None, exporter.robot, name.encode()) == 0
+        desc = json.loads(buf.value.decode())
+        if any(n in ("time", "sessions") for n in desc.get("needs", [])):
+            continue
+        model.append(name)
+        for p in desc["parameters"]:
+            lo, hi = float(p["lower"]), float(p["upper"])
+            v = float(np.clip(0.3 * float(p["typical"]), lo, hi))
+            params.append({"effect": name, "name": p["name"], "value": v})
+    fit = {"format": "stiff-fit", "version": 1, "robot": {"name": "rokae"}, "model": model,
+           "parameters": params}
+    fit_path = tmp_path / "all.fit.json"
+    fit_path.write_text(json.dumps(fit))
+    res = ctypes.c_void_p()
+    assert lib.stiff_result_read_json(ctypes.byref(res), str(fit_path).encode()) == 0, \
+        lib.stiff_last_error()
+    m = ctypes.c_void_p()
+    lib.stiff_model_create.argtypes = [ctypes.POINTER(ctypes.c_void_p), ctypes.c_void_p,
+                                       ctypes.c_void_p]
+    assert lib.stiff_model_create(ctypes.byref(m), exporter.robot, res) == 0, lib.stiff_last_error()
+    lib.stiff_predict.argtypes = [ctypes.POINTER(ctypes.c_double), ctypes.c_void_p,
+                                  ctypes.POINTER(ctypes.c_double), ctypes.c_size_t,
+                                  ctypes.POINTER(ctypes.c_double)]
+    for v in (2, 3):
+        out = tmp_path / f"all{v}.fmu"
+        from fmu_reference import FmuOptions
+
+        opts = FmuOptions(ctypes.sizeof(FmuOptions), v, None, None)
+        assert lib.stiff_fmu_export(str(out).encode(), exporter.robot, res,
+                                    ctypes.byref(opts)) == 0, lib.stiff_last_error()
+        assert validate_fmu(str(out)) == []
+        a = Instance(str(out)).start()
+        rng = np.random.default_rng(7)
+        for _ in range(5):
+            q = rng.uniform(-1, 1, 6)
+            w = rng.uniform(-300, 300, 6)
+            a.set_inputs(q, w)
+            d = (ctypes.c_double * 6)()
+            assert lib.stiff_predict(d, m, (ctypes.c_double * 6)(*q), 6,
+                                     (ctypes.c_double * 6)(*w)) == 0
+            np.testing.assert_allclose(a.deflection(), np.array(d[:]), rtol=0, atol=TOL)
+        a.free()
+    lib.stiff_result_destroy(res)
+    assert len(model) > 1, model
+
+
+# ---------------------------------------------------------------- 16: valgrind
+@pytest.mark.skipif(shutil.which("valgrind") is None or shutil.which("cc") is None,
+                    reason="valgrind or cc missing")
+def test_valgrind_clean(fmu2, tmp_path):
+    """Instantiate, 500 deflection + 50 compensation evaluations, free: no leak, no error."""
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "bench"))
+    import fmu_bench
+
+    md = read_model_description(fmu2)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    macros = {
+        "IN_VR": [vr[f"q{j + 1}"] for j in range(6)] + [vr[n] for n in WRENCH],
+        "OUT_VR": [vr[n] for n in DEFL],
+        "CMD_VR": [vr[f"q_cmd{j + 1}"] for j in range(6)],
+    }
+    exe = tmp_path / "drive"
+    subprocess.run(["cc", "-O1", "-g", "-std=c99", "-D_POSIX_C_SOURCE=200809L",
+                    f"-I{fmu_bench.fmi_headers()}"]
+                   + [f"-D{k}={','.join(map(str, v))}" for k, v in macros.items()]
+                   + [str(pathlib.Path(fmu_bench.__file__).with_suffix(".c")), "-o", str(exe),
+                      "-ldl"], check=True)
+    r = subprocess.run(["valgrind", "--leak-check=full", "--errors-for-leak-kinds=definite",
+                        "--error-exitcode=9", str(exe), extract(fmu2), md.guid, "500"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-3000:]

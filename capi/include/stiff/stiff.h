@@ -341,4 +341,8 @@ STIFF_API stiff_status stiff_effect_describe(
 }
 #endif
 
+/* Further parts of the ABI, each in its own header. */
+#include "stiff/stiff_plan.h"
+#include "stiff/stiff_fmu.h"
+
 #endif /* STIFF_H */

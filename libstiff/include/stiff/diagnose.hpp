@@ -64,7 +64,7 @@ struct DiagnosisOptions {
   int worst_poses = 5;
   /// Flag rows whose residual is improbable under chi2_3 at this family-wise level (after a
   /// robust scale) as outliers; they are excluded from the fit and the tests. 0: no check.
-  double outlier_alpha = 0.01;
+  double outlier_alpha = 0.05;
   /// Start of the command that adds an effect ("stiff diagnose --robot r --data d.csv");
   /// candidates get `<prefix> --model <model>+<effect>`.
   std::string command_prefix = "stiff diagnose";

@@ -182,3 +182,74 @@ def get_string(fn, *args) -> str:
 
 def encode(s):
     return None if s is None else os.fsencode(s) if isinstance(s, os.PathLike) else str(s).encode("utf-8")
+
+# ---------------------------------------------------------------- planning (stiff_plan.h)
+PLAN_PROGRESS_FN = C.CFUNCTYPE(C.c_int, C.c_char_p, C.c_uint64, C.c_uint64, C.c_double, C.c_void_p)
+
+
+class PlanOptions(C.Structure):
+    _fields_ = [
+        ("struct_size", C.c_uint32),
+        ("count", C.c_uint32),
+        ("criterion", C.c_char_p),
+        ("seed", C.c_uint64),
+        ("pool_poses", C.c_uint32),
+        ("pool_loads", C.c_uint32),
+        ("range_fraction", C.c_double),
+        ("load_min_N", C.c_double),
+        ("load_max_N", C.c_double),
+        ("load_step_N", C.c_double),
+        ("load_max_magnitude_N", C.c_double),
+        ("min_sigma_m", C.c_double),
+        ("q_fixed", c_double_p),
+        ("q_fixed_count", C.c_size_t),
+        ("optimizers", C.c_uint32),
+        ("annealing_iterations", C.c_uint32),
+        ("candidate_file", C.c_char_p),
+        ("task", C.c_void_p),
+        ("tracker_sigma_m", C.c_double),
+        ("tracker_ppm", C.c_double),
+        ("progress", PLAN_PROGRESS_FN),
+        ("progress_user_data", C.c_void_p),
+    ]
+
+
+_proto("stiff_plan_create", S, HP, H, C.POINTER(PlanOptions))
+_proto("stiff_plan_destroy", None, H)
+_proto("stiff_plan_dataset", S, HP, H)
+_proto("stiff_plan_json", S, C.c_char_p, C.c_size_t, c_size_p, H)
+_proto("stiff_criteria_json", S, C.c_char_p, C.c_size_t, c_size_p, H, H, C.c_double)
+_proto("stiff_criterion_count", C.c_size_t)
+_proto("stiff_criterion_name", S, C.c_char_p, C.c_size_t, c_size_p, C.c_size_t)
+
+# ---------------------------------------------------------------- FMU export (stiff_fmu.h)
+
+
+class FmuOptions(C.Structure):
+    _fields_ = [
+        ("struct_size", C.c_uint32),
+        ("fmi_version", C.c_uint32),
+        ("model_identifier", C.c_char_p),
+        ("binaries_dir", C.c_char_p),
+    ]
+
+
+_proto("stiff_fmu_export", S, C.c_char_p, H, H, C.POINTER(FmuOptions))
+
+
+# ---- diagnosis (stiff_diagnose.h)
+class DiagnoseOptions(C.Structure):
+    _fields_ = [
+        ("struct_size", C.c_uint32),
+        ("model", C.c_char_p),
+        ("candidates", C.c_char_p),
+        ("alpha", C.c_double),
+        ("auto_steps", C.c_uint32),
+        ("command_prefix", C.c_char_p),
+    ]
+
+
+_proto("stiff_diagnose", S, HP, H, H, H, C.POINTER(DiagnoseOptions))
+_proto("stiff_diagnosis_json", S, C.c_char_p, C.c_size_t, c_size_p, H)
+_proto("stiff_diagnosis_verdict", S, C.c_char_p, C.c_size_t, c_size_p, H)
+_proto("stiff_diagnosis_destroy", None, H)

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <set>
 
 #include "../effects/effect_truths.hpp"
 #include "stiff/error.hpp"
@@ -116,39 +117,281 @@ void print(const std::string& hidden, uint64_t seed, const Diagnosis& d) {
   std::printf("\n");
 }
 
-TEST(DiagnoseExplore, AllEffects) {
-  for (const std::string e : {"joint", "link", "gravity_compensator", "nonlinear_joint", "backlash",
-                              "coupling", "tracker_frame", "force_frame", "point_offset",
-                              "tool_compliance", "drift", "complementary"})
-    for (uint64_t seed = 1; seed <= 2; ++seed) print(e, seed, run(make_scenario(e, seed)));
+double validation_ratio(const Diagnosis& d) {
+  return d.after.validation_rms_m / d.after.validation_floor_m;
 }
 
-}  // namespace
-}  // namespace stiff
-namespace stiff {
-namespace {
-TEST(DiagnoseExplore, LeftOutOutliersAuto) {
-  for (const std::string e : {"nonlinear_joint", "force_frame", "point_offset", "link", "backlash", "coupling"})
-    for (uint64_t seed = 1; seed <= 3; ++seed) {
-      DiagnosisOptions o;
-      for (const auto& n : effect_names())
-        if (n != e && n != "joint") o.candidates.push_back(n);
-      print("leftout-" + e, seed, run(make_scenario(e, seed), o));
+bool found(const Diagnosis& d, const std::string& hidden) {
+  if (d.verdict == "missing_effect") return d.candidates[0].effect == hidden;
+  if (d.verdict == "ambiguous")
+    return std::find(d.ambiguous_group.begin(), d.ambiguous_group.end(), hidden) !=
+           d.ambiguous_group.end();
+  return false;
+}
+
+bool claimed(const Diagnosis& d) { return d.verdict == "missing_effect" || d.verdict == "ambiguous"; }
+
+/// Effects visible above the realistic noise at the magnitudes of effect_truths.hpp.
+const std::vector<std::string>& visible_effects() {
+  static const std::vector<std::string> e = {
+      "link",     "gravity_compensator", "nonlinear_joint", "backlash",        "coupling",
+      "tracker_frame", "force_frame",    "point_offset",    "tool_compliance", "drift"};
+  return e;
+}
+
+struct Tally {
+  int runs = 0, found = 0, val_ok = 0, wrong = 0;
+  double worst_ratio = 0, base_val = 0, after_val = 0, floor = 0;
+};
+
+Tally hidden_sweep(const std::string& hidden, int seeds) {
+  Tally t;
+  for (int seed = 1; seed <= seeds; ++seed) {
+    const Diagnosis d = run(make_scenario(hidden, seed));
+    print(hidden, seed, d);
+    ++t.runs;
+    if (!found(d, hidden)) {
+      t.wrong += claimed(d);
+      continue;
     }
-  for (uint64_t seed = 1; seed <= 4; ++seed) {
-    const Scenario s = make_scenario("joint", seed, 0.05);
+    ++t.found;
+    const double r = validation_ratio(d);
+    t.worst_ratio = std::max(t.worst_ratio, r);
+    t.val_ok += r <= 1.25;
+    t.base_val += d.fit.validation_rms_m;
+    t.after_val += d.after.validation_rms_m;
+    t.floor += d.after.validation_floor_m;
+  }
+  std::printf("  %-20s found %d/%d (wrong claims %d), validation %.1f -> %.1f um (floor %.1f um), within 1.25x "
+              "floor %d/%d (worst %.2f)\n",
+              hidden.c_str(), t.found, t.runs, t.wrong, 1e6 * t.base_val / std::max(1, t.found),
+              1e6 * t.after_val / std::max(1, t.found), 1e6 * t.floor / std::max(1, t.found),
+              t.val_ok, t.found, t.worst_ratio);
+  return t;
+}
+
+class HiddenEffect : public ::testing::TestWithParam<std::string> {};
+
+// Every visible effect is ranked first (or in the reported ambiguous group), and adding it
+// brings the validation error to within 1.25x the noise floor. Fast: 2 seeds each.
+TEST_P(HiddenEffect, RankedFirstAndErrorFalls) {
+  const Tally t = hidden_sweep(GetParam(), 2);
+  EXPECT_EQ(t.found, t.runs);
+  EXPECT_EQ(t.val_ok, t.found);
+}
+
+// Tracker-frame rotation (1 deg) and drift (5-8 um) are visible at only ~0.2-0.3 sigma of this
+// noise (22 um with 5 ppm at 2 m): detection power is partial there (spec 2.9: "below ~0.3
+// sigma visible RMS nothing works"); a miss must then be `adequate`, never a wrong effect.
+TEST_P(HiddenEffect, SlowRankedFirstAndErrorFallsManySeeds) {
+  const Tally t = hidden_sweep(GetParam(), 20);
+  const bool weak = GetParam() == "tracker_frame" || GetParam() == "drift";
+  EXPECT_GE(t.found, weak ? 6 : 18) << "top-1 / group accuracy too low";
+  EXPECT_LE(t.wrong, 1) << "wrong effect claimed";
+  EXPECT_GE(t.val_ok, t.found - 1);
+}
+
+INSTANTIATE_TEST_SUITE_P(Diagnose, HiddenEffect, ::testing::ValuesIn(visible_effects()),
+                         [](const auto& info) { return info.param; });
+
+int control_claims(int seeds, double outlier_rate, int* adequate, int* missed_outliers) {
+  int claims = 0;
+  *adequate = 0;
+  *missed_outliers = 0;
+  for (int seed = 1; seed <= seeds; ++seed) {
+    const Scenario s = make_scenario("joint", 300 + seed, outlier_rate);
     const Diagnosis d = run(s);
-    print("outliers", seed, d);
+    claims += claimed(d);
+    *adequate += d.verdict == "adequate";
+    // A gross error of 150 um is > 5 sigma: every one must be flagged, and only a few others.
     int flagged = 0;
     for (const auto& r : d.residuals) flagged += r.outlier;
-    std::printf("   true outliers %zu flagged %d\n", s.outliers.size(), flagged);
+    for (int r : s.outliers)
+      if (!d.residuals[r].outlier && d.residuals[r].norm_sigma > 6) ++*missed_outliers;
+    EXPECT_LE(flagged, static_cast<int>(s.outliers.size()) + 2);
   }
+  std::printf("  control (outlier rate %.2f): %d claims, %d adequate of %d seeds\n", outlier_rate,
+              claims, *adequate, seeds);
+  return claims;
+}
+
+// Controls without a hidden effect: `adequate`, no effect claimed.
+TEST(DiagnoseControl, NoHiddenEffect) {
+  int adequate = 0, missed = 0;
+  EXPECT_LE(control_claims(8, 0.0, &adequate, &missed), 1);
+  EXPECT_GE(adequate, 6);
+}
+
+TEST(DiagnoseControl, GrossOutliersAreFlaggedNotExplained) {
+  int adequate = 0, missed = 0;
+  EXPECT_LE(control_claims(8, 0.05, &adequate, &missed), 1);
+  EXPECT_GE(adequate, 6);
+  EXPECT_EQ(missed, 0);
+}
+
+// False-claim rate: at most 5 % over 100 seeded controls (Holm, FWER 5 %), and at most 5 %
+// with 5 % gross outliers (40 seeds).
+TEST(DiagnoseControl, SlowFalseClaimRate) {
+  int adequate = 0, missed = 0;
+  EXPECT_LE(control_claims(100, 0.0, &adequate, &missed), 5);
+  EXPECT_GE(adequate, 85);
+  EXPECT_LE(control_claims(40, 0.05, &adequate, &missed), 2);
+  EXPECT_GE(adequate, 32);
+  EXPECT_EQ(missed, 0);
+}
+
+// Complementary (geometric) stiffness at 15-35 N is ~1 um, below the noise: the honest answer
+// is `adequate`, never a claim.
+TEST(DiagnoseHonesty, ComplementaryBelowNoiseIsAdequate) {
+  for (int seed = 1; seed <= 3; ++seed) {
+    const Diagnosis d = run(make_scenario("complementary", seed));
+    print("complementary", seed, d);
+    EXPECT_FALSE(claimed(d));
+  }
+}
+
+// A common force scale error is exactly a compliance scale: not identifiable from
+// displacements. Not claimed; force_frame's common-scale direction is reported unidentifiable.
+TEST(DiagnoseHonesty, CommonForceScaleIsUnidentifiable) {
+  const RobotModel robot = test::rokae();
+  DeflectionModel m(robot, {"joint", "force_frame"});
+  Truth t;
+  t.effects = {"joint", "force_frame"};
+  t.theta = m.null_parameters();
+  t.theta.head(6) = test::paper_stiffness().cwiseInverse();
+  for (int k = 3; k < 6; ++k) t.theta(m.offset(1) + k) = 0.03;
+  const Dataset calib = simulate(robot, t, test::design60(11), realistic_noise(11));
+  const Dataset valid = simulate(robot, t, test::design60(12, 40), realistic_noise(12));
+  const Diagnosis d = diagnose(robot, calib, &valid, {"joint"});
+  print("force common scale", 11, d);
+  EXPECT_FALSE(claimed(d));
+  for (const auto& c : d.candidates)
+    if (c.effect == "force_frame") {
+      EXPECT_FALSE(c.identifiable);
+      EXPECT_EQ(c.df, c.parameters - 1) << c.reason;
+    }
+}
+
+// The hidden effect is left out of the candidate list: no confident wrong claim.
+TEST(DiagnoseHonesty, LeftOutEffectIsUnexplainedNotMisattributed) {
+  for (const std::string hidden : {"nonlinear_joint", "point_offset", "force_frame", "backlash"})
+    for (int seed = 1; seed <= 2; ++seed) {
+      DiagnosisOptions o;
+      for (const auto& n : effect_names())
+        if (n != hidden && n != "joint") o.candidates.push_back(n);
+      const Diagnosis d = run(make_scenario(hidden, seed), o);
+      print("left out " + hidden, seed, d);
+      EXPECT_TRUE(d.verdict == "unexplained" || d.verdict == "ambiguous") << d.summary;
+      if (d.verdict == "unexplained") EXPECT_FALSE(d.unexplained_signature.empty());
+    }
+}
+
+// Two hidden effects: the loop finds both (in either order) and ends adequate, the validation
+// error falling at every step.
+TEST(DiagnoseAuto, FindsTwoEffectsInSequence) {
+  const RobotModel robot = test::rokae();
+  DeflectionModel m(robot, {"joint", "point_offset", "force_frame"});
+  Truth t;
+  t.effects = {"joint", "point_offset", "force_frame"};
+  t.theta = m.null_parameters();
+  t.theta.head(6) = test::paper_stiffness().cwiseInverse();
+  t.theta(m.offset(1) + 0) = 0.03;   // meas_x
+  t.theta(m.offset(1) + 3) = 0.03;   // load_x
+  t.theta(m.offset(1) + 4) = -0.02;  // load_y
+  t.theta(m.offset(2) + 2) = 0.087;  // 5 deg clocking
+  const Dataset calib = simulate(robot, t, test::design60(21), realistic_noise(21));
+  const Dataset valid = simulate(robot, t, test::design60(22, 40), realistic_noise(22));
   DiagnosisOptions o;
   o.auto_loop = true;
-  const Diagnosis d = run(make_scenario("point_offset", 1), o);
+  const Diagnosis d = diagnose(robot, calib, &valid, {"joint"}, o);
   for (const auto& s : d.steps)
-    std::printf("step %d +%s %s fit %.1f val %.1f top %s\n", s.step, s.added.c_str(), s.verdict.c_str(),
-                s.quality.fit_rms_m * 1e6, s.quality.validation_rms_m * 1e6, s.top.c_str());
+    std::printf("  step %d +%-14s %-15s fit %.1f um, validation %.1f um (floor %.1f um)\n",
+                s.step, s.added.c_str(), s.verdict.c_str(), s.quality.fit_rms_m * 1e6,
+                s.quality.validation_rms_m * 1e6, s.quality.validation_floor_m * 1e6);
+  ASSERT_EQ(d.steps.size(), 3u);
+  std::set<std::string> added = {d.steps[1].added, d.steps[2].added};
+  EXPECT_EQ(added, (std::set<std::string>{"point_offset", "force_frame"}));
+  EXPECT_EQ(d.final_verdict, "adequate");
+  EXPECT_EQ(d.final_model, "joint+" + d.steps[1].added + "+" + d.steps[2].added);
+  for (size_t i = 1; i < d.steps.size(); ++i)
+    EXPECT_LT(d.steps[i].quality.validation_rms_m, d.steps[i - 1].quality.validation_rms_m);
+  EXPECT_LT(d.steps.back().quality.validation_rms_m, 1.25 * d.steps.back().quality.validation_floor_m);
+  // Re-running with the suggested model: the error has fallen and nothing more is missing.
+  const Diagnosis again = diagnose(robot, calib, &valid, parse_model_string(d.final_model));
+  EXPECT_EQ(again.verdict, "adequate");
 }
+
+// Without any stated noise the partial F-tests still find a large effect; the absolute check
+// is skipped and said so. Replicated measurements give the noise floor.
+TEST(DiagnoseNoise, UnknownNoiseAndReplicates) {
+  Scenario s = make_scenario("point_offset", 3);
+  s.calib.has_sigma = false;
+  for (auto& r : s.calib.rows) r.sigma_d = 0;
+  s.calib.metadata.clear();
+  const Diagnosis d = run(s);
+  EXPECT_EQ(d.noise_source, "none");
+  EXPECT_EQ(d.verdict, "missing_effect");
+  EXPECT_EQ(d.candidates[0].effect, "point_offset");
+  EXPECT_FALSE(d.warnings.empty());
+
+  const RobotModel robot = test::rokae();
+  Dataset design = test::design60(5, 30);
+  const size_t n = design.rows.size();
+  for (size_t r = 0; r < n; ++r) {
+    Measurement m = design.rows[r];
+    m.id += "_rep";
+    design.rows.push_back(m);
+  }
+  NoiseModel noise = realistic_noise(5);
+  noise.force_relative = noise.force_absolute_N = noise.tracker_ppm = 0;
+  Dataset rep = simulate(robot, test::effect_truth("joint", robot), design, noise);
+  rep.has_sigma = false;
+  rep.metadata.clear();
+  const Diagnosis dr = diagnose(robot, rep, nullptr, {"joint"});
+  EXPECT_EQ(dr.noise_source, "replicates");
+  EXPECT_NEAR(dr.noise_floor_m, kTrackerSigma, 0.25 * kTrackerSigma);
+  EXPECT_EQ(dr.verdict, "adequate");
+}
+
+TEST(DiagnoseApi, RejectsBadInputAndWritesJson) {
+  const RobotModel robot = test::rokae();
+  const Scenario s = make_scenario("drift", 1);
+  DiagnosisOptions o;
+  o.candidates = {"no_such_effect"};
+  EXPECT_THROW(diagnose(robot, s.calib, nullptr, {"joint"}, o), InvalidArgument);
+  o = {};
+  o.alpha = 1.5;
+  EXPECT_THROW(diagnose(robot, s.calib, nullptr, {"joint"}, o), InvalidArgument);
+  EXPECT_THROW(diagnose(robot, s.calib, nullptr, {}, {}), InvalidArgument);
+  EXPECT_THROW(diagnose(robot, s.calib, nullptr, {"joint", "bogus"}, {}), InvalidArgument);
+  Dataset plan = s.calib;
+  plan.has_displacement = false;
+  EXPECT_THROW(diagnose(robot, plan, nullptr, {"joint"}, {}), InvalidArgument);
+
+  o = {};
+  o.command_prefix = "stiff diagnose --robot rokae --data c.csv";
+  const Diagnosis d = diagnose(robot, s.calib, &s.valid, {"joint"}, o);
+  EXPECT_EQ(d.verdict, "missing_effect");
+  EXPECT_EQ(d.candidates[0].command, "stiff diagnose --robot rokae --data c.csv --model joint+drift");
+  // Ranks are 1..k over the testable candidates, p_adjusted >= p_value.
+  for (size_t i = 0; i < d.candidates.size(); ++i) {
+    const auto& c = d.candidates[i];
+    if (!c.testable) continue;
+    EXPECT_EQ(c.rank, static_cast<int>(i) + 1);
+    EXPECT_GE(c.p_adjusted, c.p_value);
+  }
+  const std::string js = diagnosis_to_json(d);
+  for (const char* key : {"\"verdict\"", "\"model\"", "\"rms_m\"", "\"validation\"",
+                          "\"noise_floor_m\"", "\"candidates\"", "\"p_adjusted\"",
+                          "\"expected_rms_drop_m\"", "\"identifiable\"", "\"group\"",
+                          "\"steps\"", "\"where\"", "\"covariates\"", "\"worst_poses\""})
+    EXPECT_NE(js.find(key), std::string::npos) << key;
+  // The drift shows in the covariate tests (offset or time).
+  bool trend = false;
+  for (const auto& c : d.covariates)
+    if ((c.covariate == "offset" || c.covariate == "time") && c.p_value < 0.01) trend = true;
+  EXPECT_TRUE(trend);
+}
+
 }  // namespace
 }  // namespace stiff

@@ -75,3 +75,44 @@ def atomic_write_text(path, text: str) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+class ProgressBar:
+    """A one-line progress bar on stderr (only when it is a terminal), and Ctrl-C as a clean
+    stop: while active, SIGINT sets `interrupted` and the callback returns False."""
+
+    def __init__(self, label: str = "", width: int = 30):
+        import sys
+
+        self.label, self.width, self.stream = label, width, sys.stderr
+        self.tty = self.stream.isatty()
+        self.interrupted = False
+        self._last = ""
+
+    def __enter__(self):
+        import signal
+
+        self._old = signal.signal(signal.SIGINT, self._on_sigint)
+        return self
+
+    def _on_sigint(self, *_):
+        self.interrupted = True
+
+    def __exit__(self, *exc):
+        import signal
+
+        signal.signal(signal.SIGINT, self._old)
+        if self.tty and self._last:
+            self.stream.write("\r" + " " * len(self._last) + "\r")
+            self.stream.flush()
+        return False
+
+    def update(self, done: float, total: float, text: str = "") -> bool:
+        if self.tty:
+            frac = min(1.0, done / total) if total else 0.0
+            n = int(frac * self.width)
+            line = f"{self.label} [{'#' * n}{'.' * (self.width - n)}] {100 * frac:5.1f}% {text}"
+            self.stream.write("\r" + line.ljust(len(self._last)))
+            self.stream.flush()
+            self._last = line
+        return not self.interrupted

@@ -1,0 +1,75 @@
+/**
+ * @file stiff_diagnose.h
+ * Model diagnosis: how good the model is against the noise floor, where it fails, which
+ * physical effect of the library is missing (group score / partial-F tests, Holm-corrected),
+ * and a verdict; optionally the forward-stepwise loop. See docs/diagnosis.md for the
+ * statistics and the JSON format ("stiff-diagnosis" version 1).
+ *
+ * Included by stiff.h; it can also be included on its own.
+ */
+#ifndef STIFF_DIAGNOSE_H
+#define STIFF_DIAGNOSE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifndef STIFF_H
+#include "stiff/stiff.h"
+#endif
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** A diagnosis result (opaque). Destroy with stiff_diagnosis_destroy(). @since 0.1 */
+typedef struct stiff_diagnosis stiff_diagnosis;
+
+/**
+ * Options of stiff_diagnose. Zero-initialise, set struct_size = sizeof(stiff_diagnose_options),
+ * then the fields you need; a NULL options pointer means all defaults. Zero means default.
+ * @since 0.1
+ */
+typedef struct stiff_diagnose_options {
+  uint32_t struct_size; /**< sizeof(stiff_diagnose_options) as the caller knows it */
+  const char* model;      /**< current model, effects joined by '+'; NULL = "joint" */
+  const char* candidates; /**< candidate effects joined by '+'; NULL = every effect not in model */
+  double alpha;           /**< family-wise error rate (Holm); 0 = 0.05 */
+  uint32_t auto_steps;    /**< 0 = no loop; else add the top effect up to this many times */
+  /** Start of the command printed for each candidate ("stiff diagnose --robot r --data d.csv");
+   *  NULL = "stiff diagnose". */
+  const char* command_prefix;
+} stiff_diagnose_options;
+
+/**
+ * Diagnose the model on the calibration data (with displacements); `validation` may be NULL.
+ * On success *out owns a new result (stiff_diagnosis_destroy); on failure *out is NULL.
+ * Errors: STIFF_E_INVALID_ARGUMENT (NULL, unknown effect, bad option or data),
+ * STIFF_E_NUMERICAL (the model cannot be fitted). Thread-safe for distinct outputs.
+ * @since 0.1
+ */
+STIFF_API stiff_status stiff_diagnose(stiff_diagnosis** out,
+                                      const stiff_robot* robot,
+                                      const stiff_dataset* calibration,
+                                      const stiff_dataset* validation,
+                                      const stiff_diagnose_options* options);
+
+/** The diagnosis as JSON (UTF-8, NUL-terminated; capacity/needed in bytes). @since 0.1 */
+STIFF_API stiff_status stiff_diagnosis_json(char* json,
+                                            size_t capacity,
+                                            size_t* needed,
+                                            const stiff_diagnosis* diagnosis);
+
+/** The verdict ("missing_effect", "adequate", "ambiguous", "unexplained"). @since 0.1 */
+STIFF_API stiff_status stiff_diagnosis_verdict(char* verdict,
+                                               size_t capacity,
+                                               size_t* needed,
+                                               const stiff_diagnosis* diagnosis);
+
+/** Destroy a diagnosis; NULL is a no-op. @since 0.1 */
+STIFF_API void stiff_diagnosis_destroy(stiff_diagnosis* diagnosis);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* STIFF_DIAGNOSE_H */

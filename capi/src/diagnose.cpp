@@ -1,0 +1,79 @@
+// Model diagnosis over the C ABI (stiff_diagnose.h).
+#include "stiff/diagnose.hpp"
+
+#include "boundary.hpp"
+#include "handles.hpp"
+#include "stiff/stiff_diagnose.h"
+
+using namespace stiff;
+using namespace stiff::capi;
+
+struct stiff_diagnosis {
+  stiff::Diagnosis diagnosis;
+  std::string json;  ///< serialised once
+};
+
+namespace {
+
+const stiff_diagnosis& diagnosis_of(const stiff_diagnosis* d) {
+  require(d, "diagnosis");
+  return *d;
+}
+
+}  // namespace
+
+extern "C" {
+
+stiff_status stiff_diagnose(stiff_diagnosis** out,
+                            const stiff_robot* robot,
+                            const stiff_dataset* calibration,
+                            const stiff_dataset* validation,
+                            const stiff_diagnose_options* options) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require(robot, "robot");
+    require(calibration, "calibration");
+    const stiff_diagnose_options o = read_options(options);
+    const std::vector<std::string> model = parse_model_string(o.model ? o.model : "joint");
+    DiagnosisOptions d;
+    if (o.candidates) d.candidates = parse_model_string(o.candidates);
+    if (o.alpha != 0) {
+      if (!(o.alpha > 0 && o.alpha < 1)) throw InvalidArgument("alpha must be in (0, 1)");
+      d.alpha = o.alpha;
+    }
+    if (o.auto_steps > 20) throw InvalidArgument("auto_steps must be <= 20");
+    d.auto_loop = o.auto_steps > 0;
+    if (o.auto_steps > 0) d.max_steps = static_cast<int>(o.auto_steps);
+    if (o.command_prefix) d.command_prefix = o.command_prefix;
+    auto r = std::make_unique<stiff_diagnosis>();
+    r->diagnosis = diagnose(robot->model, calibration->data,
+                            validation ? &validation->data : nullptr, model, d);
+    r->json = diagnosis_to_json(r->diagnosis);
+    *out = r.release();
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_diagnosis_json(char* json,
+                                  size_t capacity,
+                                  size_t* needed,
+                                  const stiff_diagnosis* diagnosis) {
+  return guarded(__func__, [&] {
+    return copy_string(__func__, diagnosis_of(diagnosis).json, json, capacity, needed);
+  });
+}
+
+stiff_status stiff_diagnosis_verdict(char* verdict,
+                                     size_t capacity,
+                                     size_t* needed,
+                                     const stiff_diagnosis* diagnosis) {
+  return guarded(__func__, [&] {
+    return copy_string(__func__, diagnosis_of(diagnosis).diagnosis.verdict, verdict, capacity,
+                       needed);
+  });
+}
+
+void stiff_diagnosis_destroy(stiff_diagnosis* diagnosis) { delete diagnosis; }
+
+}  // extern "C"

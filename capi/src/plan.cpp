@@ -1,0 +1,128 @@
+// Measurement planning through the C ABI.
+#include <nlohmann/json.hpp>
+
+#include "boundary.hpp"
+#include "handles.hpp"
+#include "stiff/plan.hpp"
+
+struct stiff_plan {
+  stiff::PlanResult result;
+};
+
+using namespace stiff;
+using namespace stiff::capi;
+
+extern "C" {
+
+stiff_status stiff_plan_create(stiff_plan** out, const stiff_robot* robot,
+                               const stiff_plan_options* options) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require(robot, "robot");
+    const stiff_plan_options o = read_options(options);
+    const double nums[] = {o.range_fraction, o.load_min_N,  o.load_max_N,      o.load_step_N,
+                           o.load_max_magnitude_N, o.min_sigma_m, o.tracker_sigma_m, o.tracker_ppm};
+    require_finite(nums, sizeof nums / sizeof nums[0], "options");
+    PoolOptions pool;
+    PlanOptions plan;
+    if (o.count) plan.count = static_cast<int>(o.count);
+    if (o.criterion) plan.criterion = o.criterion;
+    if (o.seed) plan.seed = pool.seed = o.seed;
+    if (o.pool_poses) pool.pose_count = static_cast<int>(o.pool_poses);
+    if (o.pool_loads) pool.load_count = static_cast<int>(o.pool_loads);
+    if (o.range_fraction != 0) pool.range_fraction = o.range_fraction;
+    if (o.load_min_N != 0) pool.load_min_N = o.load_min_N;
+    if (o.load_max_N != 0) pool.load_max_N = o.load_max_N;
+    if (o.load_step_N > 0) pool.load_step_N = o.load_step_N;
+    if (o.load_step_N < 0) pool.load_step_N = 0.0;
+    if (o.load_max_magnitude_N != 0) pool.load_max_magnitude_N = o.load_max_magnitude_N;
+    if (o.min_sigma_m != 0) pool.min_sigma_m = o.min_sigma_m;
+    if (o.q_fixed) {
+      if (o.q_fixed_count != static_cast<size_t>(robot->model.dof()))
+        throw InvalidArgument("q_fixed has " + std::to_string(o.q_fixed_count) +
+                              " values, the robot has " + std::to_string(robot->model.dof()) +
+                              " joints");
+      pool.q_fixed.assign(o.q_fixed, o.q_fixed + o.q_fixed_count);
+    }
+    if (o.candidate_file) pool.candidate_file = o.candidate_file;
+    if (o.tracker_sigma_m != 0) pool.noise.tracker_sigma_m = o.tracker_sigma_m;
+    pool.noise.tracker_ppm = o.tracker_ppm;
+    if (o.optimizers) {
+      plan.annealing.enabled = o.optimizers & STIFF_PLAN_ANNEALING;
+      plan.exchange.enabled = o.optimizers & STIFF_PLAN_EXCHANGE;
+      plan.refine.enabled = o.optimizers & STIFF_PLAN_REFINE;
+    }
+    if (o.annealing_iterations) plan.annealing.iterations = o.annealing_iterations;
+    if (o.task) plan.task = o.task->data;
+    if (o.progress) {
+      const auto fn = o.progress;
+      void* ud = o.progress_user_data;
+      plan.progress = [fn, ud](const PlanProgress& p) {
+        int stop = 1;
+        try {
+          stop = fn(p.optimizer.c_str(), static_cast<uint64_t>(p.iteration),
+                    static_cast<uint64_t>(p.total), p.best_score, ud);
+        } catch (...) {
+          stop = 1;  // an exception in user code stops the call cleanly
+        }
+        return stop == 0;
+      };
+    }
+    auto r = std::make_unique<stiff_plan>();
+    r->result = plan_measurements(robot->model, pool, plan);
+    *out = r.release();
+    return STIFF_OK;
+  });
+}
+
+void stiff_plan_destroy(stiff_plan* plan) { delete plan; }
+
+stiff_status stiff_plan_dataset(stiff_dataset** out, const stiff_plan* plan) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require(plan, "plan");
+    auto d = std::make_unique<stiff_dataset>();
+    d->data = plan_to_dataset(plan->result);
+    *out = d.release();
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_plan_json(char* json, size_t capacity, size_t* needed, const stiff_plan* plan) {
+  return guarded(__func__, [&] {
+    require(plan, "plan");
+    return copy_string(__func__, plan_summary_json(plan->result), json, capacity, needed);
+  });
+}
+
+stiff_status stiff_criteria_json(char* json, size_t capacity, size_t* needed,
+                                 const stiff_robot* robot, const stiff_dataset* set,
+                                 double tracker_sigma_m) {
+  return guarded(__func__, [&] {
+    require(robot, "robot");
+    require(set, "set");
+    if (!(std::isfinite(tracker_sigma_m) && tracker_sigma_m >= 0))
+      throw InvalidArgument("tracker_sigma_m must be finite and >= 0");
+    CriteriaOptions co;
+    if (tracker_sigma_m > 0) co.noise.tracker_sigma_m = tracker_sigma_m;
+    nlohmann::json j = nlohmann::json::object();
+    for (const auto& [name, value] : evaluate_criteria(robot->model, set->data, co))
+      j[name] = std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+    return copy_string(__func__, j.dump(), json, capacity, needed);
+  });
+}
+
+size_t stiff_criterion_count(void) { return criterion_registry().size(); }
+
+stiff_status stiff_criterion_name(char* name, size_t capacity, size_t* needed, size_t index) {
+  return guarded(__func__, [&] {
+    const auto& reg = criterion_registry();
+    if (index >= reg.size())
+      throw InvalidArgument("criterion index " + std::to_string(index) + " out of range");
+    return copy_string(__func__, reg[index].name, name, capacity, needed);
+  });
+}
+
+}  // extern "C"

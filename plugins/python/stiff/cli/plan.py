@@ -1,0 +1,140 @@
+"""stiff plan: choose the poses AND loads of a stiffness-identification experiment."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from .. import api
+from ..errors import CancelledError
+from ..plan import criteria as criterion_names
+from ..plan import evaluate_criteria, plan
+from .common import Formatter, ProgressBar, add_robot, atomic_write_text, fmt, robot_path, table
+
+EXAMPLE = """example:
+  stiff plan --robot examples/robots/rokae.yaml --count 10 --criterion kappa_a --fix 6=0 -o plan.csv
+  stiff plan --robot rokae --count 30 --criterion d_opt --refine --json plan.json -o plan.csv
+  stiff plan --robot rokae --evaluate examples/paper/design_kappa_a.csv   # criteria of a given set
+
+Criteria (docs/planning.md): kappa_a = kappa_F^-1(A) of the stacked observation matrix (the
+paper's criterion, poses and loads), kappa_j = kappa_F^-1(J) of the stacked translational
+Jacobians (pose only), d_opt = log det A^T A, a_opt = tr (A^T A)^-1, e_opt = smallest
+eigenvalue, o1 = observability index, task = expected RMS error of the predicted deflection
+over --task poses and loads. The plan file is a measurement file without displacements, with
+the load also in the flange frame (fx_flange_N ...: what the operator sets on the loading
+fixture) and each measurement's contribution; `stiff simulate --plan` and tracker software
+read it directly. Ctrl-C stops the search cleanly."""
+
+
+def register(sub):
+    p = sub.add_parser("plan", help="plan poses and loads of the experiment",
+                       description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
+    add_robot(p)
+    p.add_argument("--count", "-n", type=int, default=10, help="measurements N (default 10)")
+    p.add_argument("--criterion", "-c", default="kappa_a", help="design criterion (default kappa_a)")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--pool-poses", type=int, default=500, help="random candidate poses (default 500)")
+    p.add_argument("--pool-loads", type=int, default=100, help="candidate loads (default 100)")
+    p.add_argument("--range", type=float, default=0.95, help="fraction of each joint range (default 0.95)")
+    p.add_argument("--load-range", default="15,35", help="per-axis load magnitude range [N] (default 15,35)")
+    p.add_argument("--load-step", type=float, default=5.0, help="load grid step [N], 0 = continuous (default 5)")
+    p.add_argument("--load-max", type=float, default=0.0, help="largest |F| [N] (default: unlimited)")
+    p.add_argument("--min-sigma", type=float, default=0.05,
+                   help="reject poses whose translational Jacobian has sigma_min below this [m] (default 0.05)")
+    p.add_argument("--fix", action="append", default=[], metavar="J=DEG",
+                   help="hold joint J at DEG degrees (the paper holds 6=0); repeatable")
+    p.add_argument("--iterations", type=int, default=100000, help="annealing iterations (default 1e5)")
+    p.add_argument("--optimizers", default="annealing,exchange",
+                   help="comma-separated: annealing, exchange (default both)")
+    p.add_argument("--refine", action="store_true", help="refine poses and loads continuously with NLopt")
+    p.add_argument("--candidates", help="CSV whose poses are the candidates")
+    p.add_argument("--task", help="CSV of task poses and loads (for --criterion task)")
+    p.add_argument("--tracker-sigma-um", type=float, default=10.0, help="row weighting noise [um]")
+    p.add_argument("--evaluate", help="only evaluate every criterion for this set (CSV)")
+    p.add_argument("-o", "--output", help="plan file (CSV) to write")
+    p.add_argument("--json", help="write the JSON summary here")
+    p.set_defaults(func=run)
+
+
+def _fixed(args, dof):
+    from . import UserError
+
+    q = np.full(dof, np.nan)
+    for item in args.fix:
+        try:
+            j, v = item.split("=")
+            j = int(j.lstrip("qQ"))
+            q[j - 1] = math.radians(float(v))
+            if not 1 <= j <= dof:
+                raise IndexError
+        except (ValueError, IndexError):
+            raise UserError(f"--fix {item}: expected J=DEG with J in 1..{dof}, e.g. --fix 6=0")
+    return q if args.fix else None
+
+
+def _print_criteria(values: dict) -> None:
+    names = [n for n in criterion_names() if n in values]
+    print(table(["criterion", "value"], [[n, fmt(values[n], ".5g")] for n in names]))
+
+
+def run(args):
+    from . import UserError
+
+    robot = api.Robot(robot_path(args.robot))
+    if args.evaluate:
+        design = api.Dataset.read(args.evaluate, robot)
+        values = evaluate_criteria(robot, design, args.tracker_sigma_um * 1e-6)
+        print(f"{args.evaluate}: {int(values['count'])} measurements, {int(values['m'])} identifiable compliances")
+        _print_criteria(values)
+        if args.json:
+            atomic_write_text(args.json, json.dumps(values, indent=2) + "\n")
+        return 0
+    if not args.output and not args.json:
+        raise UserError("give -o plan.csv (and/or --json summary.json)")
+    if args.criterion not in criterion_names():
+        raise UserError(f"unknown criterion '{args.criterion}' (known: {', '.join(criterion_names())})")
+    try:
+        lo, hi = (float(x) for x in args.load_range.split(","))
+    except ValueError:
+        raise UserError(f"--load-range {args.load_range}: expected MIN,MAX in N")
+    optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
+    if args.refine:
+        optimizers.append("refine")
+    task = api.Dataset.read(args.task, robot) if args.task else None
+    with ProgressBar("planning") as bar:
+        def progress(optimizer, it, total, best):
+            return bar.update(it, total or 1, f"{optimizer} best {best:.4g}")
+        try:
+            result = plan(robot, args.count, args.criterion, seed=args.seed, pool_poses=args.pool_poses,
+                          pool_loads=args.pool_loads, range_fraction=args.range, load_range_N=(lo, hi),
+                          load_step_N=args.load_step, load_max_magnitude_N=args.load_max,
+                          min_sigma_m=args.min_sigma, q_fixed=_fixed(args, robot.dof),
+                          optimizers=optimizers, annealing_iterations=args.iterations,
+                          candidate_file=args.candidates, task=task,
+                          tracker_sigma_m=args.tracker_sigma_um * 1e-6, progress=progress)
+        except CancelledError:
+            raise UserError("stopped (Ctrl-C); nothing written")
+    s = result.summary
+    rows = []
+    for m in s["measurements"]:
+        rows.append([m["id"], " ".join(f"{math.degrees(v):7.1f}" for v in m["q_rad"]),
+                     " ".join(f"{v:6.1f}" for v in m["force_base_N"]),
+                     " ".join(f"{v:6.1f}" for v in m["force_flange_N"]), fmt(m["contribution"], ".3f")])
+    print(table(["id", "q [deg]", "F base [N]", "F flange [N]", "contribution"], rows,
+                ["<", "<", "<", "<", ">"]))
+    print()
+    print(f"{s['criterion']} = {s['value']:.5g}, found by {s['found_by']}; pool {s['pool']['elements']} "
+          f"elements ({s['pool']['poses']} poses x {s['pool']['loads']} loads), seed {s['seed']}")
+    for t in s["trace"]:
+        print(f"  {t['optimizer']:<10} best {t['best_value']:.5g} after {t['iterations']} iterations "
+              f"({t['evaluations']} evaluations, {t['seconds'] * 1e3:.0f} ms)")
+    print()
+    _print_criteria(s["criteria"])
+    if args.output:
+        result.write(args.output)
+        print(f"wrote {args.output}")
+    if args.json:
+        atomic_write_text(args.json, json.dumps(s, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    return 0

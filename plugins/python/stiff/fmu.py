@@ -1,0 +1,30 @@
+"""Export an identified model as an FMU (FMI 2.0 or 3.0) for co-simulation (docs/fmu.md)."""
+from __future__ import annotations
+
+import ctypes as C
+import os
+from pathlib import Path
+
+from . import _capi as _c
+from ._capi import check, lib
+from .api import Fit, Robot
+
+
+def _default_binaries() -> str | None:
+    bundled = Path(__file__).resolve().parent / "_lib" / "fmu"
+    return str(bundled) if bundled.exists() else None
+
+
+def export_fmu(robot: Robot, fit: Fit, path, fmi_version: int = 2,
+               model_identifier: str = "stiff_arm", binaries_dir=None) -> Path:
+    """Write `path` (.fmu): the fit's parameters as tunable start values, the robot in
+    resources/. Inputs q1..qn [rad], fx..mz [N, N*m]; outputs dx..rz [m, rad], the loaded tool
+    position and the compensated joint targets q_cmd1..n. Written atomically."""
+    o = _c.FmuOptions()
+    o.struct_size = C.sizeof(o)
+    o.fmi_version = fmi_version
+    o.model_identifier = model_identifier.encode()
+    b = binaries_dir if binaries_dir is not None else _default_binaries()
+    o.binaries_dir = None if b is None else _c.encode(os.fspath(b))
+    check(lib.stiff_fmu_export(_c.encode(os.fspath(path)), robot, fit, C.byref(o)))
+    return Path(path)

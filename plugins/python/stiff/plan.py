@@ -1,0 +1,119 @@
+"""Measurement planning: choose poses AND loads (docs/planning.md)."""
+from __future__ import annotations
+
+import ctypes as C
+import json
+import os
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+from . import _capi as _c
+from ._capi import check, lib
+from .api import Dataset, Robot, _Handle
+from .errors import CancelledError
+
+OPTIMIZERS = {"annealing": 1, "exchange": 2, "refine": 4}
+
+
+def criteria() -> list[str]:
+    """Names of the design criteria."""
+    return [_c.get_string(lib.stiff_criterion_name, i) for i in range(lib.stiff_criterion_count())]
+
+
+def evaluate_criteria(robot: Robot, design: Dataset, tracker_sigma_m: float = 10e-6) -> dict:
+    """Every criterion's value for a given set of poses and loads."""
+    return json.loads(_c.get_string(lib.stiff_criteria_json, robot, design, tracker_sigma_m))
+
+
+class Plan(_Handle):
+    """A planned set of measurements: `.dataset` is the plan file, `.summary` the JSON."""
+
+    _destroy = lib.stiff_plan_destroy
+
+    def __init__(self, handle):
+        self._own(handle)
+        self.summary = json.loads(_c.get_string(lib.stiff_plan_json, self))
+
+    @property
+    def dataset(self) -> Dataset:
+        h = C.c_void_p()
+        check(lib.stiff_plan_dataset(C.byref(h), self))
+        return Dataset(h)
+
+    def write(self, path) -> None:
+        """Write the plan file (CSV) atomically."""
+        self.dataset.write(path)
+
+    @property
+    def criterion(self) -> str:
+        return self.summary["criterion"]
+
+    @property
+    def value(self) -> float:
+        return self.summary["value"]
+
+    @property
+    def criteria(self) -> dict:
+        return self.summary["criteria"]
+
+    def to_dataframe(self):
+        import pandas as pd
+
+        return pd.DataFrame(self.summary["measurements"])
+
+    def __repr__(self) -> str:
+        return (f"Plan({len(self.summary['measurements'])} measurements, {self.criterion} = "
+                f"{self.value:.4g}, found by {self.summary['found_by']})")
+
+
+def plan(robot: Robot, count: int = 10, criterion: str = "kappa_a", *, seed: int = 1,
+         pool_poses: int = 500, pool_loads: int = 100, range_fraction: float = 0.95,
+         load_range_N: Sequence[float] = (15.0, 35.0), load_step_N: float = 5.0,
+         load_max_magnitude_N: float = 0.0, min_sigma_m: float = 0.05,
+         q_fixed: Optional[Sequence[float]] = None, optimizers: Sequence[str] = ("annealing", "exchange"),
+         annealing_iterations: int = 100000, candidate_file=None, task: Optional[Dataset] = None,
+         tracker_sigma_m: float = 10e-6, tracker_ppm: float = 0.0,
+         progress: Optional[Callable[[str, int, int, float], bool]] = None) -> Plan:
+    """Plan `count` measurements (poses and loads) on `criterion`. `q_fixed` holds joints at
+    values [rad] (NaN = free). `progress(optimizer, iteration, total, best_score)` may return
+    False to stop (raises CancelledError); an exception it raises is re-raised here."""
+    o = _c.PlanOptions()
+    o.struct_size = C.sizeof(o)
+    o.count, o.criterion, o.seed = count, criterion.encode(), seed
+    o.pool_poses, o.pool_loads, o.range_fraction = pool_poses, pool_loads, range_fraction
+    o.load_min_N, o.load_max_N = float(load_range_N[0]), float(load_range_N[1])
+    o.load_step_N = load_step_N if load_step_N > 0 else -1.0
+    o.load_max_magnitude_N, o.min_sigma_m = load_max_magnitude_N, min_sigma_m
+    keep = []
+    if q_fixed is not None:
+        qf = _c.as_array(q_fixed)
+        keep.append(qf)
+        o.q_fixed, o.q_fixed_count = _c.ptr(qf), qf.size
+    mask = 0
+    for name in optimizers:
+        if name not in OPTIMIZERS:
+            raise ValueError(f"unknown optimizer {name!r} (use {', '.join(OPTIMIZERS)})")
+        mask |= OPTIMIZERS[name]
+    o.optimizers, o.annealing_iterations = mask, annealing_iterations
+    if candidate_file is not None:
+        o.candidate_file = _c.encode(os.fspath(candidate_file))
+    if task is not None:
+        o.task = task._h
+    o.tracker_sigma_m, o.tracker_ppm = tracker_sigma_m, tracker_ppm
+    raised = []
+    if progress is not None:
+        def trampoline(opt, it, total, best, _):
+            try:
+                return 0 if progress(opt.decode(), it, total, best) is not False else 1
+            except BaseException as e:  # re-raised after the C call returns
+                raised.append(e)
+                return 1
+        cb = _c.PLAN_PROGRESS_FN(trampoline)
+        o.progress = cb
+    h = C.c_void_p()
+    st = lib.stiff_plan_create(C.byref(h), robot, C.byref(o))
+    if raised:
+        raise raised[0]
+    check(st)
+    return Plan(h)

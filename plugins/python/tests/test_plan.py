@@ -1,0 +1,64 @@
+"""Planning through the Python API and the command line."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import stiff
+
+
+def test_plan_beats_the_printed_design_on_its_own_criterion(rokae_path, design_a):
+    robot = stiff.Robot(rokae_path)
+    printed = stiff.evaluate_criteria(robot, stiff.Dataset.read(design_a, robot))
+    p = stiff.plan(robot, 10, "kappa_a", q_fixed=[np.nan] * 5 + [0.0], annealing_iterations=20000)
+    assert p.value >= printed["kappa_a"]
+    ds = p.dataset
+    assert len(ds) == 10 and ds.displacement is None
+    np.testing.assert_array_equal(ds.q[:, 5], 0.0)
+    f = np.abs(ds.force)
+    assert f.min() >= 15 - 1e-9 and f.max() <= 35 + 1e-9
+    # The flange-frame load has the same magnitude as the base-frame load.
+    m = p.summary["measurements"][0]
+    assert np.isclose(np.linalg.norm(m["force_base_N"]), np.linalg.norm(m["force_flange_N"]))
+
+
+def test_progress_callback_can_stop_and_exceptions_propagate(rokae_path):
+    robot = stiff.Robot(rokae_path)
+    calls = []
+    with pytest.raises(stiff.CancelledError):
+        stiff.plan(robot, 10, progress=lambda *a: calls.append(a) or len(calls) < 3)
+    assert len(calls) == 3
+
+    def boom(*a):
+        raise KeyError("from the callback")
+
+    with pytest.raises(KeyError, match="from the callback"):
+        stiff.plan(robot, 10, progress=boom)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(count=100000), "pool"),
+    (dict(count=1), "3N"),
+    (dict(criterion="nope"), "unknown plan criterion"),
+    (dict(load_range_N=(40, 20)), "load"),
+])
+def test_bad_requests_are_clear_errors(rokae_path, kwargs, message):
+    robot = stiff.Robot(rokae_path)
+    args = dict(count=10, pool_poses=50, pool_loads=10, annealing_iterations=1000)
+    args.update(kwargs)
+    with pytest.raises(stiff.InvalidArgumentError, match=message):
+        stiff.plan(robot, args.pop("count"), **args)
+
+
+def test_cli_plan_writes_plan_file_and_json(tmp_path, rokae_path):
+    out = subprocess.run([sys.executable, "-m", "stiff.cli", "plan", "--robot", rokae_path, "--count", "10",
+                          "--criterion", "kappa_a", "--fix", "6=0", "--iterations", "5000",
+                          "-o", tmp_path / "plan.csv", "--json", tmp_path / "plan.json"],
+                         capture_output=True, text=True, check=True).stdout
+    assert "kappa_a =" in out and "found by" in out
+    header = [l for l in (tmp_path / "plan.csv").read_text().splitlines() if not l.startswith("#")][0]
+    assert "fx_flange_N" in header and "contribution" in header and "q6_rad" in header
+    summary = json.loads((tmp_path / "plan.json").read_text())
+    assert set(stiff.criteria()) <= set(summary["criteria"])
