@@ -44,8 +44,11 @@ double median(std::vector<double> v) {
 /// Orthonormal basis of the column space of `a` (columns scaled to unit norm first); columns
 /// whose relative singular value is below `tol` are dropped. `v_null` (optional) receives the
 /// right singular vectors of the dropped directions.
-MatrixXd orthonormal_basis(const MatrixXd& a, double tol, VectorXd* sv = nullptr,
-                           MatrixXd* v_null = nullptr, double scale_ref = 0.0) {
+MatrixXd orthonormal_basis(const MatrixXd& a,
+                           double tol,
+                           VectorXd* sv = nullptr,
+                           MatrixXd* v_null = nullptr,
+                           double scale_ref = 0.0) {
   if (a.cols() == 0) return MatrixXd(a.rows(), 0);
   Eigen::JacobiSVD<MatrixXd> svd(a, Eigen::ComputeThinU | Eigen::ComputeThinV);
   const VectorXd s = svd.singularValues();
@@ -172,19 +175,19 @@ Noise noise_of_tracker(const Dataset& data) {
 /// A fitted model on the calibration rows that are not outliers, with everything the tests need.
 struct Analysis {
   std::vector<std::string> effects;
-  Dataset used;                 ///< inlier rows (times kept)
-  std::vector<int> used_rows;   ///< their index in the calibration data
-  std::vector<bool> outlier;    ///< per calibration row
+  Dataset used;                ///< inlier rows (times kept)
+  std::vector<int> used_rows;  ///< their index in the calibration data
+  std::vector<bool> outlier;   ///< per calibration row
   std::unique_ptr<DeflectionModel> model;
   std::vector<MeasurementContext> ctx;  ///< of `used`
   VectorXd theta;
   std::vector<bool> identified;
-  VectorXd w;        ///< 1/sigma per used row
-  MatrixXd qx;       ///< orthonormal basis of the weighted Jacobian (3n x p)
-  VectorXd r;        ///< weighted residual of the used rows (3n)
-  MatrixXd pred_all; ///< predicted d of every calibration row (N x 3)
-  double rss = 0;    ///< ||r||^2
-  int n = 0, p = 0;  ///< equations, rank
+  VectorXd w;         ///< 1/sigma per used row
+  MatrixXd qx;        ///< orthonormal basis of the weighted Jacobian (3n x p)
+  VectorXd r;         ///< weighted residual of the used rows (3n)
+  MatrixXd pred_all;  ///< predicted d of every calibration row (N x 3)
+  double rss = 0;     ///< ||r||^2
+  int n = 0, p = 0;   ///< equations, rank
   ModelQuality quality;
   std::vector<std::string> warnings;
 };
@@ -208,7 +211,8 @@ Dataset subset(const Dataset& d, const std::vector<int>& rows) {
 }
 
 /// Fit `effects` to `data` (linear least squares for the joint model, else Ceres).
-FitResult fit_model(const RobotModel& robot, const Dataset& data,
+FitResult fit_model(const RobotModel& robot,
+                    const Dataset& data,
                     const std::vector<std::string>& effects) {
   if (effects.size() == 1 && effects[0] == "joint") return identify_joint_linear(robot, data);
   IdentifyOptions o;
@@ -227,7 +231,8 @@ struct Context {
 };
 
 /// `fixed` (may be null): use these outlier flags instead of detecting them.
-Analysis analyse(const Context& cx, const std::vector<std::string>& effects,
+Analysis analyse(const Context& cx,
+                 const std::vector<std::string>& effects,
                  const std::vector<bool>* fixed = nullptr) {
   const Dataset& calib = *cx.calib;
   const int rows = static_cast<int>(calib.rows.size());
@@ -326,8 +331,7 @@ Analysis analyse(const Context& cx, const std::vector<std::string>& effects,
   q.dof = a.n - a.p;
   q.chi2 = noise.known ? a.rss : 0.0;
   q.chi2_p = noise.known && q.dof > 0 ? stats::chi2_sf(a.rss, q.dof) : 1.0;
-  q.sigma_hat_m =
-      q.dof > 0 ? std::sqrt(a.rss / q.dof) * (noise.known ? noise.floor_m : 1.0) : 0.0;
+  q.sigma_hat_m = q.dof > 0 ? std::sqrt(a.rss / q.dof) * (noise.known ? noise.floor_m : 1.0) : 0.0;
   for (int k = 0; k < pc; ++k) {
     q.parameter_names.push_back(a.model->owner(k).name() + "." + a.model->spec(k).name);
     q.parameter_values.push_back(a.theta(k));
@@ -354,9 +358,9 @@ Analysis analyse(const Context& cx, const std::vector<std::string>& effects,
 struct GroupScore {
   int columns = 0, df = 0;
   double drss = 0, f = 0, log_p = 0, surviving = 0;
-  MatrixXd u;                      ///< basis of the projected group
-  std::vector<int> null_columns;   ///< columns with no (surviving) effect
-  VectorXd fitted;                 ///< projection of r on the group (weighted)
+  MatrixXd u;                     ///< basis of the projected group
+  std::vector<int> null_columns;  ///< columns with no (surviving) effect
+  VectorXd fitted;                ///< projection of r on the group (weighted)
 };
 
 GroupScore score_group(const Analysis& a, const MatrixXd& z, const VectorXd& typical, double tol) {
@@ -381,8 +385,7 @@ GroupScore score_group(const Analysis& a, const MatrixXd& z, const VectorXd& typ
   for (int j = 0; j < v_null.cols(); ++j) {
     int best = 0;
     v_null.col(j).cwiseAbs().maxCoeff(&best);
-    if (std::find(g.null_columns.begin(), g.null_columns.end(), live[best]) ==
-        g.null_columns.end())
+    if (std::find(g.null_columns.begin(), g.null_columns.end(), live[best]) == g.null_columns.end())
       g.null_columns.push_back(live[best]);
   }
   g.df = static_cast<int>(g.u.cols());
@@ -489,15 +492,16 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
     if (g.df == 0) {
       c.testable = false;
       c.identifiable = false;
-      c.reason = "untestable: no direction of it is identifiable from this data (the current "
-                 "model absorbs it, or it has no effect on these measurements)";
+      c.reason =
+          "untestable: no direction of it is identifiable from this data (the current "
+          "model absorbs it, or it has no effect on these measurements)";
       untestable.push_back(c);
       continue;
     }
     if (!c.identifiable)
       c.reason = std::to_string(c.parameters - g.df) + " of " + std::to_string(c.parameters) +
-                 " directions are not identifiable from this data (" + join(c.unidentifiable, ", ") +
-                 "); tested on the other " + std::to_string(g.df);
+                 " directions are not identifiable from this data (" +
+                 join(c.unidentifiable, ", ") + "); tested on the other " + std::to_string(g.df);
     if ((eg.requirements() & kNeedsTime) && !cx.had_time)
       c.reason += std::string(c.reason.empty() ? "" : "; ") +
                   "the data has no time column: the row order is taken as time";
@@ -506,9 +510,8 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
     c.lm = cx.noise->known ? g.drss : NAN;
     c.log_p = g.log_p;
     c.p_value = std::exp(g.log_p);
-    const double s2 = cx.noise->known
-                          ? 1.0
-                          : std::max(a.rss - g.drss, 0.0) / std::max(1, a.n - a.p - g.df);
+    const double s2 =
+        cx.noise->known ? 1.0 : std::max(a.rss - g.drss, 0.0) / std::max(1, a.n - a.p - g.df);
     const double metres2 = cx.noise->known ? cx.noise->floor_m * cx.noise->floor_m : 1.0;
     c.expected_rms_drop_m = std::sqrt(std::max(0.0, g.drss - g.df * s2) * metres2 / a.n);
     const double rms2 = a.quality.fit_rms_m * a.quality.fit_rms_m;
@@ -681,8 +684,7 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
   add("load_dir_z", "load direction, base z (F_z/|F|)", fz);
   add("load_level", "load level |F|", level);
   add("predicted", "predicted deflection |d|", pred);
-  add("time", cx.had_time ? "measurement time" : "measurement order",
-      time);
+  add("time", cx.had_time ? "measurement time" : "measurement order", time);
   std::vector<CovariateTest> tests;
   std::vector<double> lps;
   for (size_t t = 0; t < names.size(); ++t) {
@@ -783,16 +785,16 @@ struct Chain {
     const ModelQuality& q = levels[i].a.quality;
     const ModelQuality& nq = n->a.quality;
     if (q.has_validation && nq.validation_rms_m >= q.validation_rms_m) {
-      *why = "adding " + levels[i].scores[0].effect +
-             " does not improve the validation error (" + um(q.validation_rms_m) + " -> " +
-             um(nq.validation_rms_m) + ")";
+      *why = "adding " + levels[i].scores[0].effect + " does not improve the validation error (" +
+             um(q.validation_rms_m) + " -> " + um(nq.validation_rms_m) + ")";
       return false;
     }
     if (!cx->noise->known || nq.chi2_p >= cx->opt->alpha) return true;
     if (claims(*n) && n->separable && depth > 1) return explained_by_chain(i + 1, depth - 1, why);
-    *why = "after adding " + levels[i].scores[0].effect + " the residual is still above the noise " +
-           "floor (chi2 = " + num(nq.chi2, 4) + " for " + std::to_string(nq.dof) + " dof, p = " +
-           num(nq.chi2_p, 2) + ") and no further candidate explains the rest";
+    *why = "after adding " + levels[i].scores[0].effect +
+           " the residual is still above the noise " + "floor (chi2 = " + num(nq.chi2, 4) +
+           " for " + std::to_string(nq.dof) + " dof, p = " + num(nq.chi2_p, 2) +
+           ") and no further candidate explains the rest";
     return false;
   }
 
@@ -815,22 +817,25 @@ struct Chain {
                          "effect is significant" + extra
                    : "no candidate effect is significant (the noise level is unknown: give "
                      "sigma_d, # tracker_sigma_m or replicated measurements for an absolute "
-                     "check)" + extra;
+                     "check)" +
+                         extra;
       return std::string("adequate");
     };
     if (!claims(L)) return nothing("");
     const CandidateScore& top = L.scores[0];
     if (!L.separable) {
-      *why = "these candidates explain the same part of the residual and this data cannot tell "
-             "them apart: " + join(L.group, ", ");
+      *why =
+          "these candidates explain the same part of the residual and this data cannot tell "
+          "them apart: " +
+          join(L.group, ", ");
       return "ambiguous";
     }
     std::string reason;
     if (!explained_by_chain(i, cx->opt->max_steps, &reason)) {
       // A marginal candidate that does not validate on a model at the noise floor: no claim.
       if (!omnibus && top.p_adjusted > alpha / 10)
-        return nothing(" (" + top.effect + " reached p_adj = " + num(top.p_adjusted, 2) +
-                       " but " + reason + ")");
+        return nothing(" (" + top.effect + " reached p_adj = " + num(top.p_adjusted, 2) + " but " +
+                       reason + ")");
       *why = top.effect + " explains part of the misfit (partial F = " + num(top.statistic, 4) +
              ", p_adj = " + num(top.p_adjusted, 2) + ") but " + reason +
              ": the missing effect is probably not in the candidate list";
@@ -847,8 +852,8 @@ std::string signature_of(const Diagnosis& d) {
   std::vector<std::string> parts;
   for (const auto& c : d.covariates)
     if (c.significant && parts.size() < 4)
-      parts.push_back(c.covariate + " (F = " + num(c.statistic, 3) + ", p_adj = " +
-                      num(c.p_adjusted, 2) + ")");
+      parts.push_back(c.covariate + " (F = " + num(c.statistic, 3) +
+                      ", p_adj = " + num(c.p_adjusted, 2) + ")");
   const char* ax = "xyz";
   for (int k = 0; k < 3; ++k)
     if (d.axis_chi2_p[k] < d.alpha)
@@ -859,8 +864,11 @@ std::string signature_of(const Diagnosis& d) {
 
 }  // namespace
 
-Diagnosis diagnose(const RobotModel& robot, const Dataset& calibration, const Dataset* validation,
-                   const std::vector<std::string>& model, const DiagnosisOptions& options) {
+Diagnosis diagnose(const RobotModel& robot,
+                   const Dataset& calibration,
+                   const Dataset* validation,
+                   const std::vector<std::string>& model,
+                   const DiagnosisOptions& options) {
   if (!(options.alpha > 0 && options.alpha < 1))
     throw InvalidArgument("diagnose: alpha must be in (0, 1)");
   if (!(options.ambiguity_correlation > 0 && options.ambiguity_correlation <= 1))
@@ -1048,8 +1056,7 @@ std::string diagnosis_to_json(const Diagnosis& d) {
     j["validation"] = v;
   }
   j["suggested_model"] = d.suggested_model.empty() ? json(nullptr) : json(d.suggested_model);
-  j["suggested_command"] =
-      d.suggested_command.empty() ? json(nullptr) : json(d.suggested_command);
+  j["suggested_command"] = d.suggested_command.empty() ? json(nullptr) : json(d.suggested_command);
   if (d.after_valid) j["after"] = quality_json(d.after);
   j["ambiguous_group"] = d.ambiguous_group;
   j["experiment"] = d.experiment.empty() ? json(nullptr) : json(d.experiment);

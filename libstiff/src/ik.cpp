@@ -92,12 +92,6 @@ Vec3 nearest_point(const std::vector<Vec3>& o, const std::vector<Vec3>& d, doubl
   return c;
 }
 
-Mat4 tool_offset(const RobotModel& r) {
-  Mat4 t = Mat4::Identity();
-  t.block<3, 1>(0, 3) = r.measured_point;
-  return t;
-}
-
 }  // namespace
 
 Eigen::Matrix<double, 6, 1> pose_error(const Mat4& target, const Mat4& actual) {

@@ -30,7 +30,7 @@ typedef struct stiff_diagnosis stiff_diagnosis;
  * @since 0.1
  */
 typedef struct stiff_diagnose_options {
-  uint32_t struct_size; /**< sizeof(stiff_diagnose_options) as the caller knows it */
+  uint32_t struct_size;   /**< sizeof(stiff_diagnose_options) as the caller knows it */
   const char* model;      /**< current model, effects joined by '+'; NULL = "joint" */
   const char* candidates; /**< candidate effects joined by '+'; NULL = every effect not in model */
   double alpha;           /**< family-wise error rate (Holm); 0 = 0.05 */

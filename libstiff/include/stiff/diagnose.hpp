@@ -73,20 +73,20 @@ struct DiagnosisOptions {
 /// One candidate effect and its evidence.
 struct CandidateScore {
   std::string effect;
-  int rank = 0;             ///< 1 = strongest evidence; 0 for untestable candidates
+  int rank = 0;  ///< 1 = strongest evidence; 0 for untestable candidates
   bool testable = true;
-  std::string reason;       ///< why it is untestable / partly identifiable
-  int parameters = 0;       ///< columns of the group
-  int df = 0;               ///< identifiable directions after projection
-  bool identifiable = true; ///< every direction of the group is identifiable here
+  std::string reason;                       ///< why it is untestable / partly identifiable
+  int parameters = 0;                       ///< columns of the group
+  int df = 0;                               ///< identifiable directions after projection
+  bool identifiable = true;                 ///< every direction of the group is identifiable here
   std::vector<std::string> unidentifiable;  ///< parameters the data cannot see
-  double statistic = 0.0;   ///< partial F statistic
-  double lm = 0.0;          ///< score statistic dRSS / sigma^2 (chi2_df under H0, known sigma)
-  double log_p = 0.0;       ///< natural log of p_value
+  double statistic = 0.0;                   ///< partial F statistic
+  double lm = 0.0;     ///< score statistic dRSS / sigma^2 (chi2_df under H0, known sigma)
+  double log_p = 0.0;  ///< natural log of p_value
   double p_value = 1.0;
   double p_adjusted = 1.0;  ///< Holm
   bool significant = false;
-  double delta_rss = 0.0;   ///< weighted (sigma units squared)
+  double delta_rss = 0.0;            ///< weighted (sigma units squared)
   double expected_rms_drop_m = 0.0;  ///< sqrt(max(0, dRSS - df sigma^2) / n) [m]
   double fit_rms_after_m = 0.0;      ///< fit RMS expected after adding it [m]
   double excess_explained = 0.0;     ///< dRSS / (RSS0 - (n - p)), when the noise is known
@@ -101,7 +101,7 @@ struct CandidateScore {
 
 /// A test of residual structure against one covariate.
 struct CovariateTest {
-  std::string covariate;   ///< e.g. "q2", "tau_load_3", "tau_gravity_2", "load_level", "time"
+  std::string covariate;  ///< e.g. "q2", "tau_load_3", "tau_gravity_2", "load_level", "time"
   std::string description;
   double statistic = 0.0;  ///< F
   int df = 0;
@@ -123,7 +123,7 @@ struct PoseResidual {
 
 /// Fit quality of one model.
 struct ModelQuality {
-  std::string model;  ///< "joint+link"
+  std::string model;               ///< "joint+link"
   int measurements = 0, used = 0;  ///< rows, rows not flagged as outliers
   int parameters = 0;              ///< rank of the fitted Jacobian
   double fit_rms_m = 0.0;
@@ -133,7 +133,7 @@ struct ModelQuality {
   double sigma_hat_m = 0.0;
   bool has_validation = false;
   double validation_rms_m = 0.0;
-  double validation_floor_m = 0.0;  ///< sigma sqrt(1 + p/n)
+  double validation_floor_m = 0.0;         ///< sigma sqrt(1 + p/n)
   std::vector<double> validation_error_m;  ///< per validation row, norm of the error
   std::vector<std::string> parameter_names;
   std::vector<double> parameter_values;
@@ -142,10 +142,10 @@ struct ModelQuality {
 /// One step of the loop.
 struct DiagnosisStep {
   int step = 0;
-  std::string added;     ///< effect added at this step ("" for step 0)
+  std::string added;  ///< effect added at this step ("" for step 0)
   ModelQuality quality;
-  std::string verdict;   ///< verdict of this step's model
-  std::string top;       ///< top candidate of this step's model ("" if none)
+  std::string verdict;  ///< verdict of this step's model
+  std::string top;      ///< top candidate of this step's model ("" if none)
   double top_p_adjusted = 1.0;
   double top_expected_rms_drop_m = 0.0;
 };
@@ -156,18 +156,18 @@ struct Diagnosis {
   std::vector<std::string> model;
   /// "missing_effect", "adequate", "ambiguous" or "unexplained".
   std::string verdict;
-  std::string summary;  ///< one paragraph for people
-  std::string suggested_model;       ///< model with the top effect ("" if none)
+  std::string summary;          ///< one paragraph for people
+  std::string suggested_model;  ///< model with the top effect ("" if none)
   std::string suggested_command;
-  std::string experiment;            ///< discriminating experiment (ambiguous)
+  std::string experiment;  ///< discriminating experiment (ambiguous)
   std::vector<std::string> ambiguous_group;
-  std::string unexplained_signature; ///< what the structure looks like (unexplained)
+  std::string unexplained_signature;  ///< what the structure looks like (unexplained)
   double noise_floor_m = 0.0;
   std::string noise_source;  ///< "sigma_d", "metadata", "replicates" or "none"
   double alpha = 0.05;
-  ModelQuality fit;          ///< the model as given
+  ModelQuality fit;  ///< the model as given
   bool omnibus_rejects = false;
-  ModelQuality after;        ///< after adding the top candidate (re-fitted), if any
+  ModelQuality after;  ///< after adding the top candidate (re-fitted), if any
   bool after_valid = false;
   std::vector<CandidateScore> candidates;  ///< testable by rank, then untestable
   std::vector<PoseResidual> residuals;

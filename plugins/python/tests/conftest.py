@@ -26,4 +26,3 @@ def design_a(root) -> str:
     return str(root / "examples" / "paper" / "design_kappa_a.csv")
 
 
-PAPER_K = [5.0914e4, 1.6382e4, 3.1311e4, 7.7911e3, 5.6136e3, 4.0e3]

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import stiff
-from conftest import PAPER_K
+from pystiff_support import PAPER_K
 
 
 def test_c_program_and_python_identify_the_same_to_1e12(build_dir, root, rokae_path, design_a, tmp_path):

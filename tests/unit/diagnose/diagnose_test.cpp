@@ -22,8 +22,9 @@ namespace {
 // ---------------------------------------------------------------- distribution tails
 
 TEST(DiagnoseStats, IncompleteGammaMatchesReference) {
-  for (double x : {0.1, 1.0, 3.0, 10.0}) EXPECT_NEAR(stats::gamma_p(1.0, x), 1 - std::exp(-x), 1e-14);
-  EXPECT_NEAR(stats::gamma_p(2.5, 1.7), 0.36143007689620493, 1e-13);       // scipy gammainc
+  for (double x : {0.1, 1.0, 3.0, 10.0})
+    EXPECT_NEAR(stats::gamma_p(1.0, x), 1 - std::exp(-x), 1e-14);
+  EXPECT_NEAR(stats::gamma_p(2.5, 1.7), 0.36143007689620493, 1e-13);           // scipy gammainc
   EXPECT_NEAR(stats::gamma_q(7.5, 30.0) / 2.522085078696141e-07, 1.0, 1e-10);  // gammaincc
   EXPECT_NEAR(stats::gamma_p(4.0, 2.0) + stats::gamma_q(4.0, 2.0), 1.0, 1e-15);
   EXPECT_EQ(stats::gamma_p(3.0, 0.0), 0.0);
@@ -98,21 +99,23 @@ Scenario make_scenario(const std::string& hidden, uint64_t seed, double outlier_
   return s;
 }
 
-Diagnosis run(const Scenario& s, const DiagnosisOptions& o = {},
+Diagnosis run(const Scenario& s,
+              const DiagnosisOptions& o = {},
               const std::vector<std::string>& model = {"joint"}) {
   return diagnose(test::rokae(), s.calib, &s.valid, model, o);
 }
 
 void print(const std::string& hidden, uint64_t seed, const Diagnosis& d) {
-  std::printf("%-20s seed %2d: %-15s fit %.1f val %.1f floor %.1f um chi2p %.2g | ",
-              hidden.c_str(), static_cast<int>(seed), d.verdict.c_str(), d.fit.fit_rms_m * 1e6,
+  std::printf("%-20s seed %2d: %-15s fit %.1f val %.1f floor %.1f um chi2p %.2g | ", hidden.c_str(),
+              static_cast<int>(seed), d.verdict.c_str(), d.fit.fit_rms_m * 1e6,
               d.fit.validation_rms_m * 1e6, d.fit.validation_floor_m * 1e6, d.fit.chi2_p);
   for (size_t i = 0; i < std::min<size_t>(3, d.candidates.size()); ++i) {
     const auto& c = d.candidates[i];
     std::printf("%s(F %.3g padj %.2g drop %.1f) ", c.effect.c_str(), c.statistic, c.p_adjusted,
                 c.expected_rms_drop_m * 1e6);
   }
-  if (d.after_valid) std::printf("| after val %.1f chi2p %.2g", d.after.validation_rms_m * 1e6, d.after.chi2_p);
+  if (d.after_valid)
+    std::printf("| after val %.1f chi2p %.2g", d.after.validation_rms_m * 1e6, d.after.chi2_p);
   if (!d.ambiguous_group.empty()) std::printf(" group %zu", d.ambiguous_group.size());
   std::printf("\n");
 }
@@ -129,13 +132,15 @@ bool found(const Diagnosis& d, const std::string& hidden) {
   return false;
 }
 
-bool claimed(const Diagnosis& d) { return d.verdict == "missing_effect" || d.verdict == "ambiguous"; }
+bool claimed(const Diagnosis& d) {
+  return d.verdict == "missing_effect" || d.verdict == "ambiguous";
+}
 
 /// Effects visible above the realistic noise at the magnitudes of effect_truths.hpp.
 const std::vector<std::string>& visible_effects() {
   static const std::vector<std::string> e = {
-      "link",     "gravity_compensator", "nonlinear_joint", "backlash",        "coupling",
-      "tracker_frame", "force_frame",    "point_offset",    "tool_compliance", "drift"};
+      "link",          "gravity_compensator", "nonlinear_joint", "backlash",        "coupling",
+      "tracker_frame", "force_frame",         "point_offset",    "tool_compliance", "drift"};
   return e;
 }
 
@@ -162,11 +167,13 @@ Tally hidden_sweep(const std::string& hidden, int seeds) {
     t.after_val += d.after.validation_rms_m;
     t.floor += d.after.validation_floor_m;
   }
-  std::printf("  %-20s found %d/%d (wrong claims %d), validation %.1f -> %.1f um (floor %.1f um), within 1.25x "
-              "floor %d/%d (worst %.2f)\n",
-              hidden.c_str(), t.found, t.runs, t.wrong, 1e6 * t.base_val / std::max(1, t.found),
-              1e6 * t.after_val / std::max(1, t.found), 1e6 * t.floor / std::max(1, t.found),
-              t.val_ok, t.found, t.worst_ratio);
+  std::printf(
+      "  %-20s found %d/%d (wrong claims %d), validation %.1f -> %.1f um (floor %.1f um), within "
+      "1.25x "
+      "floor %d/%d (worst %.2f)\n",
+      hidden.c_str(), t.found, t.runs, t.wrong, 1e6 * t.base_val / std::max(1, t.found),
+      1e6 * t.after_val / std::max(1, t.found), 1e6 * t.floor / std::max(1, t.found), t.val_ok,
+      t.found, t.worst_ratio);
   return t;
 }
 
@@ -191,7 +198,9 @@ TEST_P(HiddenEffect, SlowRankedFirstAndErrorFallsManySeeds) {
   EXPECT_GE(t.val_ok, t.found - 1);
 }
 
-INSTANTIATE_TEST_SUITE_P(Diagnose, HiddenEffect, ::testing::ValuesIn(visible_effects()),
+INSTANTIATE_TEST_SUITE_P(Diagnose,
+                         HiddenEffect,
+                         ::testing::ValuesIn(visible_effects()),
                          [](const auto& info) { return info.param; });
 
 int control_claims(int seeds, double outlier_rate, int* adequate, int* missed_outliers) {
@@ -305,8 +314,8 @@ TEST(DiagnoseAuto, FindsTwoEffectsInSequence) {
   o.auto_loop = true;
   const Diagnosis d = diagnose(robot, calib, &valid, {"joint"}, o);
   for (const auto& s : d.steps)
-    std::printf("  step %d +%-14s %-15s fit %.1f um, validation %.1f um (floor %.1f um)\n",
-                s.step, s.added.c_str(), s.verdict.c_str(), s.quality.fit_rms_m * 1e6,
+    std::printf("  step %d +%-14s %-15s fit %.1f um, validation %.1f um (floor %.1f um)\n", s.step,
+                s.added.c_str(), s.verdict.c_str(), s.quality.fit_rms_m * 1e6,
                 s.quality.validation_rms_m * 1e6, s.quality.validation_floor_m * 1e6);
   ASSERT_EQ(d.steps.size(), 3u);
   std::set<std::string> added = {d.steps[1].added, d.steps[2].added};
@@ -315,7 +324,8 @@ TEST(DiagnoseAuto, FindsTwoEffectsInSequence) {
   EXPECT_EQ(d.final_model, "joint+" + d.steps[1].added + "+" + d.steps[2].added);
   for (size_t i = 1; i < d.steps.size(); ++i)
     EXPECT_LT(d.steps[i].quality.validation_rms_m, d.steps[i - 1].quality.validation_rms_m);
-  EXPECT_LT(d.steps.back().quality.validation_rms_m, 1.25 * d.steps.back().quality.validation_floor_m);
+  EXPECT_LT(d.steps.back().quality.validation_rms_m,
+            1.25 * d.steps.back().quality.validation_floor_m);
   // Re-running with the suggested model: the error has fallen and nothing more is missing.
   const Diagnosis again = diagnose(robot, calib, &valid, parse_model_string(d.final_model));
   EXPECT_EQ(again.verdict, "adequate");
@@ -372,7 +382,8 @@ TEST(DiagnoseApi, RejectsBadInputAndWritesJson) {
   o.command_prefix = "stiff diagnose --robot rokae --data c.csv";
   const Diagnosis d = diagnose(robot, s.calib, &s.valid, {"joint"}, o);
   EXPECT_EQ(d.verdict, "missing_effect");
-  EXPECT_EQ(d.candidates[0].command, "stiff diagnose --robot rokae --data c.csv --model joint+drift");
+  EXPECT_EQ(d.candidates[0].command,
+            "stiff diagnose --robot rokae --data c.csv --model joint+drift");
   // Ranks are 1..k over the testable candidates, p_adjusted >= p_value.
   for (size_t i = 0; i < d.candidates.size(); ++i) {
     const auto& c = d.candidates[i];
@@ -381,10 +392,10 @@ TEST(DiagnoseApi, RejectsBadInputAndWritesJson) {
     EXPECT_GE(c.p_adjusted, c.p_value);
   }
   const std::string js = diagnosis_to_json(d);
-  for (const char* key : {"\"verdict\"", "\"model\"", "\"rms_m\"", "\"validation\"",
-                          "\"noise_floor_m\"", "\"candidates\"", "\"p_adjusted\"",
-                          "\"expected_rms_drop_m\"", "\"identifiable\"", "\"group\"",
-                          "\"steps\"", "\"where\"", "\"covariates\"", "\"worst_poses\""})
+  for (const char* key :
+       {"\"verdict\"", "\"model\"", "\"rms_m\"", "\"validation\"", "\"noise_floor_m\"",
+        "\"candidates\"", "\"p_adjusted\"", "\"expected_rms_drop_m\"", "\"identifiable\"",
+        "\"group\"", "\"steps\"", "\"where\"", "\"covariates\"", "\"worst_poses\""})
     EXPECT_NE(js.find(key), std::string::npos) << key;
   // The drift shows in the covariate tests (offset or time).
   bool trend = false;

@@ -1,0 +1,117 @@
+"""stiff diagnose end to end: simulated data with a hidden force-sensor clocking error."""
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+
+import stiff
+from stiff.cli import main
+
+PAPER_K = [5.0914e4, 1.6382e4, 3.1311e4, 7.7911e3, 5.6136e3, 4.0e3]
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    d = tmp_path_factory.mktemp("diag")
+    truth = d / "truth.yaml"
+    truth.write_text("stiffness_Nm_per_rad: [" + ", ".join(map(str, PAPER_K)) + "]\n"
+                     "effects:\n  force_frame: {omega_z: 0.087}\n")
+    noise = ["--tracker-sigma-um", "10", "--tracker-ppm", "5", "--force-relative", "0.01",
+             "--force-absolute-n", "0.3"]
+    for name, count, seed in (("calib.csv", 60, 1), ("valid.csv", 40, 2)):
+        assert main(["simulate", "--robot", "rokae", "--count", str(count), "--seed", str(seed),
+                     "--truth", str(truth), *noise, "-o", str(d / name)]) == 0
+    return d
+
+
+def test_cli_finds_hidden_effect_and_writes_json_and_report(data, capsys):
+    js, rep = data / "d.json", data / "report.html"
+    rc = main(["diagnose", "--robot", "rokae", "--data", str(data / "calib.csv"), "--validate",
+               str(data / "valid.csv"), "--model", "joint", "--json", str(js), "--report", str(rep)])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert "verdict: missing_effect" in out
+    assert "--model joint+force_frame" in out
+    d = json.loads(js.read_text())
+    for key in ("verdict", "model", "fit", "validation", "noise_floor_m", "candidates", "steps", "where"):
+        assert key in d
+    assert d["verdict"] == "missing_effect"
+    assert d["fit"]["rms_m"] > 0 and d["validation"]["rms_m"] > 0
+    top = d["candidates"][0]
+    assert top["effect"] == "force_frame" and top["rank"] == 1
+    for key in ("effect", "rank", "statistic", "p_value", "p_adjusted", "expected_rms_drop_m",
+                "identifiable", "group", "command"):
+        assert key in top
+    assert top["p_adjusted"] < 1e-6
+    assert "joint+force_frame" in top["command"] and "--validate" in top["command"]
+    assert [c["rank"] for c in d["candidates"] if c["testable"]] == \
+        list(range(1, 1 + sum(c["testable"] for c in d["candidates"])))
+    assert d["where"]["worst_poses"] and d["where"]["covariates"]
+    # Report: one self-contained HTML with embedded PNGs, no external references.
+    html = rep.read_text()
+    assert html.startswith("<!DOCTYPE html>")
+    assert len(re.findall(r'src="data:image/png;base64,', html)) >= 4
+    assert not re.search(r'(src|href)="(?!data:)', html)
+
+
+def test_suggested_model_makes_the_error_fall(data, capsys):
+    args = ["diagnose", "--robot", "rokae", "--data", str(data / "calib.csv"), "--validate",
+            str(data / "valid.csv")]
+    js0, js1 = data / "before.json", data / "after.json"
+    assert main(args + ["--json", str(js0)]) == 0
+    assert main(args + ["--model", "joint+force_frame", "--json", str(js1)]) == 0
+    before, after = json.loads(js0.read_text()), json.loads(js1.read_text())
+    assert after["verdict"] == "adequate"
+    assert after["validation"]["rms_m"] < 0.7 * before["validation"]["rms_m"]
+    assert after["validation"]["rms_m"] < 1.25 * after["validation"]["floor_m"]
+
+
+def test_auto_loop_and_python_api(data, tmp_path):
+    robot = stiff.Robot(stiff_robot_path())
+    calib = stiff.Dataset.read(data / "calib.csv", robot)
+    valid = stiff.Dataset.read(data / "valid.csv", robot)
+    d = stiff.diagnose(robot, calib, valid, model="joint", auto_steps=3)
+    assert isinstance(d, stiff.Diagnosis)
+    assert d.verdict == "missing_effect" and d["verdict"] == "missing_effect"
+    assert d.top["effect"] == "force_frame"
+    assert [s["added"] for s in d["steps"]] == [None, "force_frame"]
+    assert d["final_model"] == "joint+force_frame" and d["final_verdict"] == "adequate"
+    assert "force_frame" in repr(d) and "missing_effect" in repr(d)
+    from stiff.report import diagnosis_report
+
+    html = diagnosis_report(d)
+    assert "<td>joint+force_frame</td>" in html  # the loop's history table
+    assert html.count("data:image/png;base64,") >= 5  # incl. the history plot
+    try:
+        import pandas  # noqa: F401
+    except ImportError:
+        return
+    df = d.to_dataframe()
+    assert df.iloc[0]["effect"] == "force_frame"
+
+
+def stiff_robot_path():
+    from stiff.cli.common import robot_path
+
+    return robot_path("rokae")
+
+
+def test_bad_input_is_one_line_exit_2(data, tmp_path):
+    env_cmd = [sys.executable, "-m", "stiff.cli", "diagnose", "--robot", "rokae", "--data"]
+    for extra in (["missing.csv"],
+                  [str(data / "calib.csv"), "--model", "joint+bogus"],
+                  [str(data / "calib.csv"), "--candidates", "nope"],
+                  [str(data / "calib.csv"), "--alpha", "2"]):
+        r = subprocess.run(env_cmd + extra, capture_output=True, text=True, cwd=tmp_path)
+        assert r.returncode == 2, r.stderr
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("stiff diagnose: error:"), r.stderr
+
+
+def test_help_has_worked_example(capsys):
+    with pytest.raises(SystemExit):
+        main(["diagnose", "--help"])
+    out = capsys.readouterr().out
+    assert "worked example" in out and "--model joint+force_frame" in out
