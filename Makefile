@@ -7,7 +7,11 @@ JOBS    ?= $(shell nproc)
 PY      := .venv/bin/python
 PYLIB   := plugins/python/stiff/_lib
 
-.PHONY: all setup build install-python demo test test-cpp test-python bench fuzz clean format
+# Regenerate the committed ABI baseline after an intended ABI change.
+abi-baseline: build
+	@mkdir -p abi && abidw --headers-dir capi/include/stiff --out-file abi/libstiff_c.abi $(BUILD)/capi/libstiff_c.so && echo "wrote abi/libstiff_c.abi"
+
+.PHONY: abi-baseline all setup build install-python demo test test-cpp test-python bench fuzz clean format
 
 all: build
 

@@ -344,5 +344,6 @@ STIFF_API stiff_status stiff_effect_describe(
 /* Further parts of the ABI, each in its own header. */
 #include "stiff/stiff_plan.h"
 #include "stiff/stiff_fmu.h"
+#include "stiff/stiff_diagnose.h"
 
 #endif /* STIFF_H */

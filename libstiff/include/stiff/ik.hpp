@@ -36,14 +36,14 @@ struct WristStructure {
 WristStructure analyse_wrist(const RobotModel& robot);
 
 struct IkOptions {
-  double tolerance = 1e-12;       ///< accepted position [m] and orientation [rad] error
-  int max_iterations = 100;       ///< per numerical solve (damped least squares)
-  int restarts = 24;              ///< random starts of the numerical solver
-  uint64_t seed = 1;              ///< for the random starts (same seed, same answer)
-  double singular_sigma = 1e-5;   ///< smallest singular value of the 6 x n Jacobian below
-                                  ///< which a solution is flagged singular
-  bool respect_limits = true;     ///< drop solutions outside the joint limits
-  bool force_numerical = false;   ///< use the numerical solver even for spherical wrists
+  double tolerance = 1e-12;      ///< accepted position [m] and orientation [rad] error
+  int max_iterations = 100;      ///< per numerical solve (damped least squares)
+  int restarts = 24;             ///< random starts of the numerical solver
+  uint64_t seed = 1;             ///< for the random starts (same seed, same answer)
+  double singular_sigma = 1e-5;  ///< smallest singular value of the 6 x n Jacobian below
+                                 ///< which a solution is flagged singular
+  bool respect_limits = true;    ///< drop solutions outside the joint limits
+  bool force_numerical = false;  ///< use the numerical solver even for spherical wrists
 };
 
 /// One solution.
@@ -55,7 +55,8 @@ struct IkSolution {
 };
 
 /// Pose error: position [m] and orientation [rad] (rotation vector of target * actual^T).
-Eigen::Matrix<double, 6, 1> pose_error(const Eigen::Matrix4d& target, const Eigen::Matrix4d& actual);
+Eigen::Matrix<double, 6, 1> pose_error(const Eigen::Matrix4d& target,
+                                       const Eigen::Matrix4d& actual);
 
 class InverseKinematics {
  public:

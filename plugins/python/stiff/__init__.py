@@ -5,6 +5,7 @@ from .api import (Dataset, Fit, Model, Robot, describe_effect, effects, identify
 from .fmu import export_fmu
 from .plan import Plan, criteria, evaluate_criteria, plan
 from .diagnose import Diagnosis, diagnose
+from .compensate import compensate_path, inverse_kinematics, read_path  # noqa: F401
 from .errors import (CancelledError, InvalidArgumentError, NumericalError, ParseError,
                      StiffError, StiffIOError)
 

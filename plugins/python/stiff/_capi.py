@@ -253,3 +253,30 @@ _proto("stiff_diagnose", S, HP, H, H, H, C.POINTER(DiagnoseOptions))
 _proto("stiff_diagnosis_json", S, C.c_char_p, C.c_size_t, c_size_p, H)
 _proto("stiff_diagnosis_verdict", S, C.c_char_p, C.c_size_t, c_size_p, H)
 _proto("stiff_diagnosis_destroy", None, H)
+
+
+# ---------------------------------------------------------------- compensation (stiff_compensate.h)
+class PathOptions(C.Structure):
+    _fields_ = [
+        ("struct_size", C.c_uint32),
+        ("frame", C.c_double * 6),
+        ("tool_rpy", C.c_double * 3),
+        ("flags", C.c_uint32),
+        ("segment_m", C.c_double),
+    ]
+
+
+PATH_TOOL_RPY = 1
+c_int_p = C.POINTER(C.c_int)
+_proto("stiff_ik_analytic", S, c_int_p, H)
+_proto("stiff_tool_pose_batch", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, C.c_size_t)
+_proto("stiff_ik", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, c_double_p)
+_proto("stiff_ik_path", S, c_double_p, C.c_size_t, c_size_p, c_int_p, H, c_double_p, C.c_size_t,
+       c_double_p)
+_proto("stiff_compensate_pose", S, c_double_p, H, c_double_p, C.c_size_t, c_double_p)
+_proto("stiff_compensate_path", S, c_double_p, C.c_size_t, c_size_p, c_int_p, H, c_double_p,
+       c_double_p, C.c_size_t, c_double_p)
+_proto("stiff_truth_deviation", S, c_double_p, C.c_size_t, c_size_p, H, C.c_char_p, c_double_p,
+       c_double_p, c_double_p, C.c_size_t)
+_proto("stiff_path_read", S, c_double_p, c_double_p, C.POINTER(C.c_uint32), C.c_size_t, c_size_p,
+       c_int_p, C.c_char_p, C.POINTER(PathOptions))

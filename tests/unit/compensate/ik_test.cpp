@@ -73,7 +73,8 @@ TEST_P(AnalyticIk, EveryBranchReproducesThePose) {
               GetParam(), total, eight, worst);
 }
 
-INSTANTIATE_TEST_SUITE_P(BuiltIn, AnalyticIk,
+INSTANTIATE_TEST_SUITE_P(BuiltIn,
+                         AnalyticIk,
                          ::testing::Values("rokae.yaml", "puma560.yaml", "abb_irb120.yaml"));
 
 TEST(NumericalIk, Ur5HasNoSphericalWristAndConvergesFromNearbySeeds) {
@@ -142,10 +143,10 @@ TEST(IkPath, AWristFlipThroughTheSingularityIsReported) {
   const IkPath p = solve_path(ik, poses, q);
   int flagged = 0;
   for (size_t i = 1; i < poses.size(); ++i) {
-    const double step = (p.q.row(static_cast<Eigen::Index>(i)) -
-                         p.q.row(static_cast<Eigen::Index>(i - 1)))
-                            .cwiseAbs()
-                            .maxCoeff();
+    const double step =
+        (p.q.row(static_cast<Eigen::Index>(i)) - p.q.row(static_cast<Eigen::Index>(i - 1)))
+            .cwiseAbs()
+            .maxCoeff();
     const bool reported = p.status[i] & (kPointBranchChange | kPointJump | kPointSingular);
     if (step > 0.35) {
       EXPECT_TRUE(reported) << "silent jump at " << i;

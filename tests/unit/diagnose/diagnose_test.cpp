@@ -201,7 +201,7 @@ TEST_P(HiddenEffect, SlowRankedFirstAndErrorFallsManySeeds) {
 INSTANTIATE_TEST_SUITE_P(Diagnose,
                          HiddenEffect,
                          ::testing::ValuesIn(visible_effects()),
-                         [](const auto& info) { return info.param; });
+                         [](const auto& p) { return p.param; });
 
 int control_claims(int seeds, double outlier_rate, int* adequate, int* missed_outliers) {
   int claims = 0;
@@ -291,7 +291,9 @@ TEST(DiagnoseHonesty, LeftOutEffectIsUnexplainedNotMisattributed) {
       const Diagnosis d = run(make_scenario(hidden, seed), o);
       print("left out " + hidden, seed, d);
       EXPECT_TRUE(d.verdict == "unexplained" || d.verdict == "ambiguous") << d.summary;
-      if (d.verdict == "unexplained") EXPECT_FALSE(d.unexplained_signature.empty());
+      if (d.verdict == "unexplained") {
+        EXPECT_FALSE(d.unexplained_signature.empty());
+      }
     }
 }
 

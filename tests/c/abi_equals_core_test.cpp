@@ -1,0 +1,79 @@
+// Results through the C ABI equal the C++ core to the last bit for the same inputs.
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+#include "stiff/identify.hpp"
+#include "stiff/robot_io.hpp"
+#include "stiff/simulate.hpp"
+#include "stiff/stiff.h"
+
+namespace {
+
+std::string src(const char* rel) { return std::string(STIFF_SOURCE_DIR) + "/" + rel; }
+
+TEST(CApi, IdentificationAndPredictionEqualTheCoreBitForBit) {
+  const std::string robot_path = src("examples/robots/rokae.yaml");
+  const std::string design_path = src("examples/paper/design_kappa_a.csv");
+  const double k[6] = {5.0914e4, 1.6382e4, 3.1311e4, 7.7911e3, 5.6136e3, 4.0e3};
+
+  // C++ core.
+  const stiff::RobotModel robot = stiff::load_robot(robot_path);
+  stiff::NoiseModel noise;
+  noise.tracker_sigma_m = 10e-6;
+  noise.seed = 9;
+  const stiff::Dataset data = stiff::simulate(
+      robot, stiff::joint_truth(Eigen::Map<const Eigen::VectorXd>(k, 6)),
+      stiff::read_measurements_csv(design_path, 6), noise);
+  const stiff::FitResult fit = stiff::identify_joint_linear(robot, data);
+  const stiff::FitResult robust = stiff::identify(robot, data, {"joint"}, [] {
+    stiff::IdentifyOptions o;
+    o.loss = "huber";
+    return o;
+  }());
+
+  // C ABI on the same inputs.
+  stiff_robot* r = nullptr;
+  stiff_dataset* design = nullptr;
+  stiff_dataset* d = nullptr;
+  stiff_result* f = nullptr;
+  stiff_result* fr = nullptr;
+  stiff_model* m = nullptr;
+  ASSERT_EQ(stiff_robot_load(&r, robot_path.c_str()), STIFF_OK);
+  ASSERT_EQ(stiff_dataset_read_csv(&design, r, design_path.c_str()), STIFF_OK);
+  stiff_noise_options no;
+  std::memset(&no, 0, sizeof no);
+  no.struct_size = sizeof no;
+  no.tracker_sigma_m = 10e-6;
+  no.seed = 9;
+  ASSERT_EQ(stiff_simulate(&d, r, design, nullptr, k, 6, &no), STIFF_OK);
+  ASSERT_EQ(stiff_identify(&f, r, d, nullptr), STIFF_OK);
+  stiff_identify_options io = STIFF_IDENTIFY_OPTIONS_INIT;
+  io.loss = "huber";
+  ASSERT_EQ(stiff_identify(&fr, r, d, &io), STIFF_OK);
+
+  double c[6], se[6];
+  ASSERT_EQ(stiff_result_parameters(c, se, 6, nullptr, f), STIFF_OK);
+  for (int j = 0; j < 6; ++j) EXPECT_EQ(c[j], fit.parameters[j].value) << "joint " << j + 1;
+  for (int j = 0; j < 5; ++j) EXPECT_EQ(se[j], fit.parameters[j].standard_error);
+  ASSERT_EQ(stiff_result_parameters(c, se, 6, nullptr, fr), STIFF_OK);
+  for (int j = 0; j < 6; ++j) EXPECT_EQ(c[j], robust.parameters[j].value) << "joint " << j + 1;
+
+  ASSERT_EQ(stiff_model_create(&m, r, f), STIFF_OK);
+  stiff::DeflectionModel model(robot, fit.model);
+  for (const auto& row : data.rows) {
+    double w[6] = {row.force(0), row.force(1), row.force(2), 0, 0, 0};
+    double out[6];
+    ASSERT_EQ(stiff_predict(out, m, row.q.data(), 6, w), STIFF_OK);
+    const auto expect = model.predict(fit.theta(), row, model.context(row, 0));
+    for (int k6 = 0; k6 < 6; ++k6) EXPECT_EQ(out[k6], expect(k6));
+  }
+  stiff_model_destroy(m);
+  stiff_result_destroy(fr);
+  stiff_result_destroy(f);
+  stiff_dataset_destroy(d);
+  stiff_dataset_destroy(design);
+  stiff_robot_destroy(r);
+}
+
+}  // namespace
