@@ -30,7 +30,7 @@ build: setup $(BUILD)/build.ninja
 install-python:
 	@mkdir -p $(PYLIB)
 	@cp -L $(BUILD)/capi/libstiff_c.so $(PYLIB)/libstiff_c.so
-	@rm -rf plugins/python/stiff/_data && mkdir -p plugins/python/stiff/_data && cp -r examples/robots examples/paper plugins/python/stiff/_data/
+	@rm -rf plugins/python/stiff/_data && mkdir -p plugins/python/stiff/_data && cp -r examples/robots examples/paper examples/truths examples/paths plugins/python/stiff/_data/
 	@if [ -d $(BUILD)/fmu/binaries ]; then rm -rf $(PYLIB)/fmu && cp -r $(BUILD)/fmu/binaries $(PYLIB)/fmu; fi
 	@$(PY) -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation ./plugins/python >/dev/null
 
@@ -43,10 +43,15 @@ test-cpp:
 	@cd $(BUILD) && $(CTEST) --output-on-failure -j $(JOBS) -LE "slow|python"
 
 test-python:
-	@STIFF_BUILD_DIR=$(CURDIR)/$(BUILD) $(PY) -m pytest -q plugins/python/tests tests/fmu
+	@STIFF_BUILD_DIR=$(CURDIR)/$(BUILD) $(PY) -m pytest -q plugins/python/tests tests/fmu tests/bad_inputs
 
 bench: build
 	@bash bench/run
+
+# Long libFuzzer runs (FUZZ_SECONDS_PER_TARGET, default 600 s each); CI runs scripts/ci-fuzz.sh
+# for about a minute. Sanitizers: bash scripts/ci-sanitize.sh (TESTING.md).
+fuzz:
+	@bash scripts/ci-fuzz.sh --long
 
 clean:
 	rm -rf $(BUILD) out $(PYLIB) plugins/python/stiff/_data plugins/python/build plugins/python/*.egg-info

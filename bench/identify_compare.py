@@ -17,7 +17,8 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "bench", "peers"))
-sys.path.insert(0, os.path.join(ROOT, "plugins", "python"))
+if not os.environ.get("PYTHONPATH"):  # bench/run sets it; else the source tree
+    sys.path.insert(0, os.path.join(ROOT, "plugins", "python"))
 import identify_scipy as peer  # noqa: E402
 import stiff  # noqa: E402
 

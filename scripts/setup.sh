@@ -8,7 +8,8 @@ cd "$(dirname "$0")/.."
 packages=(build-essential cmake ninja-build pkg-config git
   libeigen3-dev libceres-dev libnlopt-cxx-dev libgtest-dev libgmock-dev
   liburdfdom-dev libyaml-cpp-dev nlohmann-json3-dev libbenchmark-dev
-  abigail-tools clang-format python3 python3-venv python3-dev zip unzip valgrind)
+  abigail-tools clang-format python3 python3-venv python3-dev zip unzip valgrind
+  clang libclang-rt-14-dev)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

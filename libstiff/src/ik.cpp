@@ -2,6 +2,7 @@
 // parallel axes 2, 3; damped least squares for other chains (ik.hpp).
 #include "stiff/ik.hpp"
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
 #include <algorithm>
@@ -156,6 +157,13 @@ InverseKinematics::InverseKinematics(const RobotModel& robot, const IkOptions& o
 
 double InverseKinematics::sigma_min(const Eigen::VectorXd& q) const {
   const Eigen::MatrixXd jac = robot_.jacobian(q);
+  if (jac.cols() == 6) {
+    const Eigen::Matrix<double, 6, 6> j6 = jac;
+    // Eigenvalues of J^T J (cheaper than an SVD, accurate enough for a threshold).
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(j6.transpose() * j6,
+                                                                  Eigen::EigenvaluesOnly);
+    return std::sqrt(std::max(0.0, es.eigenvalues()(0)));
+  }
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(jac);
   return svd.singularValues()(svd.singularValues().size() - 1);
 }
@@ -363,6 +371,24 @@ bool InverseKinematics::solve_nearest(const Mat4& pose,
       *out = s;
       return true;
     }
+  }
+  if (analytic()) {
+    // Rank the raw branches by distance and polish only the one kept (the polish, the
+    // singularity check and the FK of every branch would cost 8 times as much).
+    std::vector<IkSolution> raw = analytic_all(pose);
+    std::vector<std::pair<double, size_t>> order;
+    for (size_t i = 0; i < raw.size(); ++i)
+      if (fit_limits(&raw[i].q, seed)) order.push_back({(raw[i].q - seed).squaredNorm(), i});
+    std::sort(order.begin(), order.end());
+    for (const auto& o : order) {
+      IkSolution s = raw[o.second];
+      finish(&s, pose);
+      if (s.error > 1e3 * options_.tolerance + 1e-9) continue;
+      if (!fit_limits(&s.q, seed)) continue;  // the polish may cross a limit by rounding
+      *out = s;
+      return true;
+    }
+    return false;
   }
   const std::vector<IkSolution> all = solve_all(pose, &seed);
   if (all.empty()) return false;

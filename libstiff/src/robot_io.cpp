@@ -7,7 +7,9 @@
 #include <iomanip>
 #include <map>
 #include <set>
+#include <mutex>
 #include <sstream>
+#include <console_bridge/console.h>
 #include <urdf_model/model.h>
 #include <urdf_parser/urdf_parser.h>
 
@@ -195,8 +197,34 @@ Eigen::Matrix4d urdf_pose(const urdf::Pose& p) {
 
 RobotModel parse_robot_urdf(const std::string& text, const std::string& file,
                             const std::string& tip_link) {
-  const auto model = urdf::parseURDF(text);
-  if (!model) throw ParseError(file, 0, 0, "not a valid URDF document");
+  // urdfdom reports problems through console_bridge, which prints to stderr by default; the
+  // library never prints (stiff.h): capture them for the error message instead.
+  struct Capture : console_bridge::OutputHandler {
+    std::string first_error;
+    void log(const std::string& text, console_bridge::LogLevel level, const char*, int) override {
+      if (level >= console_bridge::CONSOLE_BRIDGE_LOG_ERROR && first_error.empty())
+        first_error = text;
+    }
+  } capture;
+  urdf::ModelInterfaceSharedPtr model;
+  {
+    static std::mutex handler_mutex;  // the output handler is process-wide
+    std::lock_guard<std::mutex> lock(handler_mutex);
+    console_bridge::OutputHandler* previous = console_bridge::getOutputHandler();
+    console_bridge::useOutputHandler(&capture);
+    try {
+      model = urdf::parseURDF(text);
+    } catch (...) {
+      console_bridge::useOutputHandler(previous);
+      throw;
+    }
+    console_bridge::useOutputHandler(previous);
+  }
+  if (!model)
+    throw ParseError(file, 0, 0,
+                     "not a valid URDF document" +
+                         (capture.first_error.empty() ? std::string()
+                                                      : " (" + capture.first_error + ")"));
   auto root = model->getRoot();
   if (!root) throw ParseError(file, 0, 0, "URDF has no root link");
 

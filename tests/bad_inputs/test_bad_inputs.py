@@ -99,11 +99,11 @@ class CApi:
             self._robot = stiff.Robot(str(ROBOT))
         return self._robot._as_parameter_
 
-    def dataset(self, displacement=True, same_pose=False, rows=12):
+    def dataset(self, displacement=True, zero_force=False, rows=12):
         ds = stiff.Dataset.read(self.env["data"])
         q, f, d = ds.q[:rows], ds.force[:rows], ds.displacement[:rows]
-        if same_pose:
-            q = np.repeat(q[:1], len(q), axis=0)
+        if zero_force:
+            f = f * 0.0
         n = len(q)
         h = C.c_void_p()
         st = _capi.lib.stiff_dataset_create(C.byref(h), n, 6, self.dbl(list(q.ravel())),

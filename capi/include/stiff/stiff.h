@@ -345,5 +345,6 @@ STIFF_API stiff_status stiff_effect_describe(
 #include "stiff/stiff_plan.h"
 #include "stiff/stiff_fmu.h"
 #include "stiff/stiff_diagnose.h"
+#include "stiff/stiff_compensate.h"
 
 #endif /* STIFF_H */

@@ -27,10 +27,10 @@ extern "C" {
 
 /** Per-point status bits of stiff_ik_path and stiff_compensate_path (bitwise OR). */
 #define STIFF_POINT_OK 0
-#define STIFF_POINT_SINGULAR 1      /**< near a singularity (6 x n Jacobian sigma_min < 1e-5) */
-#define STIFF_POINT_UNREACHABLE 2   /**< no IK solution within the limits: previous q held */
-#define STIFF_POINT_BRANCH_CHANGE 4 /**< the analytic branch changed (e.g. a wrist flip) */
-#define STIFF_POINT_JUMP 8          /**< a joint moved more than 0.35 rad (20 deg) */
+#define STIFF_POINT_SINGULAR 1       /**< near a singularity (6 x n Jacobian sigma_min < 1e-5) */
+#define STIFF_POINT_UNREACHABLE 2    /**< no IK solution within the limits: previous q held */
+#define STIFF_POINT_BRANCH_CHANGE 4  /**< the analytic branch changed (e.g. a wrist flip) */
+#define STIFF_POINT_JUMP 8           /**< a joint moved more than 0.35 rad (20 deg) */
 #define STIFF_POINT_NOT_CONVERGED 16 /**< compensation did not reach 1e-10 m / 1e-10 rad */
 
 /** 1 if the robot's inverse kinematics is analytic (6R, spherical wrist, axes 2 and 3
@@ -77,11 +77,8 @@ STIFF_API stiff_status stiff_ik_path(double* q_out,
  *    p(q_cmd) + d(q_cmd, W) = p(q),  Exp(rot(q_cmd, W)) R(q_cmd) = R(q)
  *  (6-D; position only for robots with fewer than 6 joints), to 1e-10 m and 1e-10 rad.
  *  Errors: INVALID_ARGUMENT (size, NaN), NUMERICAL (did not converge). @since 0.1 */
-STIFF_API stiff_status stiff_compensate_pose(double* q_cmd,
-                                             const stiff_model* model,
-                                             const double* q,
-                                             size_t n,
-                                             const double wrench[6]);
+STIFF_API stiff_status stiff_compensate_pose(
+    double* q_cmd, const stiff_model* model, const double* q, size_t n, const double wrench[6]);
 
 /** Compensate a path: IK with the branch kept (as stiff_ik_path, from q_start, may be NULL),
  *  then stiff_compensate_pose at every point. poses rows x 16, wrench rows x 6 (per point;

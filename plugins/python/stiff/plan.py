@@ -11,7 +11,7 @@ import numpy as np
 from . import _capi as _c
 from ._capi import check, lib
 from .api import Dataset, Robot, _Handle
-from .errors import CancelledError
+from .errors import CancelledError, InvalidArgumentError
 
 OPTIMIZERS = {"annealing": 1, "exchange": 2, "refine": 4}
 
@@ -78,6 +78,11 @@ def plan(robot: Robot, count: int = 10, criterion: str = "kappa_a", *, seed: int
     """Plan `count` measurements (poses and loads) on `criterion`. `q_fixed` holds joints at
     values [rad] (NaN = free). `progress(optimizer, iteration, total, best_score)` may return
     False to stop (raises CancelledError); an exception it raises is re-raised here."""
+    # The C options read 0 as "library default": an explicit 0 must not silently become 10.
+    if int(count) < 1:
+        raise InvalidArgumentError(f"plan: count must be >= 1 (got {count})")
+    if not 0 < range_fraction <= 1:
+        raise InvalidArgumentError(f"plan: range_fraction must be in (0, 1] (got {range_fraction})")
     o = _c.PlanOptions()
     o.struct_size = C.sizeof(o)
     o.count, o.criterion, o.seed = count, criterion.encode(), seed

@@ -435,7 +435,7 @@ def _plots(study: dict, summary: dict, plot_dir: Path) -> list[str]:
         ax.set_yscale("log")
         ax.set_title(v.key)
         ax.grid(alpha=0.3, which="both")
-    np.atleast_1d(axes)[0].set_ylabel("mean predicted-position error at 20 validation poses [um]")
+    np.atleast_1d(axes)[0].set_ylabel("mean validation error [um]")
     fig.tight_layout()
     fig.savefig(plot_dir / "error_by_design.png", dpi=110)
     plt.close(fig)
@@ -646,6 +646,17 @@ def findings_text(s: dict) -> str:
             line += f", kappa_a searched harder {kl[0]:.3g} um"
         L.append(line + ".")
     L.append("")
+    free = [d for d in s["ranking"]["realistic"] if d != "task"]
+    if free:
+        b = v["realistic"][free[0]]["mean_err"]
+        L.append(f"- Without a task (the planner's default case) the best criterion under the "
+                 f"realistic error model is `{free[0]}` ({b[0]:.3g} um [{b[1]:.3g}, {b[2]:.3g}]); "
+                 f"with a task, `{s['ranking']['realistic'][0]}`.")
+    for var in VARIANTS:
+        se = sorted(keys, key=lambda d: v[var.key][d]["stiff_err"][0])
+        L.append(f"- Identified stiffness, `{var.key}`: the smallest median RMS relative error "
+                 f"is reached by `{se[0]}` ({v[var.key][se[0]]['stiff_err'][0]:.1f}%), kappa_a "
+                 f"reaches {v[var.key]['kappa_a']['stiff_err'][0]:.1f}%.")
     c = s["criteria"]
     if {"kappa_a", "d_opt"} <= set(keys):
         L.append(
@@ -697,7 +708,7 @@ def findings_text(s: dict) -> str:
   and lever arms out, and it is invariant to a reparameterisation of the compliances (it does
   not depend on how c is scaled per joint, unlike a_opt and e_opt, which weigh the compliances
   in their own units and so favour the wrist joints with the largest compliances).
-- **The classic kappa_F^-1(J)** ignores the loads entirely, and the loads then come from the
-  pool at random; it ranks between kappa_a and the information criteria.
+- **The classic kappa_F^-1(J)** judges the poses only: its loads come from the pool at random,
+  and it is scale-free in the lever arms as kappa_a is in the whole of A.
 """)
     return "\n".join(L)

@@ -39,5 +39,6 @@ def run(args):
                 print(f"  {p['name']:<12} [{p['unit']}]  {p['meaning']}")
         else:
             units = sorted({p["unit"] for p in info["parameters"]})
-            print(f"{'':<20} {len(info['parameters'])} parameters [{', '.join(units)}]")
+            n = len(info["parameters"])
+            print(f"{'':<20} {n} parameter{'s' if n != 1 else ''} [{', '.join(units)}]")
     return 0

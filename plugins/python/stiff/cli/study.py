@@ -35,6 +35,9 @@ def register(sub):
     p.add_argument("-o", "--output", default="paper-study.md", help="markdown report to write")
     p.add_argument("--plots", help="folder of the PNG plots (default: the report's name "
                    "without .md)")
+    p.add_argument("--save", help="also pickle the raw trial results here (to re-render)")
+    p.add_argument("--load", help="re-render the report from results saved with --save "
+                   "(no trials are run)")
     p.set_defaults(func=run)
 
 
@@ -51,15 +54,25 @@ def run(args):
                       robot_path=robot_path(args.robot), paper_dir=str(data_dir() / "paper"),
                       annealing_iterations=args.iterations, pool_poses=args.pool_poses,
                       pool_loads=args.pool_loads)
-    with ProgressBar("study") as bar:
-        try:
-            study = run_study(cfg, progress=lambda done, total: bar.update(done, total,
-                                                                           f"{done}/{total} trials"))
-        except KeyboardInterrupt:
-            raise UserError("stopped (Ctrl-C); nothing written")
-    cmd = f"stiff study paper --trials {args.trials} --seed {args.seed}"
+    import pickle
+
+    if args.load:
+        with open(args.load, "rb") as f:
+            study = pickle.load(f)
+        cfg = study["config"]
+    else:
+        with ProgressBar("study") as bar:
+            try:
+                study = run_study(cfg, progress=lambda done, total: bar.update(
+                    done, total, f"{done}/{total} trials"))
+            except KeyboardInterrupt:
+                raise UserError("stopped (Ctrl-C); nothing written")
+    if args.save:
+        with open(args.save, "wb") as f:
+            pickle.dump(study, f)
+    cmd = f"stiff study paper --trials {cfg.trials} --seed {cfg.seed}"
     s = write_report(study, out, args.plots, command=cmd)
-    print(f"{args.trials} trials in {study['seconds']:.0f} s; wrote {out}")
+    print(f"{cfg.trials} trials in {study['seconds']:.0f} s; wrote {out}")
     for v, ranked in s["ranking"].items():
         best = ranked[0]
         m = s["variants"][v][best]["mean_err"]
