@@ -9,7 +9,7 @@ PYLIB   := plugins/python/stiff/_lib
 
 # Regenerate the committed ABI baseline after an intended ABI change.
 abi-baseline: build
-	@mkdir -p abi && abidw --headers-dir capi/include/stiff --out-file abi/libstiff_c.abi $(BUILD)/capi/libstiff_c.so && echo "wrote abi/libstiff_c.abi"
+	@mkdir -p abi && abidw --exported-interfaces-only --headers-dir capi/include/stiff --drop-private-types --no-show-locs --no-corpus-path --out-file abi/libstiff_c.abi $(BUILD)/capi/libstiff_c.so && echo "wrote abi/libstiff_c.abi"
 
 .PHONY: abi-baseline all setup build install-python demo test test-cpp test-python bench fuzz clean format
 

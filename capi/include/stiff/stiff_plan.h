@@ -26,7 +26,7 @@ typedef int (*stiff_plan_progress_fn)(const char* optimizer, uint64_t iteration,
 typedef struct stiff_plan_options {
   uint32_t struct_size;
   uint32_t count;                 /**< measurements N [10] */
-  const char* criterion;          /**< kappa_a, kappa_j, d_opt, a_opt, e_opt, o1, task [kappa_a] */
+  const char* criterion;          /**< d_opt, kappa_a, kappa_j, a_opt, e_opt, o1, task [d_opt] */
   uint64_t seed;                  /**< random seed; same seed, same plan [1] */
   uint32_t pool_poses;            /**< random candidate poses [500] */
   uint32_t pool_loads;            /**< candidate loads [100] */

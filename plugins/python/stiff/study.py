@@ -710,5 +710,18 @@ def findings_text(s: dict) -> str:
   in their own units and so favour the wrist joints with the largest compliances).
 - **The classic kappa_F^-1(J)** judges the poses only: its loads come from the pool at random,
   and it is scale-free in the lever arms as kappa_a is in the whole of A.
+
+## Limits of this study
+
+- The virtual robot follows the paper's joint model exactly; the real arm also has link
+  compliance, gravity, nonlinear and backlash effects, and setup errors (method.md). A design
+  can look better on a real arm because it happens to avoid an unmodelled effect. This study
+  tests the criterion, not the paper's robot.
+- The paper reports one experiment. The `A better` row above gives how often one experiment
+  favours the kappa_F^-1(A) set although, on average, it predicts worse.
+- The noise levels are stated assumptions. The ranking rests on the ratio of deflection to
+  absolute error, so it holds for any tracker whose error does not shrink with the deflection.
+- Annealing is shortened for speed. `kappa_a_long` shows that a better kappa_a optimum makes
+  the prediction worse, not better.
 """)
     return "\n".join(L)

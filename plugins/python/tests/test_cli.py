@@ -49,4 +49,6 @@ def test_user_errors_are_one_line_and_exit_2(args, message, tmp_path):
 
 def test_demo_runs(tmp_path):
     out = run("demo", "--out", tmp_path / "demo").stdout
-    assert "not identifiable" in out and (tmp_path / "demo" / "fit.json").exists()
+    assert "verdict:" in out and "compensated with" in out
+    for name in ("report.html", "fit_joint.json", "fit_full.json", "arm.fmu", "diagnosis.json"):
+        assert (tmp_path / "demo" / name).exists(), name

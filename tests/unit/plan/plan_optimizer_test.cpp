@@ -78,6 +78,7 @@ TEST(PlanAnnealing, RokaeSetAtLeastAsGoodAsPaperDesign) {
   const CandidatePool pool = build_pool(robot, paper_pool(500, 100));
   PlanOptions o;
   o.count = 10;
+  o.criterion = "kappa_a";  // the paper's criterion, compared with the paper's design
   o.annealing.iterations = 100000;
   o.exchange.enabled = false;
   const auto t0 = std::chrono::steady_clock::now();

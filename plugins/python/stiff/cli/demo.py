@@ -85,7 +85,7 @@ def run(args):
     out.mkdir(parents=True, exist_ok=True)
     story = Story()
     robot = api.Robot(robot_path("rokae"))
-    truth = data_dir() / "truths" / "rokae_force_clocking.yaml"
+    truth = data_dir() / "truths" / "rokae_smr_offset.yaml"
     noise = api.read_noise(data_dir() / "truths" / "noise_realistic.yaml")
     noise["seed"] = args.seed
 
