@@ -79,3 +79,23 @@ def test_effect_registry_lists_every_effect():
     assert "joint" in names
     info = stiff.describe_effect("joint")
     assert info["parameters"][0]["unit"] == "rad/(N*m)"
+
+
+def test_plots_draw_real_data(rokae_path, design_a, tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from stiff import plots
+
+    robot = stiff.Robot(rokae_path)
+    data = stiff.simulate(robot, stiff.Dataset.read(design_a, robot), stiffness=PAPER_K, seed=4)
+    fit = stiff.identify(robot, data)
+    ax = plots.residuals(fit, data)
+    assert len(ax.patches) == 3 * len(data)
+    ax = plots.prediction_error(robot, {"joint": fit}, data)
+    assert "RMS" in ax.get_legend().get_texts()[0].get_text()
+    plots.stiffness(fit, PAPER_K).figure.savefig(tmp_path / "k.png")
+    assert (tmp_path / "k.png").stat().st_size > 1000
+    plt.close("all")
