@@ -61,30 +61,31 @@ inline void require_finite(const double* v, size_t n, const char* what) {
       throw InvalidArgument(std::string(what) + "[" + std::to_string(i) + "] is not finite");
 }
 
-/// Copy `n` values into a caller buffer with capacity/needed semantics.
-inline stiff_status copy_out(const char* function,
-                             const double* src,
-                             size_t n,
-                             double* dst,
-                             size_t capacity,
-                             size_t* needed) {
+/// Throw the buffer-too-small error (caught by guarded(), which names the C function).
+[[noreturn]] inline void too_small(size_t capacity, size_t n, const char* unit) {
+  throw Error(Status::buffer_too_small, "buffer holds " + std::to_string(capacity) + " " + unit +
+                                            ", " + std::to_string(n) + " needed");
+}
+
+/// Capacity/needed check of an output buffer of n values.
+inline void require_capacity(size_t n, const void* dst, size_t capacity, size_t* needed) {
   if (needed) *needed = n;
-  if (capacity < n || (!dst && n > 0))
-    return fail(
-        function, STIFF_E_BUFFER_TOO_SMALL,
-        "buffer holds " + std::to_string(capacity) + " values, " + std::to_string(n) + " needed");
+  if (capacity < n || (!dst && n > 0)) too_small(capacity, n, "values");
+}
+
+/// Copy `n` values into a caller buffer with capacity/needed semantics.
+inline stiff_status copy_out(
+    const double* src, size_t n, double* dst, size_t capacity, size_t* needed) {
+  if (needed) *needed = n;
+  if (capacity < n || (!dst && n > 0)) too_small(capacity, n, "values");
   for (size_t i = 0; i < n; ++i) dst[i] = src[i];
   return STIFF_OK;
 }
 
 /// Copy a string (with its NUL) into a caller buffer with capacity/needed semantics (bytes).
-inline stiff_status copy_string(
-    const char* function, const std::string& s, char* dst, size_t capacity, size_t* needed) {
+inline stiff_status copy_string(const std::string& s, char* dst, size_t capacity, size_t* needed) {
   if (needed) *needed = s.size() + 1;
-  if (capacity < s.size() + 1 || !dst)
-    return fail(function, STIFF_E_BUFFER_TOO_SMALL,
-                "buffer holds " + std::to_string(capacity) + " bytes, " +
-                    std::to_string(s.size() + 1) + " needed");
+  if (capacity < s.size() + 1 || !dst) too_small(capacity, s.size() + 1, "bytes");
   s.copy(dst, s.size());
   dst[s.size()] = '\0';
   return STIFF_OK;

@@ -63,22 +63,6 @@ Eigen::MatrixXd rows_of(const double* v, size_t rows, Eigen::Index cols, const c
   return m;
 }
 
-bool check_buffer(const char* function,
-                  size_t n,
-                  double* dst,
-                  size_t capacity,
-                  size_t* needed,
-                  stiff_status* st) {
-  if (needed) *needed = n;
-  if (capacity < n || (!dst && n > 0)) {
-    *st = fail(
-        function, STIFF_E_BUFFER_TOO_SMALL,
-        "buffer holds " + std::to_string(capacity) + " values, " + std::to_string(n) + " needed");
-    return false;
-  }
-  return true;
-}
-
 void write_rows(const Eigen::MatrixXd& m, double* dst) {
   for (Eigen::Index i = 0; i < m.rows(); ++i)
     for (Eigen::Index c = 0; c < m.cols(); ++c) dst[i * m.cols() + c] = m(i, c);
@@ -104,8 +88,7 @@ stiff_status stiff_tool_pose_batch(double* poses,
   return guarded(__func__, [&] {
     require(robot, "robot");
     const RobotModel& r = robot->model;
-    stiff_status st = STIFF_OK;
-    if (!check_buffer(__func__, rows * 16, poses, capacity, needed, &st)) return st;
+    stiff::capi::require_capacity(rows * 16, poses, capacity, needed);
     const Eigen::MatrixXd qm = rows_of(q, rows, r.dof(), "q");
     for (Eigen::Index i = 0; i < qm.rows(); ++i) {
       const Eigen::Matrix4d t = r.tool_pose(qm.row(i).transpose());
@@ -136,8 +119,7 @@ stiff_status stiff_ik(double* q_out,
       return (a.q - seed).norm() < (b.q - seed).norm();
     });
     const size_t n = all.size() * static_cast<size_t>(r.dof());
-    stiff_status st = STIFF_OK;
-    if (!check_buffer(__func__, n, q_out, capacity, needed, &st)) return st;
+    stiff::capi::require_capacity(n, q_out, capacity, needed);
     for (size_t s = 0; s < all.size(); ++s)
       for (int j = 0; j < r.dof(); ++j) q_out[s * static_cast<size_t>(r.dof()) + j] = all[s].q(j);
     return STIFF_OK;
@@ -155,9 +137,7 @@ stiff_status stiff_ik_path(double* q_out,
   return guarded(__func__, [&] {
     require(robot, "robot");
     const RobotModel& r = robot->model;
-    stiff_status st = STIFF_OK;
-    if (!check_buffer(__func__, rows * static_cast<size_t>(r.dof()), q_out, capacity, needed, &st))
-      return st;
+    stiff::capi::require_capacity(rows * static_cast<size_t>(r.dof()), q_out, capacity, needed);
     const auto p = poses_of(poses, rows);
     const Eigen::VectorXd start = q_start ? joints_of(r, q_start, "q_start") : Eigen::VectorXd();
     const IkPath path = solve_path(InverseKinematics(r), p, start);
@@ -204,9 +184,7 @@ stiff_status stiff_compensate_path(double* q_cmd,
   return guarded(__func__, [&] {
     require(model, "model");
     const RobotModel& r = model->robot;
-    stiff_status st = STIFF_OK;
-    if (!check_buffer(__func__, rows * static_cast<size_t>(r.dof()), q_cmd, capacity, needed, &st))
-      return st;
+    stiff::capi::require_capacity(rows * static_cast<size_t>(r.dof()), q_cmd, capacity, needed);
     const auto p = poses_of(poses, rows);
     const Eigen::MatrixXd w = rows_of(wrench, rows, 6, "wrench");
     const Eigen::VectorXd start = q_start ? joints_of(r, q_start, "q_start") : Eigen::VectorXd();
@@ -232,8 +210,7 @@ stiff_status stiff_truth_deviation(double* deviation,
     require(robot, "robot");
     capi::require_string(truth_path, "truth_path");
     const RobotModel& r = robot->model;
-    stiff_status st = STIFF_OK;
-    if (!check_buffer(__func__, rows * 6, deviation, capacity, needed, &st)) return st;
+    stiff::capi::require_capacity(rows * 6, deviation, capacity, needed);
     const Truth truth = read_truth(truth_path, r);
     const DeflectionModel model(r, truth.effects);
     const auto p = poses_of(poses, rows);
@@ -272,9 +249,9 @@ stiff_status stiff_path_read(double* poses,
     if (rows) *rows = tp.size();
     if (has_wrench) *has_wrench = tp.has_wrench ? 1 : 0;
     if (capacity < tp.size())
-      return fail(__func__, STIFF_E_BUFFER_TOO_SMALL,
-                  "buffer holds " + std::to_string(capacity) + " points, " +
-                      std::to_string(tp.size()) + " needed");
+      throw Error(Status::buffer_too_small, "buffer holds " + std::to_string(capacity) +
+                                                " points, " + std::to_string(tp.size()) +
+                                                " needed");
     for (size_t i = 0; i < tp.size(); ++i) {
       const PathPoint& pt = tp.points[i];
       if (poses)

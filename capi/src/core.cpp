@@ -93,7 +93,7 @@ stiff_status stiff_robot_name(char* name,
                               const stiff_robot* robot) {
   return guarded(__func__, [&] {
     require(robot, "robot");
-    return copy_string(__func__, robot->model.name, name, capacity, needed);
+    return copy_string(robot->model.name, name, capacity, needed);
   });
 }
 
@@ -104,9 +104,8 @@ stiff_status stiff_robot_limits(
     const size_t n = robot->model.dof();
     if (needed) *needed = n;
     if (capacity < n || !lower || !upper)
-      return fail(
-          __func__, STIFF_E_BUFFER_TOO_SMALL,
-          "buffers hold " + std::to_string(capacity) + " values, " + std::to_string(n) + " needed");
+      throw Error(Status::buffer_too_small, "buffers hold " + std::to_string(capacity) +
+                                                " values, " + std::to_string(n) + " needed");
     for (size_t j = 0; j < n; ++j) {
       lower[j] = robot->model.joints[j].lower;
       upper[j] = robot->model.joints[j].upper;
@@ -150,7 +149,7 @@ stiff_status stiff_robot_jacobian(double* jacobian,
   return guarded(__func__, [&] {
     const Eigen::VectorXd qv = joint_vector(robot, q, n);
     const Eigen::Matrix<double, 6, Eigen::Dynamic, Eigen::RowMajor> j = robot->model.jacobian(qv);
-    return copy_out(__func__, j.data(), static_cast<size_t>(j.size()), jacobian, capacity, needed);
+    return copy_out(j.data(), static_cast<size_t>(j.size()), jacobian, capacity, needed);
   });
 }
 
@@ -300,7 +299,7 @@ stiff_status stiff_dataset_get(double* values,
           break;
       }
     }
-    return copy_out(__func__, v.data(), v.size(), values, capacity, needed);
+    return copy_out(v.data(), v.size(), values, capacity, needed);
   });
 }
 
@@ -328,7 +327,7 @@ stiff_status stiff_dataset_id(
     if (row >= dataset->data.rows.size())
       throw InvalidArgument("row " + std::to_string(row) + " out of range (dataset has " +
                             std::to_string(dataset->data.rows.size()) + ")");
-    return copy_string(__func__, dataset->data.rows[row].id, id, capacity, needed);
+    return copy_string(dataset->data.rows[row].id, id, capacity, needed);
   });
 }
 

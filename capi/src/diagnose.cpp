@@ -59,9 +59,8 @@ stiff_status stiff_diagnosis_json(char* json,
                                   size_t capacity,
                                   size_t* needed,
                                   const stiff_diagnosis* diagnosis) {
-  return guarded(__func__, [&] {
-    return copy_string(__func__, diagnosis_of(diagnosis).json, json, capacity, needed);
-  });
+  return guarded(__func__,
+                 [&] { return copy_string(diagnosis_of(diagnosis).json, json, capacity, needed); });
 }
 
 stiff_status stiff_diagnosis_verdict(char* verdict,
@@ -69,8 +68,7 @@ stiff_status stiff_diagnosis_verdict(char* verdict,
                                      size_t* needed,
                                      const stiff_diagnosis* diagnosis) {
   return guarded(__func__, [&] {
-    return copy_string(__func__, diagnosis_of(diagnosis).diagnosis.verdict, verdict, capacity,
-                       needed);
+    return copy_string(diagnosis_of(diagnosis).diagnosis.verdict, verdict, capacity, needed);
   });
 }
 

@@ -35,7 +35,7 @@ stiff_status stiff_effect_name(char* name, size_t capacity, size_t* needed, size
     if (index >= reg.size())
       throw InvalidArgument("effect index " + std::to_string(index) + " out of range (" +
                             std::to_string(reg.size()) + " effects)");
-    return copy_string(__func__, reg[index].name, name, capacity, needed);
+    return copy_string(reg[index].name, name, capacity, needed);
   });
 }
 
@@ -65,7 +65,7 @@ stiff_status stiff_effect_describe(
                                  {"upper", p.upper},
                                  {"typical", p.typical},
                                  {"null_value", p.null_value}});
-    return copy_string(__func__, j.dump(), json, capacity, needed);
+    return copy_string(j.dump(), json, capacity, needed);
   });
 }
 

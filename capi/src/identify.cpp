@@ -91,9 +91,8 @@ stiff_status stiff_result_json(char* json,
                                size_t capacity,
                                size_t* needed,
                                const stiff_result* result) {
-  return guarded(__func__, [&] {
-    return copy_string(__func__, fit_to_json(fit_of(result)), json, capacity, needed);
-  });
+  return guarded(__func__,
+                 [&] { return copy_string(fit_to_json(fit_of(result)), json, capacity, needed); });
 }
 
 stiff_status stiff_result_joint_stiffness(double* values,
@@ -106,7 +105,7 @@ stiff_status stiff_result_joint_stiffness(double* values,
     const auto ident = f.joint_identified();
     for (int j = 0; j < k.size(); ++j)
       if (!ident[j]) k(j) = NAN;
-    return copy_out(__func__, k.data(), static_cast<size_t>(k.size()), values, capacity, needed);
+    return copy_out(k.data(), static_cast<size_t>(k.size()), values, capacity, needed);
   });
 }
 
@@ -116,7 +115,7 @@ stiff_status stiff_result_joint_stiffness_se(double* values,
                                              const stiff_result* result) {
   return guarded(__func__, [&] {
     const Eigen::VectorXd k = fit_of(result).joint_stiffness_se();
-    return copy_out(__func__, k.data(), static_cast<size_t>(k.size()), values, capacity, needed);
+    return copy_out(k.data(), static_cast<size_t>(k.size()), values, capacity, needed);
   });
 }
 
@@ -130,9 +129,8 @@ stiff_status stiff_result_parameters(double* values,
     const size_t p = f.parameters.size();
     if (needed) *needed = p;
     if (capacity < p || !values)
-      return fail(
-          __func__, STIFF_E_BUFFER_TOO_SMALL,
-          "buffer holds " + std::to_string(capacity) + " values, " + std::to_string(p) + " needed");
+      throw Error(Status::buffer_too_small, "buffer holds " + std::to_string(capacity) +
+                                                " values, " + std::to_string(p) + " needed");
     for (size_t k = 0; k < p; ++k) {
       values[k] = f.parameters[k].value;
       if (standard_errors) standard_errors[k] = f.parameters[k].standard_error;
@@ -148,8 +146,7 @@ stiff_status stiff_result_covariance(double* covariance,
   return guarded(__func__, [&] {
     const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> c =
         fit_of(result).covariance;
-    return copy_out(__func__, c.data(), static_cast<size_t>(c.size()), covariance, capacity,
-                    needed);
+    return copy_out(c.data(), static_cast<size_t>(c.size()), covariance, capacity, needed);
   });
 }
 
@@ -159,7 +156,7 @@ stiff_status stiff_result_residuals(double* residuals,
                                     const stiff_result* result) {
   return guarded(__func__, [&] {
     const Eigen::VectorXd& r = fit_of(result).residuals;
-    return copy_out(__func__, r.data(), static_cast<size_t>(r.size()), residuals, capacity, needed);
+    return copy_out(r.data(), static_cast<size_t>(r.size()), residuals, capacity, needed);
   });
 }
 
@@ -193,7 +190,7 @@ stiff_status stiff_result_warning(
     if (index >= f.warnings.size())
       throw InvalidArgument("warning " + std::to_string(index) + " out of range (" +
                             std::to_string(f.warnings.size()) + " warnings)");
-    return copy_string(__func__, f.warnings[index], text, capacity, needed);
+    return copy_string(f.warnings[index], text, capacity, needed);
   });
 }
 
@@ -271,9 +268,8 @@ stiff_status stiff_predict_batch(double* deflection,
     require(wrench, "wrench");
     if (needed) *needed = 6 * rows;
     if (capacity < 6 * rows || !deflection)
-      return fail(__func__, STIFF_E_BUFFER_TOO_SMALL,
-                  "buffer holds " + std::to_string(capacity) + " values, " +
-                      std::to_string(6 * rows) + " needed");
+      throw Error(Status::buffer_too_small, "buffer holds " + std::to_string(capacity) +
+                                                " values, " + std::to_string(6 * rows) + " needed");
     for (size_t r = 0; r < rows; ++r) {
       try {
         predict_one(model, q + r * n, n, wrench + 6 * r, deflection + 6 * r);

@@ -1,9 +1,10 @@
 // Measurement planning through the C ABI.
+#include "stiff/plan.hpp"
+
 #include <nlohmann/json.hpp>
 
 #include "boundary.hpp"
 #include "handles.hpp"
-#include "stiff/plan.hpp"
 
 struct stiff_plan {
   stiff::PlanResult result;
@@ -14,14 +15,15 @@ using namespace stiff::capi;
 
 extern "C" {
 
-stiff_status stiff_plan_create(stiff_plan** out, const stiff_robot* robot,
+stiff_status stiff_plan_create(stiff_plan** out,
+                               const stiff_robot* robot,
                                const stiff_plan_options* options) {
   if (out) *out = nullptr;
   return guarded(__func__, [&] {
     require(out, "out");
     require(robot, "robot");
     const stiff_plan_options o = read_options(options);
-    const double nums[] = {o.range_fraction, o.load_min_N,  o.load_max_N,      o.load_step_N,
+    const double nums[] = {o.range_fraction,       o.load_min_N,  o.load_max_N,      o.load_step_N,
                            o.load_max_magnitude_N, o.min_sigma_m, o.tracker_sigma_m, o.tracker_ppm};
     require_finite(nums, sizeof nums / sizeof nums[0], "options");
     PoolOptions pool;
@@ -93,12 +95,15 @@ stiff_status stiff_plan_dataset(stiff_dataset** out, const stiff_plan* plan) {
 stiff_status stiff_plan_json(char* json, size_t capacity, size_t* needed, const stiff_plan* plan) {
   return guarded(__func__, [&] {
     require(plan, "plan");
-    return copy_string(__func__, plan_summary_json(plan->result), json, capacity, needed);
+    return copy_string(plan_summary_json(plan->result), json, capacity, needed);
   });
 }
 
-stiff_status stiff_criteria_json(char* json, size_t capacity, size_t* needed,
-                                 const stiff_robot* robot, const stiff_dataset* set,
+stiff_status stiff_criteria_json(char* json,
+                                 size_t capacity,
+                                 size_t* needed,
+                                 const stiff_robot* robot,
+                                 const stiff_dataset* set,
                                  double tracker_sigma_m) {
   return guarded(__func__, [&] {
     require(robot, "robot");
@@ -110,7 +115,7 @@ stiff_status stiff_criteria_json(char* json, size_t capacity, size_t* needed,
     nlohmann::json j = nlohmann::json::object();
     for (const auto& [name, value] : evaluate_criteria(robot->model, set->data, co))
       j[name] = std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
-    return copy_string(__func__, j.dump(), json, capacity, needed);
+    return copy_string(j.dump(), json, capacity, needed);
   });
 }
 
@@ -121,7 +126,7 @@ stiff_status stiff_criterion_name(char* name, size_t capacity, size_t* needed, s
     const auto& reg = criterion_registry();
     if (index >= reg.size())
       throw InvalidArgument("criterion index " + std::to_string(index) + " out of range");
-    return copy_string(__func__, reg[index].name, name, capacity, needed);
+    return copy_string(reg[index].name, name, capacity, needed);
   });
 }
 

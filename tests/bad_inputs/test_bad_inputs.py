@@ -126,6 +126,11 @@ class CApi:
         self.keep.extend([o, buf])
         return C.cast(buf, C.POINTER(_capi.IdentifyOptions))
 
+    def fit(self):
+        f = stiff.Fit.read(self.env["fit"])
+        self.keep.append(f)
+        return f._as_parameter_
+
     def model(self):
         m = stiff.Model(stiff.Robot(str(ROBOT)), stiff.Fit.read(self.env["fit"]))
         self.keep.append(m)
@@ -134,6 +139,7 @@ class CApi:
     def namespace(self):
         return {"lib": _capi.lib, "out": self.out, "dbl": self.dbl, "robot": self.robot,
                 "dataset": self.dataset, "options": self.options, "model": self.model,
+                "fit": self.fit,
                 "NAN": NAN, "INF": INF}
 
 

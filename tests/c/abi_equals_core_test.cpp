@@ -22,9 +22,9 @@ TEST(CApi, IdentificationAndPredictionEqualTheCoreBitForBit) {
   stiff::NoiseModel noise;
   noise.tracker_sigma_m = 10e-6;
   noise.seed = 9;
-  const stiff::Dataset data = stiff::simulate(
-      robot, stiff::joint_truth(Eigen::Map<const Eigen::VectorXd>(k, 6)),
-      stiff::read_measurements_csv(design_path, 6), noise);
+  const stiff::Dataset data =
+      stiff::simulate(robot, stiff::joint_truth(Eigen::Map<const Eigen::VectorXd>(k, 6)),
+                      stiff::read_measurements_csv(design_path, 6), noise);
   const stiff::FitResult fit = stiff::identify_joint_linear(robot, data);
   const stiff::FitResult robust = stiff::identify(robot, data, {"joint"}, [] {
     stiff::IdentifyOptions o;

@@ -9,13 +9,13 @@
 #include "stiff/stiff.h"
 
 static int failures = 0;
-#define CHECK(cond)                                                            \
-  do {                                                                         \
-    if (!(cond)) {                                                             \
-      fprintf(stderr, "%s:%d: check failed: %s (last error: %s)\n", __FILE__, \
-              __LINE__, #cond, stiff_last_error());                            \
-      ++failures;                                                              \
-    }                                                                          \
+#define CHECK(cond)                                                                            \
+  do {                                                                                         \
+    if (!(cond)) {                                                                             \
+      fprintf(stderr, "%s:%d: check failed: %s (last error: %s)\n", __FILE__, __LINE__, #cond, \
+              stiff_last_error());                                                             \
+      ++failures;                                                                              \
+    }                                                                                          \
   } while (0)
 
 int main(int argc, char** argv) {
@@ -64,7 +64,8 @@ int main(int argc, char** argv) {
   for (i = 0; i < 5; ++i) CHECK(fabs(values[i] - k[i]) < 0.5 * k[i]);
   memset(&stats, 0, sizeof stats);
   stats.struct_size = sizeof stats;
-  CHECK(stiff_result_statistics(&stats, fit) == STIFF_OK && stats.rank == 5 && stats.measurements == 10);
+  CHECK(stiff_result_statistics(&stats, fit) == STIFF_OK && stats.rank == 5 &&
+        stats.measurements == 10);
   CHECK(stats.rms_m > 3e-6 && stats.rms_m < 30e-6);
   CHECK(stiff_result_write_json(fit, fit_path) == STIFF_OK);
   CHECK(stiff_result_read_json(&fit2, fit_path) == STIFF_OK);

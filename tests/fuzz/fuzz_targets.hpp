@@ -55,6 +55,19 @@ void expect_clean(const char* target, Body&& body) {
   }
 }
 
+/// Run `body`, which must not fail at all: any exception is a finding (e.g. a writer whose
+/// output its own reader rejects loses data).
+template <typename Body>
+void must_succeed(const char* target, const char* what, Body&& body) {
+  try {
+    body();
+  } catch (const std::exception& e) {
+    finding(target, std::string(what) + ": " + e.what());
+  } catch (...) {
+    finding(target, std::string(what) + ": unknown exception");
+  }
+}
+
 inline std::string text_of(const uint8_t* data, size_t size) {
   return std::string(reinterpret_cast<const char*>(data), size);
 }
@@ -68,30 +81,44 @@ inline const RobotModel& rokae() {
 inline void measurements_csv(const uint8_t* data, size_t size) {
   const std::string text = text_of(data, size);
   for (int dof : {0, 6}) {
+    Dataset d;
+    bool ok = false;
     expect_clean("measurements_csv", [&] {
-      Dataset d = parse_measurements_csv(text, "fuzz.csv", dof);
-      if (dof != 0 && d.dof != dof) finding("measurements_csv", "dof not honoured");
-      // What was read must be writable and read back to the same size.
+      d = parse_measurements_csv(text, "fuzz.csv", dof);
+      ok = true;
+    });
+    if (!ok) continue;
+    if (dof != 0 && d.dof != dof) finding("measurements_csv", "dof not honoured");
+    // What was read must be written and read back whole (writers never lose data).
+    must_succeed("measurements_csv", "round trip", [&] {
       const std::string out = format_measurements_csv(d);
       Dataset again = parse_measurements_csv(out, "roundtrip.csv", d.dof);
       if (again.size() != d.size()) finding("measurements_csv", "round trip changed row count");
-      validate_dataset(d, d.dof, d.has_displacement);
+      if (again.extra_columns != d.extra_columns || again.metadata.size() != d.metadata.size())
+        finding("measurements_csv", "round trip lost columns or metadata");
     });
+    expect_clean("measurements_csv", [&] { validate_dataset(d, d.dof, d.has_displacement); });
   }
 }
 
 inline void robot_yaml(const uint8_t* data, size_t size) {
+  RobotModel r;
+  bool ok = false;
   expect_clean("robot_yaml", [&] {
-    RobotModel r = parse_robot_yaml(text_of(data, size), "fuzz.yaml");
-    const std::string y = robot_to_yaml(r);
-    RobotModel again = parse_robot_yaml(y, "roundtrip.yaml");
+    r = parse_robot_yaml(text_of(data, size), "fuzz.yaml");
+    ok = true;
+  });
+  if (!ok) return;
+  must_succeed("robot_yaml", "round trip", [&] {
+    RobotModel again = parse_robot_yaml(robot_to_yaml(r), "roundtrip.yaml");
     if (again.dof() != r.dof()) finding("robot_yaml", "round trip changed dof");
-    if (r.dof() > 0 && r.dof() <= 64) {
+  });
+  if (r.dof() > 0 && r.dof() <= 64)
+    must_succeed("robot_yaml", "kinematics", [&] {
       const Eigen::VectorXd q = Eigen::VectorXd::Zero(r.dof());
       (void)r.tool_pose(q);
       (void)r.jacobian(q);
-    }
-  });
+    });
 }
 
 inline void robot_urdf(const uint8_t* data, size_t size) {
@@ -103,10 +130,15 @@ inline void robot_urdf(const uint8_t* data, size_t size) {
 }
 
 inline void fit_json(const uint8_t* data, size_t size) {
+  FitResult f;
+  bool ok = false;
   expect_clean("fit_json", [&] {
-    FitResult f = fit_from_json(text_of(data, size), "fuzz.json");
-    const std::string j = fit_to_json(f);
-    FitResult again = fit_from_json(j, "roundtrip.json");
+    f = fit_from_json(text_of(data, size), "fuzz.json");
+    ok = true;
+  });
+  if (!ok) return;
+  must_succeed("fit_json", "round trip", [&] {
+    FitResult again = fit_from_json(fit_to_json(f), "roundtrip.json");
     if (again.parameters.size() != f.parameters.size())
       finding("fit_json", "round trip changed parameter count");
     (void)f.theta();

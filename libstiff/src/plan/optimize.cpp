@@ -60,7 +60,8 @@ void report(const PlanOptions& o, const PlanProgress& p) {
     throw Cancelled("plan: cancelled by the progress callback during " + p.optimizer);
 }
 
-std::vector<int> random_subset(Rng& rng, int pool_size, int count, std::vector<uint8_t>& in) {
+template <class R>
+std::vector<int> random_subset(R& rng, int pool_size, int count, std::vector<uint8_t>& in) {
   std::vector<int> set;
   set.reserve(count);
   while (static_cast<int>(set.size()) < count) {
@@ -72,41 +73,64 @@ std::vector<int> random_subset(Rng& rng, int pool_size, int count, std::vector<u
   return set;
 }
 
+// The optimizers keep one packed m x m matrix X: M, or MJ for kappa_j (the criteria need one or
+// the other, never both). An element's packed contribution comes from the pool's per-element
+// table when finalize() stored it, else it is computed from the per-pose data (same values).
 template <int MC>
-struct Kernel {
-  static constexpr int kSize = MC > 0 ? MC* MC : kMaxM* kMaxM;
+struct PackedKernel {
+  static constexpr int kT = packed_size(MC > 0 ? MC : kMaxM);
   const CandidatePool& pool;
-  const Context& ctx;
-  int mm;
-  Kernel(const CandidatePool& p, const Context& c) : pool(p), ctx(c), mm(c.m * c.m) {}
-  // Add (sign +1) or remove (-1) one element's contribution to M (and MJ when needed).
-  void add(int e, double sign, double* M, double* MJ) const {
-    if (ctx.needs_a()) add_element<MC>(pool, e, sign, M);
-    if (ctx.needs_j()) add_jacobian<MC>(pool, e, sign, MJ);
+  const int t;
+  const bool jac;
+  const double* table;
+  PackedKernel(const CandidatePool& p, const Context& c)
+      : pool(p), t(packed_size(c.m)), jac(c.id == Crit::kappa_j), table(nullptr) {
+    if (!jac && p.packed_element_information.size() == static_cast<size_t>(p.size()) * t)
+      table = p.packed_element_information.data();
   }
-  void rebuild(const std::vector<int>& set, double* M, double* MJ) const {
-    std::fill(M, M + mm, 0.0);
-    std::fill(MJ, MJ + mm, 0.0);
-    for (int e : set) add(e, 1.0, M, MJ);
+  int size() const { return MC > 0 ? packed_size(MC) : t; }
+  // Element e's packed matrix: a pointer into the table, or `scratch` filled.
+  const double* element(int e, double* scratch) const {
+    if (table) return table + static_cast<size_t>(e) * size();
+    if (jac)
+      element_jacobian_information<MC>(pool, e, scratch);
+    else
+      element_information<MC>(pool, e, scratch);
+    return scratch;
   }
-  double score_of(const double* M, const double* MJ) const { return score<MC>(ctx, M, MJ); }
+  void copy_element(int e, double* out) const {
+    const double* g = element(e, out);
+    if (g != out) std::copy(g, g + size(), out);
+  }
+  // X = sum over positions of gset (in position order, as a rebuild from scratch).
+  void rebuild(const std::vector<double>& gset, int count, double* X) const {
+    const int T = size();
+    std::fill(X, X + T, 0.0);
+    for (int i = 0; i < count; ++i) {
+      const double* g = gset.data() + static_cast<size_t>(i) * T;
+      for (int q = 0; q < T; ++q) X[q] += g[q];
+    }
+  }
 };
 
-template <int MC>
+template <int MC, Crit C>
 struct Anneal {
   static SetSearchResult run(const CandidatePool& pool, const PlanOptions& o, const Context& ctx) {
     const auto t0 = Clock::now();
-    const Kernel<MC> K(pool, ctx);
-    const int N = o.count, P = pool.size(), mm = K.mm;
+    using K_t = PackedKernel<MC>;
+    const K_t K(pool, ctx);
+    const int N = o.count, P = pool.size(), T = K.size();
     const AnnealingOptions& ao = o.annealing;
-    Rng rng(o.seed);
+    FastRng rng(o.seed);
     std::vector<uint8_t> in(P, 0);
     std::vector<int> set = random_subset(rng, P, N, in);
-    double M[Kernel<MC>::kSize], MJ[Kernel<MC>::kSize], Mn[Kernel<MC>::kSize],
-        MJn[Kernel<MC>::kSize];
-    K.rebuild(set, M, MJ);
-    double sc = K.score_of(M, MJ);
-    double cost = cost_of(ctx.id, sc);
+    // Per position of the set, its element's packed matrix (the "out" side of a swap).
+    std::vector<double> gset(static_cast<size_t>(N) * T);
+    for (int i = 0; i < N; ++i) K.copy_element(set[i], gset.data() + static_cast<size_t>(i) * T);
+    double X[K_t::kT], Xn[K_t::kT];
+    K.rebuild(gset, N, X);
+    double sc = score_packed<MC, C>(ctx, X);
+    double cost = cost_of(C, sc);
     SetSearchResult r;
     r.trace.optimizer = "annealing";
     r.trace.start_score = sc;
@@ -115,14 +139,15 @@ struct Anneal {
 
     int k0 = ao.initial_swap_count > 0 ? ao.initial_swap_count : std::max(1, N / 3);
     k0 = std::min({k0, N, P - N});
-    std::vector<int> pos(N), new_e(std::max(k0, 1));
+    const int kmax = std::max(k0, 1);
+    std::vector<int> pos(N), new_e(kmax);
+    std::vector<const double*> gin(kmax);
+    std::vector<double> scratch(static_cast<size_t>(kmax) * T);
     for (int i = 0; i < N; ++i) pos[i] = i;
-    const bool use_j = ctx.needs_j();
 
-    // One k-element swap proposal: Mn = M + sum (G_in - G_out), no rebuild of A.
+    // One k-element swap proposal: Xn = X + sum (G_in - G_out), no rebuild of A.
     auto propose = [&](int k) {
-      std::copy(M, M + mm, Mn);
-      if (use_j) std::copy(MJ, MJ + mm, MJn);
+      std::copy(X, X + T, Xn);
       for (int s = 0; s < k; ++s) {
         const int j = s + static_cast<int>(fast_index(rng, static_cast<uint32_t>(N - s)));
         std::swap(pos[s], pos[j]);
@@ -131,10 +156,12 @@ struct Anneal {
         while (in[e]);
         in[e] = 2;
         new_e[s] = e;
-        K.add(e, 1.0, Mn, MJn);
-        K.add(set[pos[s]], -1.0, Mn, MJn);
+        const double* gi = K.element(e, scratch.data() + static_cast<size_t>(s) * T);
+        const double* go = gset.data() + static_cast<size_t>(pos[s]) * T;
+        gin[s] = gi;
+        for (int q = 0; q < T; ++q) Xn[q] = (Xn[q] + gi[q]) - go[q];
       }
-      return K.score_of(Mn, MJn);
+      return score_packed<MC, C>(ctx, Xn);
     };
     auto reject = [&](int k) {
       for (int s = 0; s < k; ++s) in[new_e[s]] = 0;
@@ -149,7 +176,7 @@ struct Anneal {
       double sum = 0;
       int cnt = 0;
       for (int t = 0; t < 200; ++t) {
-        const double c = cost_of(ctx.id, propose(k0));
+        const double c = cost_of(C, propose(k0));
         reject(k0);
         if (std::isfinite(c) && std::isfinite(cost) && c > cost) {
           sum += c - cost;
@@ -167,35 +194,36 @@ struct Anneal {
     PlanProgress pr;
     pr.optimizer = "annealing";
     pr.total = iters;
+    const bool progress = static_cast<bool>(o.progress);
     for (long it = 0; it < iters; ++it) {
       const double frac = static_cast<double>(it) / static_cast<double>(iters);
       const int k = std::max(1, static_cast<int>(std::ceil(k0 * (1.0 - frac))));
-      const double T = T0 * (1.0 - frac);
+      const double temp = T0 * (1.0 - frac);
       const double sn = propose(k);
-      const double cn = cost_of(ctx.id, sn);
+      const double cn = cost_of(C, sn);
       bool accept = false;
       if (cn < kInf) {
         if (cn <= cost)
           accept = true;
-        else if (T > 0)
-          accept = rng.uniform() < std::exp(-(cn - cost) / T);
+        else if (temp > 0)
+          accept = rng.uniform() < std::exp(-(cn - cost) / temp);
       }
       if (accept) {
         for (int s = 0; s < k; ++s) {
           in[set[pos[s]]] = 0;
           set[pos[s]] = new_e[s];
           in[new_e[s]] = 1;
+          std::copy(gin[s], gin[s] + T, gset.data() + static_cast<size_t>(pos[s]) * T);
         }
-        std::copy(Mn, Mn + mm, M);
-        if (use_j) std::copy(MJn, MJn + mm, MJ);
+        std::copy(Xn, Xn + T, X);
         cost = cn;
         sc = sn;
         ++accepted;
         if (++since_refresh >= refresh) {
           // Bound the round-off of the rank-3 updates.
-          K.rebuild(set, M, MJ);
-          sc = K.score_of(M, MJ);
-          cost = cost_of(ctx.id, sc);
+          K.rebuild(gset, N, X);
+          sc = score_packed<MC, C>(ctx, X);
+          cost = cost_of(C, sc);
           since_refresh = 0;
         }
         if (cost < best_cost) {
@@ -206,11 +234,11 @@ struct Anneal {
       } else {
         reject(k);
       }
-      if ((it + 1) % o.progress_interval == 0 && o.progress) {
+      if (progress && (it + 1) % o.progress_interval == 0) {
         pr.iteration = it + 1;
         pr.best_score = best_score;
         pr.current_score = sc;
-        pr.temperature = T;
+        pr.temperature = temp;
         report(o, pr);
       }
     }
@@ -225,20 +253,21 @@ struct Anneal {
   }
 };
 
-template <int MC>
+template <int MC, Crit C>
 struct Exchange {
   static SetSearchResult run(const CandidatePool& pool,
                              const PlanOptions& o,
                              const Context& ctx,
                              const std::vector<int>* start) {
     const auto t0 = Clock::now();
-    const Kernel<MC> K(pool, ctx);
-    const int N = o.count, P = pool.size(), mm = K.mm;
+    using K_t = PackedKernel<MC>;
+    const K_t K(pool, ctx);
+    const int N = o.count, P = pool.size(), T = K.size();
     const ExchangeOptions& xo = o.exchange;
     if (xo.max_passes < 0 || xo.max_evaluations_per_pass < N)
       throw InvalidArgument(
           "plan: exchange needs max_passes >= 0 and max_evaluations_per_pass >= N");
-    Rng rng(o.seed ^ 0x9E3779B97F4A7C15ULL);
+    FastRng rng(o.seed ^ 0x9E3779B97F4A7C15ULL);
     std::vector<uint8_t> in(P, 0);
     std::vector<int> set;
     if (start) {
@@ -252,10 +281,11 @@ struct Exchange {
     } else {
       set = random_subset(rng, P, N, in);
     }
-    double M[Kernel<MC>::kSize], MJ[Kernel<MC>::kSize], Mm[Kernel<MC>::kSize],
-        MJm[Kernel<MC>::kSize], Mt[Kernel<MC>::kSize], MJt[Kernel<MC>::kSize];
-    K.rebuild(set, M, MJ);
-    double sc = K.score_of(M, MJ), cost = cost_of(ctx.id, sc);
+    std::vector<double> gset(static_cast<size_t>(N) * T);
+    for (int i = 0; i < N; ++i) K.copy_element(set[i], gset.data() + static_cast<size_t>(i) * T);
+    double X[K_t::kT], Xm[K_t::kT], Xt[K_t::kT], scratch[K_t::kT];
+    K.rebuild(gset, N, X);
+    double sc = score_packed<MC, C>(ctx, X), cost = cost_of(C, sc);
     SetSearchResult r;
     r.trace.optimizer = "exchange";
     r.trace.start_score = sc;
@@ -264,29 +294,27 @@ struct Exchange {
     long evals = 0, accepted = 0, passes = 0;
     PlanProgress pr;
     pr.optimizer = "exchange";
+    const bool progress = static_cast<bool>(o.progress);
     for (; passes < xo.max_passes; ++passes) {
       bool improved = false;
       for (int p = 0; p < N; ++p) {
-        std::copy(M, M + mm, Mm);
-        std::copy(MJ, MJ + mm, MJm);
-        K.add(set[p], -1.0, Mm, MJm);
-        double best_c = cost, best_s = sc;
+        const double* go = gset.data() + static_cast<size_t>(p) * T;
+        for (int q = 0; q < T; ++q) Xm[q] = X[q] - go[q];
+        double best_c = cost;
         int best_e = -1;
         for (long t = 0; t < per_position; ++t) {
           const int e = all ? static_cast<int>(t) : static_cast<int>(rng.index(P));
           if (in[e]) continue;
-          std::copy(Mm, Mm + mm, Mt);
-          std::copy(MJm, MJm + mm, MJt);
-          K.add(e, 1.0, Mt, MJt);
-          const double s = K.score_of(Mt, MJt);
-          const double c = cost_of(ctx.id, s);
+          const double* g = K.element(e, scratch);
+          for (int q = 0; q < T; ++q) Xt[q] = Xm[q] + g[q];
+          const double s = score_packed<MC, C>(ctx, Xt);
+          const double c = cost_of(C, s);
           ++evals;
           if (c < best_c - 1e-12 * std::abs(best_c)) {
             best_c = c;
-            best_s = s;
             best_e = e;
           }
-          if (o.progress && evals % o.progress_interval == 0) {
+          if (progress && evals % o.progress_interval == 0) {
             pr.iteration = evals;
             pr.best_score = sc;
             pr.current_score = sc;
@@ -297,10 +325,10 @@ struct Exchange {
           in[set[p]] = 0;
           set[p] = best_e;
           in[best_e] = 1;
-          K.rebuild(set, M, MJ);
-          sc = K.score_of(M, MJ);
-          cost = cost_of(ctx.id, sc);
-          (void)best_s;
+          K.copy_element(best_e, gset.data() + static_cast<size_t>(p) * T);
+          K.rebuild(gset, N, X);
+          sc = score_packed<MC, C>(ctx, X);
+          cost = cost_of(C, sc);
           ++accepted;
           improved = true;
         }
@@ -321,25 +349,47 @@ struct Exchange {
   }
 };
 
-template <template <int> class F, typename... Args>
-SetSearchResult dispatch(int m, Args&&... args) {
+// The criterion is chosen once: the optimizer's loop is compiled per criterion and per m
+// (fixed-size code for m = 1..7, runtime size above).
+template <template <int, Crit> class F, int MC, typename... Args>
+SetSearchResult dispatch_criterion(Crit id, Args&&... args) {
+  switch (id) {
+    case Crit::kappa_a:
+      return F<MC, Crit::kappa_a>::run(std::forward<Args>(args)...);
+    case Crit::kappa_j:
+      return F<MC, Crit::kappa_j>::run(std::forward<Args>(args)...);
+    case Crit::d_opt:
+      return F<MC, Crit::d_opt>::run(std::forward<Args>(args)...);
+    case Crit::a_opt:
+      return F<MC, Crit::a_opt>::run(std::forward<Args>(args)...);
+    case Crit::e_opt:
+      return F<MC, Crit::e_opt>::run(std::forward<Args>(args)...);
+    case Crit::o1:
+      return F<MC, Crit::o1>::run(std::forward<Args>(args)...);
+    default:
+      return F<MC, Crit::task>::run(std::forward<Args>(args)...);
+  }
+}
+
+template <template <int, Crit> class F, typename... Args>
+SetSearchResult dispatch(int m, Crit id, Args&&... args) {
   switch (m) {
     case 1:
-      return F<1>::run(std::forward<Args>(args)...);
+      return dispatch_criterion<F, 1>(id, std::forward<Args>(args)...);
     case 2:
-      return F<2>::run(std::forward<Args>(args)...);
+      return dispatch_criterion<F, 2>(id, std::forward<Args>(args)...);
     case 3:
-      return F<3>::run(std::forward<Args>(args)...);
+      return dispatch_criterion<F, 3>(id, std::forward<Args>(args)...);
     case 4:
-      return F<4>::run(std::forward<Args>(args)...);
+      return dispatch_criterion<F, 4>(id, std::forward<Args>(args)...);
     case 5:
-      return F<5>::run(std::forward<Args>(args)...);
+      return dispatch_criterion<F, 5>(id, std::forward<Args>(args)...);
     case 6:
-      return F<6>::run(std::forward<Args>(args)...);
+      return dispatch_criterion<F, 6>(id, std::forward<Args>(args)...);
     case 7:
-      return F<7>::run(std::forward<Args>(args)...);
+      return dispatch_criterion<F, 7>(id, std::forward<Args>(args)...);
     default:
-      return F<0>::run(std::forward<Args>(args)...);
+      return dispatch_criterion<F, 0>(id, std::forward<Args>(args)...);
   }
 }
 
@@ -390,7 +440,7 @@ SetSearchResult anneal(const RobotModel& robot, const CandidatePool& pool, const
   validate(pool, o);
   std::vector<double> task;
   const Context ctx = make_context(robot, pool, o, &task);
-  SetSearchResult r = dispatch<Anneal>(ctx.m, pool, o, ctx);
+  SetSearchResult r = dispatch<Anneal>(ctx.m, ctx.id, pool, o, ctx);
   finish_trace(r.trace, ctx);
   return r;
 }
@@ -402,7 +452,7 @@ SetSearchResult exchange(const RobotModel& robot,
   validate(pool, o);
   std::vector<double> task;
   const Context ctx = make_context(robot, pool, o, &task);
-  SetSearchResult r = dispatch<Exchange>(ctx.m, pool, o, ctx, start);
+  SetSearchResult r = dispatch<Exchange>(ctx.m, ctx.id, pool, o, ctx, start);
   finish_trace(r.trace, ctx);
   return r;
 }

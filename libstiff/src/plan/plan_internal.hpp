@@ -82,6 +82,84 @@ inline uint32_t fast_index(Rng& rng, uint32_t n) {
   return static_cast<uint32_t>(prod >> 32);
 }
 
+/// std::mt19937_64 re-implemented header-only so that the annealing's draws inline (the
+/// standard engine's operator() is an out-of-line call): the same algorithm, seeding and
+/// tempering, hence exactly the same stream as Rng(seed).engine() (tested). index(), uniform()
+/// and fast_index() map it exactly as Rng does.
+class FastRng {
+ public:
+  explicit FastRng(uint64_t seed) {
+    x_[0] = seed;
+    for (int i = 1; i < kN; ++i) x_[i] = 6364136223846793005ULL * (x_[i - 1] ^ (x_[i - 1] >> 62)) + i;
+    i_ = kN;
+  }
+#if defined(__GNUC__)
+  __attribute__((always_inline))
+#endif
+  uint64_t operator()() {
+    if (i_ >= kN) twist();
+    uint64_t z = x_[i_++];
+    z ^= (z >> 29) & 0x5555555555555555ULL;
+    z ^= (z << 17) & 0x71d67fffeda60000ULL;
+    z ^= (z << 37) & 0xfff7eee000000000ULL;
+    z ^= z >> 43;
+    return z;
+  }
+  /// Uniform in [0, 1) with 53 random bits (as Rng::uniform).
+  double uniform() { return static_cast<double>((*this)() >> 11) * 0x1.0p-53; }
+  /// Uniform integer in [0, n) by rejection (as Rng::index).
+  uint64_t index(uint64_t n) {
+    const uint64_t limit = UINT64_MAX - UINT64_MAX % n;
+    uint64_t x;
+    do x = (*this)();
+    while (x >= limit);
+    return x % n;
+  }
+
+ private:
+  static constexpr int kN = 312, kM = 156;
+  static constexpr uint64_t kUpper = ~uint64_t(0) << 31, kLower = ~kUpper;
+  static constexpr uint64_t kA = 0xb5026f5aa96619e9ULL;
+#if defined(__GNUC__)
+  __attribute__((noinline))
+#endif
+  void twist() {
+    int k = 0;
+    for (; k < kN - kM; ++k) {
+      const uint64_t y = (x_[k] & kUpper) | (x_[k + 1] & kLower);
+      x_[k] = x_[k + kM] ^ (y >> 1) ^ ((y & 1) ? kA : 0);
+    }
+    for (; k < kN - 1; ++k) {
+      const uint64_t y = (x_[k] & kUpper) | (x_[k + 1] & kLower);
+      x_[k] = x_[k + (kM - kN)] ^ (y >> 1) ^ ((y & 1) ? kA : 0);
+    }
+    const uint64_t y = (x_[kN - 1] & kUpper) | (x_[0] & kLower);
+    x_[kN - 1] = x_[kM - 1] ^ (y >> 1) ^ ((y & 1) ? kA : 0);
+    i_ = 0;
+  }
+  uint64_t x_[kN];
+  int i_;
+};
+
+/// fast_index on FastRng: the same mapping, hence the same integers for the same stream.
+#if defined(__GNUC__)
+__attribute__((always_inline))
+#endif
+inline uint32_t fast_index(FastRng& rng, uint32_t n) {
+  uint64_t x = rng() >> 32;
+  uint64_t prod = x * n;
+  uint32_t low = static_cast<uint32_t>(prod);
+  if (low < n) {
+    const uint32_t threshold = static_cast<uint32_t>(-n) % n;
+    while (low < threshold) {
+      x = rng() >> 32;
+      prod = x * n;
+      low = static_cast<uint32_t>(prod);
+    }
+  }
+  return static_cast<uint32_t>(prod >> 32);
+}
+
 // Cholesky M = L L^T from the lower triangle; false when not numerically positive definite.
 // The diagonal of L is stored inverted (1 / L_jj): the triangular solves then multiply.
 template <int MC>
@@ -171,7 +249,7 @@ inline double score(const Context& c, const double* M, const double* MJ) {
     default:
       break;
   }
-  double L[kSize];
+  double L[kSize] = {};  // (only the lower triangle is used; silences -Wmaybe-uninitialized)
   const bool ok = cholesky<MC>(M, L, m);
   switch (c.id) {
     case Crit::d_opt:
@@ -201,6 +279,159 @@ inline double score(const Context& c, const double* M, const double* MJ) {
     }
     default:
       return -kInf;
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+// Packed kernels: the fast path of the set optimizers. A symmetric m x m matrix is its packed
+// lower triangle, row-major ((k, l), l <= k, at k (k + 1) / 2 + l): 15 doubles for m = 5.
+// Every function does the same floating-point operations in the same order as its full-storage
+// counterpart above (add_element, cholesky, invert_lower, ...), so both paths give the same
+// values bit for bit (tests/unit/plan/plan_test.cpp, PlanFastPath).
+// ------------------------------------------------------------------------------------------
+
+constexpr int packed_size(int m) { return m * (m + 1) / 2; }
+
+/// Largest per-element table finalize() stores (CandidatePool::packed_element_information).
+/// A cache budget rather than a memory one: the annealing reads about two random elements per
+/// step, and once the table no longer fits in the L2 cache these reads miss, so computing the
+/// element from the per-pose data (which stays cached) is faster. Measured on a 2-core Xeon VM
+/// (2 MB L2 per core), m = 5: 1e4 elements (1.2 MB): 7.1e6 swaps/s with the table, 5.1e6
+/// without; 1e5 elements (12 MB): 3.0e6 with, 4.6e6 without (docs/benchmarks.md).
+constexpr double kElementTableBudgetBytes = 4.0 * 1024 * 1024;
+
+/// Packed A_e^T A_e / sigma_e^2 of element e, computed as add_element does.
+template <int MC>
+inline void element_information(const CandidatePool& p, int e, double* G) {
+  const int m = dim<MC>(p.identified_count());
+  const int pose = p.element_pose[e];
+  const double* jl = p.packed_load_jacobian.data() + static_cast<size_t>(pose) * 3 * m;
+  const double* f = p.packed_force.data() + 3 * static_cast<size_t>(p.element_load[e]);
+  const double* g = p.packed_gram.data() + static_cast<size_t>(pose) * m * m;
+  double t[kMaxM];
+  for (int k = 0; k < m; ++k) t[k] = jl[3 * k] * f[0] + jl[3 * k + 1] * f[1] + jl[3 * k + 2] * f[2];
+  const double s = p.weight2[pose];
+  int idx = 0;
+  for (int k = 0; k < m; ++k) {
+    const double sk = s * t[k];
+    for (int l = 0; l <= k; ++l) G[idx++] = sk * t[l] * g[k * m + l];
+  }
+}
+
+/// Packed Jp^T Jp of element e's pose (kappa_j), as add_jacobian adds it.
+template <int MC>
+inline void element_jacobian_information(const CandidatePool& p, int e, double* G) {
+  const int m = dim<MC>(p.identified_count());
+  const double* g = p.packed_gram.data() + static_cast<size_t>(p.element_pose[e]) * m * m;
+  int idx = 0;
+  for (int k = 0; k < m; ++k)
+    for (int l = 0; l <= k; ++l) G[idx++] = g[k * m + l];
+}
+
+template <int MC>
+inline bool cholesky_packed(const double* M, double* L, int m_runtime) {
+  const int m = dim<MC>(m_runtime);
+#pragma GCC unroll 16
+  for (int j = 0; j < m; ++j) {
+    const int rj = j * (j + 1) / 2;
+    double d = M[rj + j];
+#pragma GCC unroll 16
+    for (int k = 0; k < j; ++k) d -= L[rj + k] * L[rj + k];
+    // = !(d > 1e-14 |M_jj|) || !isfinite(d)
+    if (!(d > 1e-14 * std::abs(M[rj + j]) && d < kInf)) return false;
+    const double inv = 1.0 / std::sqrt(d);
+    L[rj + j] = inv;
+#pragma GCC unroll 16
+    for (int i = j + 1; i < m; ++i) {
+      const int ri = i * (i + 1) / 2;
+      double s = M[ri + j];
+#pragma GCC unroll 16
+      for (int k = 0; k < j; ++k) s -= L[ri + k] * L[rj + k];
+      L[ri + j] = s * inv;
+    }
+  }
+  return true;
+}
+
+template <int MC>
+inline void invert_lower_packed(const double* L, double* Li, int m_runtime) {
+  const int m = dim<MC>(m_runtime);
+#pragma GCC unroll 16
+  for (int j = 0; j < m; ++j) {
+    Li[j * (j + 1) / 2 + j] = L[j * (j + 1) / 2 + j];
+#pragma GCC unroll 16
+    for (int i = j + 1; i < m; ++i) {
+      const int ri = i * (i + 1) / 2;
+      double s = 0.0;
+#pragma GCC unroll 16
+      for (int k = j; k < i; ++k) s -= L[ri + k] * Li[k * (k + 1) / 2 + j];
+      Li[ri + j] = s * L[ri + i];
+    }
+  }
+}
+
+template <int MC>
+inline double trace_inverse_packed(const double* Li, int m_runtime) {
+  const int n = packed_size(dim<MC>(m_runtime));
+  double s = 0.0;
+#pragma GCC unroll 136
+  for (int i = 0; i < n; ++i) s += Li[i] * Li[i];
+  return s;
+}
+
+template <int MC>
+inline double log_det_packed(const double* L, int m_runtime) {
+  const int m = dim<MC>(m_runtime);
+  double prod = 1.0;
+  for (int i = 0; i < m; ++i) prod *= L[i * (i + 1) / 2 + i];
+  if (std::isfinite(prod) && prod > 0) return -2.0 * std::log(prod);
+  double s = 0.0;
+  for (int i = 0; i < m; ++i) s -= std::log(L[i * (i + 1) / 2 + i]);
+  return 2.0 * s;
+}
+
+template <int MC>
+inline double kappa_inverse_packed(const double* M, int m_runtime) {
+  const int m = dim<MC>(m_runtime);
+  constexpr int kT = packed_size(MC > 0 ? MC : kMaxM);
+  double L[kT], Li[kT];
+  if (!cholesky_packed<MC>(M, L, m)) return 0.0;
+  invert_lower_packed<MC>(L, Li, m);
+  double tr = 0.0;
+  for (int i = 0; i < m; ++i) tr += M[i * (i + 1) / 2 + i];
+  return m / std::sqrt(tr * trace_inverse_packed<MC>(Li, m));
+}
+
+/// score<MC> on a packed matrix X: M, or MJ for kappa_j (the annealing keeps only the one the
+/// criterion needs). The criterion is a template argument: no dispatch in the inner loop.
+template <int MC, Crit C>
+inline double score_packed(const Context& c, const double* X) {
+  const int m = dim<MC>(c.m);
+  constexpr int kT = packed_size(MC > 0 ? MC : kMaxM);
+  if constexpr (C == Crit::kappa_a || C == Crit::kappa_j) {
+    return kappa_inverse_packed<MC>(X, m);
+  } else if constexpr (C == Crit::d_opt || C == Crit::o1 || C == Crit::a_opt) {
+    double L[kT];
+    const bool ok = cholesky_packed<MC>(X, L, m);
+    if constexpr (C == Crit::d_opt) {
+      return ok ? log_det_packed<MC>(L, m) : -kInf;
+    } else if constexpr (C == Crit::o1) {
+      return ok ? std::exp(log_det_packed<MC>(L, m) / (2.0 * m)) /
+                      std::sqrt(static_cast<double>(c.count))
+                : 0.0;
+    } else {
+      if (!ok) return -kInf;
+      double Li[kT];
+      invert_lower_packed<MC>(L, Li, m);
+      return -trace_inverse_packed<MC>(Li, m);
+    }
+  } else {
+    // e_opt, task: full storage and the generic score (an eigensolver or m^3 work anyway).
+    constexpr int kSize = MC > 0 ? MC * MC : kMaxM * kMaxM;
+    double full[kSize];
+    for (int i = 0, idx = 0; i < m; ++i)
+      for (int j = 0; j <= i; ++j) full[i * m + j] = X[idx++];
+    return score<MC>(c, full, full);
   }
 }
 

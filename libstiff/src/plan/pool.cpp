@@ -329,6 +329,17 @@ void CandidatePool::finalize() {
   packed_force.resize(3 * forces.size());
   for (size_t l = 0; l < forces.size(); ++l)
     for (int r = 0; r < 3; ++r) packed_force[3 * l + r] = forces[l](r);
+  // Per-element A_e^T A_e / sigma_e^2 for the optimizers' inner loop, below a memory budget.
+  const int t = plan_detail::packed_size(m);
+  const size_t ne = element_pose.size();
+  packed_element_information.clear();
+  packed_element_information.shrink_to_fit();
+  if (static_cast<double>(ne) * t * sizeof(double) <= plan_detail::kElementTableBudgetBytes) {
+    packed_element_information.resize(ne * t);
+    for (size_t e = 0; e < ne; ++e)
+      plan_detail::element_information<0>(*this, static_cast<int>(e),
+                                          packed_element_information.data() + e * t);
+  }
 }
 
 Eigen::Matrix<double, 3, Eigen::Dynamic> CandidatePool::block(int e) const {

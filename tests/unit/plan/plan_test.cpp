@@ -9,6 +9,8 @@
 #include "stiff/model.hpp"
 #include "stiff/random.hpp"
 #include "test_support.hpp"
+// The optimizers' packed fast path is internal; it is tested against the generic kernels.
+#include "../../../libstiff/src/plan/plan_internal.hpp"
 
 namespace stiff {
 namespace {
@@ -97,6 +99,108 @@ TEST(PlanIncremental, EqualsFullRecomputationOverLongSwapSequences) {
   inc.replace(3, 5);
   const Eigen::MatrixXd expect = before + pool.information(5) - pool.information(out);
   EXPECT_LT((inc.information() - expect).norm(), 1e-12 * expect.norm());
+}
+
+// The optimizers' fast path (packed storage, fixed size, per-element table) gives the same
+// criterion values as the generic path (full storage, runtime size, on-the-fly elements) on
+// random sets: bit for bit, since it does the same operations in the same order.
+template <plan_detail::Crit C>
+void expect_same_scores(const CandidatePool& pool, const plan_detail::Context& ctx, Rng& rng) {
+  using namespace plan_detail;
+  const int m = pool.identified_count(), t = packed_size(m);
+  const bool jac = C == Crit::kappa_j;
+  for (int trial = 0; trial < 200; ++trial) {
+    std::vector<double> full(m * m, 0.0), packed(t, 0.0), fixed(t, 0.0), g(t);
+    for (int i = 0; i < 10; ++i) {
+      const int e = static_cast<int>(rng.index(pool.size()));
+      if (jac) {
+        add_jacobian<0>(pool, e, 1.0, full.data());
+        element_jacobian_information<0>(pool, e, g.data());
+      } else {
+        add_element<0>(pool, e, 1.0, full.data());
+        element_information<0>(pool, e, g.data());
+        if (!pool.packed_element_information.empty()) {
+          for (int q = 0; q < t; ++q) ASSERT_EQ(g[q], pool.packed_element_information[e * t + q]);
+        }
+      }
+      for (int q = 0; q < t; ++q) packed[q] += g[q];
+    }
+    const double generic = score<0>(ctx, full.data(), full.data());
+    EXPECT_EQ((score_packed<5, C>(ctx, packed.data())), generic) << static_cast<int>(C);
+    EXPECT_EQ((score_packed<0, C>(ctx, packed.data())), generic) << static_cast<int>(C);
+    EXPECT_TRUE(std::isfinite(generic));
+  }
+}
+
+TEST(PlanFastPath, SameCriterionValuesAsGenericPathOnRandomSets) {
+  using namespace plan_detail;
+  const RobotModel robot = test::rokae();
+  const CandidatePool pool = build_pool(robot, paper_pool(200, 50));
+  ASSERT_EQ(pool.identified_count(), 5);
+  ASSERT_EQ(pool.packed_element_information.size(), 15u * pool.size());  // table stored
+  const std::vector<double> task = task_information(robot, test::paper_design_j(),
+                                                    pool.identified_joints);
+  Rng rng(11);
+  for (Crit id : {Crit::kappa_a, Crit::kappa_j, Crit::d_opt, Crit::a_opt, Crit::e_opt, Crit::o1,
+                  Crit::task}) {
+    Context ctx;
+    ctx.id = id;
+    ctx.m = 5;
+    ctx.count = 10;
+    ctx.task = task.data();
+    switch (id) {
+      case Crit::kappa_a: expect_same_scores<Crit::kappa_a>(pool, ctx, rng); break;
+      case Crit::kappa_j: expect_same_scores<Crit::kappa_j>(pool, ctx, rng); break;
+      case Crit::d_opt: expect_same_scores<Crit::d_opt>(pool, ctx, rng); break;
+      case Crit::a_opt: expect_same_scores<Crit::a_opt>(pool, ctx, rng); break;
+      case Crit::e_opt: expect_same_scores<Crit::e_opt>(pool, ctx, rng); break;
+      case Crit::o1: expect_same_scores<Crit::o1>(pool, ctx, rng); break;
+      case Crit::task: expect_same_scores<Crit::task>(pool, ctx, rng); break;
+    }
+  }
+  // Singular sets give the worst value on both paths.
+  std::vector<double> zero_full(25, 0.0), zero_packed(15, 0.0);
+  Context ctx;
+  ctx.m = 5;
+  ctx.count = 10;
+  EXPECT_EQ((score_packed<5, Crit::kappa_a>(ctx, zero_packed.data())), 0.0);
+  ctx.id = Crit::d_opt;
+  EXPECT_EQ((score_packed<5, Crit::d_opt>(ctx, zero_packed.data())),
+            score<0>(ctx, zero_full.data(), zero_full.data()));
+}
+
+TEST(PlanFastPath, AnnealingWithAndWithoutElementTableAndFastRng) {
+  using namespace plan_detail;
+  // FastRng is std::mt19937_64, hence Rng's stream.
+  for (uint64_t seed : {1ULL, 42ULL, (1ULL << 63) + 5}) {
+    Rng a(seed), b(seed);
+    FastRng f(seed), g(seed);
+    for (int i = 0; i < 2000; ++i) ASSERT_EQ(f(), a.engine()());
+    for (int i = 0; i < 2000; ++i) {
+      ASSERT_EQ(fast_index(g, 1000u + i), fast_index(b, 1000u + i));
+      ASSERT_EQ(g.index(7 + i), b.index(7 + i));
+      ASSERT_EQ(g.uniform(), b.uniform());
+    }
+  }
+  // A pool above the table budget computes the elements on the fly: same plan.
+  const RobotModel robot = test::rokae();
+  const CandidatePool pool = build_pool(robot, paper_pool(100, 20));
+  ASSERT_FALSE(pool.packed_element_information.empty());
+  CandidatePool no_table = pool;
+  no_table.packed_element_information.clear();
+  PlanOptions o;
+  o.annealing.iterations = 5000;
+  o.exchange.max_passes = 2;
+  for (const std::string crit : {"kappa_a", "d_opt", "a_opt"}) {
+    o.criterion = crit;
+    const SetSearchResult a = anneal(robot, pool, o), b = anneal(robot, no_table, o);
+    EXPECT_EQ(a.elements, b.elements) << crit;
+    EXPECT_EQ(a.score, b.score) << crit;
+    const SetSearchResult x = exchange(robot, pool, o), y = exchange(robot, no_table, o);
+    EXPECT_EQ(x.elements, y.elements) << crit;
+    EXPECT_EQ(x.score, y.score) << crit;
+    EXPECT_NEAR(a.score, set_score(robot, pool, a.elements, o), 1e-12 * std::abs(a.score)) << crit;
+  }
 }
 
 TEST(PlanCriteria, RegistryAndEvaluateAgreeWithPoolKernel) {

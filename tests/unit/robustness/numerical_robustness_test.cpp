@@ -263,6 +263,7 @@ TEST(Robustness, PlanThatCannotBeMetSaysWhy) {
     EXPECT_FALSE(std::string(e.what()).empty());
   }
   pool.min_sigma_m = 50.0;  // no pose of a 1 m arm has sigma_min(J) = 50 m
+  pool.pose_count = 2;      // (the pool gives up after a bounded number of draws)
   o.count = 10;
   try {
     plan_measurements(rokae(), pool, o);

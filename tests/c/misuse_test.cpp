@@ -1,0 +1,304 @@
+// Every C ABI function on bad input: NULL handles and pointers, NaN and infinite values, wrong
+// sizes, unknown names, buffers too small. Each returns its status and a message that starts
+// with the function's name; nothing crashes (ASan/valgrind runs of this test check leaks).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <functional>
+#include <limits>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "stiff/stiff.h"
+
+namespace {
+
+const double kNaN = std::numeric_limits<double>::quiet_NaN();
+const double kInf = std::numeric_limits<double>::infinity();
+
+std::string src(const char* rel) { return std::string(STIFF_SOURCE_DIR) + "/" + rel; }
+
+struct Fixture {
+  stiff_robot* robot = nullptr;
+  stiff_dataset* design = nullptr;
+  stiff_dataset* data = nullptr;
+  stiff_result* fit = nullptr;
+  stiff_model* model = nullptr;
+  Fixture() {
+    const double k[6] = {5.0914e4, 1.6382e4, 3.1311e4, 7.7911e3, 5.6136e3, 4.0e3};
+    EXPECT_EQ(stiff_robot_load(&robot, src("examples/robots/rokae.yaml").c_str()), STIFF_OK);
+    EXPECT_EQ(
+        stiff_dataset_read_csv(&design, robot, src("examples/paper/design_kappa_a.csv").c_str()),
+        STIFF_OK);
+    EXPECT_EQ(stiff_simulate(&data, robot, design, nullptr, k, 6, nullptr), STIFF_OK);
+    EXPECT_EQ(stiff_identify(&fit, robot, data, nullptr), STIFF_OK);
+    EXPECT_EQ(stiff_model_create(&model, robot, fit), STIFF_OK);
+  }
+  ~Fixture() {
+    stiff_model_destroy(model);
+    stiff_result_destroy(fit);
+    stiff_dataset_destroy(data);
+    stiff_dataset_destroy(design);
+    stiff_robot_destroy(robot);
+  }
+};
+
+struct Case {
+  const char* function;
+  stiff_status expected;
+  std::function<stiff_status()> call;
+};
+
+TEST(CApiMisuse, EveryFunctionReturnsItsStatusAndNamesItself) {
+  Fixture f;
+  const double q[6] = {0.1, 1.2, 0.5, -1.0, 1.3, 0.0};
+  const double q_nan[6] = {0.1, kNaN, 0.5, -1.0, 1.3, 0.0};
+  const double w[6] = {20, -30, 25, 0, 0, 0};
+  const double w_inf[6] = {20, kInf, 25, 0, 0, 0};
+  double out[64];
+  double pose[16];
+  char text[4];
+  size_t needed = 0, n = 0;
+  int flag = 0;
+  stiff_robot* r = nullptr;
+  stiff_dataset* d = nullptr;
+  stiff_result* res = nullptr;
+  stiff_model* m = nullptr;
+  stiff_plan* p = nullptr;
+  stiff_diagnosis* dg = nullptr;
+  stiff_robot_tool_pose(pose, f.robot, q, 6);
+  const std::vector<Case> cases = {
+      {"stiff_robot_load", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_robot_load(nullptr, "x.yaml"); }},
+      {"stiff_robot_load", STIFF_E_INVALID_ARGUMENT, [&] { return stiff_robot_load(&r, nullptr); }},
+      {"stiff_robot_load", STIFF_E_IO, [&] { return stiff_robot_load(&r, "/nonexistent.yaml"); }},
+      {"stiff_robot_load", STIFF_E_PARSE,
+       [&] { return stiff_robot_load(&r, src("examples/paper/design_kappa_a.csv").c_str()); }},
+      {"stiff_robot_dof", STIFF_E_INVALID_ARGUMENT, [&] { return stiff_robot_dof(&n, nullptr); }},
+      {"stiff_robot_dof", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_robot_dof(nullptr, f.robot); }},
+      {"stiff_robot_name", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_robot_name(text, sizeof text, &needed, f.robot); }},
+      {"stiff_robot_limits", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_robot_limits(out, out, 3, &needed, f.robot); }},
+      {"stiff_robot_tool_pose", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_robot_tool_pose(pose, f.robot, q_nan, 6); }},
+      {"stiff_robot_tool_pose", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_robot_tool_pose(pose, f.robot, q, 5); }},
+      {"stiff_robot_jacobian", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_robot_jacobian(out, 35, &needed, f.robot, q, 6); }},
+      {"stiff_dataset_read_csv", STIFF_E_IO,
+       [&] { return stiff_dataset_read_csv(&d, f.robot, "/nonexistent.csv"); }},
+      {"stiff_dataset_read_csv", STIFF_E_PARSE,
+       [&] {
+         return stiff_dataset_read_csv(&d, f.robot, src("examples/robots/rokae.yaml").c_str());
+       }},
+      {"stiff_dataset_write_csv", STIFF_E_IO,
+       [&] { return stiff_dataset_write_csv(f.data, "/nonexistent-dir/x.csv"); }},
+      {"stiff_dataset_write_csv", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_dataset_write_csv(nullptr, "x.csv"); }},
+      {"stiff_dataset_create", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_dataset_create(&d, 1, 6, q_nan, w, nullptr, nullptr, nullptr); }},
+      {"stiff_dataset_create", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_dataset_create(&d, 0, 6, q, w, nullptr, nullptr, nullptr); }},
+      {"stiff_dataset_create", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_dataset_create(&d, 1, 6, q, nullptr, nullptr, nullptr, nullptr); }},
+      {"stiff_dataset_size", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_dataset_size(&n, &n, nullptr); }},
+      {"stiff_dataset_has", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_dataset_has(&flag, f.data, static_cast<stiff_column>(99)); }},
+      {"stiff_dataset_get", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_dataset_get(out, 2, &needed, f.data, STIFF_COLUMN_FORCE); }},
+      {"stiff_dataset_get", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_dataset_get(out, 64, &needed, f.design, STIFF_COLUMN_DISPLACEMENT); }},
+      {"stiff_dataset_set_displacement", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_dataset_set_displacement(f.design, out, 3); }},
+      {"stiff_dataset_id", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_dataset_id(text, sizeof text, &needed, f.data, 99); }},
+      {"stiff_noise_read", STIFF_E_IO,
+       [&] {
+         stiff_noise_options o;
+         std::memset(&o, 0, sizeof o);
+         o.struct_size = sizeof o;
+         return stiff_noise_read(&o, "/nonexistent.yaml");
+       }},
+      {"stiff_design_random", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_design_random(&d, f.robot, 0, 1); }},
+      {"stiff_simulate", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_simulate(&d, f.robot, f.design, nullptr, w_inf, 6, nullptr); }},
+      {"stiff_simulate", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_simulate(&d, f.robot, f.design, nullptr, w, 5, nullptr); }},
+      {"stiff_simulate", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         stiff_noise_options o;
+         std::memset(&o, 0, sizeof o);
+         o.struct_size = sizeof o;
+         o.tracker_sigma_m = -1;
+         const double k[6] = {1, 1, 1, 1, 1, 1};
+         return stiff_simulate(&d, f.robot, f.design, nullptr, k, 6, &o);
+       }},
+      {"stiff_identify", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_identify(&res, f.robot, f.design, nullptr); }},
+      {"stiff_identify", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         stiff_identify_options o = STIFF_IDENTIFY_OPTIONS_INIT;
+         o.loss = "squared_sinus";
+         return stiff_identify(&res, f.robot, f.data, &o);
+       }},
+      {"stiff_identify", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         // A newer caller's larger struct with non-zero unknown fields.
+         struct Bigger {
+           stiff_identify_options o;
+           double future;
+         } b;
+         std::memset(&b, 0, sizeof b);
+         b.o.struct_size = sizeof b;
+         b.future = 1.0;
+         return stiff_identify(&res, f.robot, f.data, &b.o);
+       }},
+      {"stiff_result_read_json", STIFF_E_PARSE,
+       [&] { return stiff_result_read_json(&res, src("examples/robots/rokae.yaml").c_str()); }},
+      {"stiff_result_write_json", STIFF_E_IO,
+       [&] { return stiff_result_write_json(f.fit, "/nonexistent-dir/fit.json"); }},
+      {"stiff_result_json", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_result_json(text, sizeof text, &needed, f.fit); }},
+      {"stiff_result_joint_stiffness", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_result_joint_stiffness(out, 5, &needed, f.fit); }},
+      {"stiff_result_joint_stiffness_se", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_result_joint_stiffness_se(out, 6, &needed, nullptr); }},
+      {"stiff_result_parameters", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_result_parameters(out, nullptr, 1, &needed, f.fit); }},
+      {"stiff_result_covariance", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_result_covariance(out, 35, &needed, f.fit); }},
+      {"stiff_result_residuals", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_result_residuals(out, 29, &needed, f.fit); }},
+      {"stiff_result_statistics", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         stiff_fit_statistics s;
+         std::memset(&s, 0, sizeof s);  // struct_size 0
+         return stiff_result_statistics(&s, f.fit);
+       }},
+      {"stiff_result_warning", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_result_warning(text, sizeof text, &needed, f.fit, 1000); }},
+      {"stiff_model_create", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_model_create(&m, f.robot, nullptr); }},
+      {"stiff_predict", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_predict(out, f.model, q_nan, 6, w); }},
+      {"stiff_predict", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_predict(out, f.model, q, 6, w_inf); }},
+      {"stiff_predict", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_predict(out, f.model, q, 7, w); }},
+      {"stiff_predict_batch", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_predict_batch(out, 5, &needed, f.model, q, w, 1, 6); }},
+      {"stiff_effect_name", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_effect_name(text, sizeof text, &needed, 1000); }},
+      {"stiff_effect_describe", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_effect_describe(text, sizeof text, &needed, nullptr, "warp_drive"); }},
+      {"stiff_plan_create", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         stiff_plan_options o;
+         std::memset(&o, 0, sizeof o);
+         o.struct_size = sizeof o;
+         o.criterion = "prettiest";
+         return stiff_plan_create(&p, f.robot, &o);
+       }},
+      {"stiff_plan_create", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         stiff_plan_options o;
+         std::memset(&o, 0, sizeof o);
+         o.struct_size = sizeof o;
+         o.load_min_N = kNaN;
+         return stiff_plan_create(&p, f.robot, &o);
+       }},
+      {"stiff_plan_dataset", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_plan_dataset(&d, nullptr); }},
+      {"stiff_plan_json", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_plan_json(text, sizeof text, &needed, nullptr); }},
+      {"stiff_criteria_json", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_criteria_json(text, sizeof text, &needed, f.robot, f.design, kNaN); }},
+      {"stiff_criterion_name", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_criterion_name(text, sizeof text, &needed, 1000); }},
+      {"stiff_diagnose", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_diagnose(&dg, f.robot, f.design, nullptr, nullptr); }},
+      {"stiff_diagnosis_json", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_diagnosis_json(text, sizeof text, &needed, nullptr); }},
+      {"stiff_diagnosis_verdict", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_diagnosis_verdict(text, sizeof text, &needed, nullptr); }},
+      {"stiff_fmu_export", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_fmu_export("x.fmu", f.robot, nullptr, nullptr); }},
+      {"stiff_ik_analytic", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_ik_analytic(&flag, nullptr); }},
+      {"stiff_tool_pose_batch", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_tool_pose_batch(out, 15, &needed, f.robot, q, 1); }},
+      {"stiff_ik", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         double bad[16];
+         std::memcpy(bad, pose, sizeof bad);
+         bad[3] = kNaN;
+         return stiff_ik(out, 64, &needed, f.robot, bad, nullptr);
+       }},
+      {"stiff_ik_path", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_ik_path(out, 64, &needed, nullptr, nullptr, pose, 1, nullptr); }},
+      {"stiff_compensate_pose", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_compensate_pose(out, f.model, q, 6, w_inf); }},
+      {"stiff_compensate_path", STIFF_E_BUFFER_TOO_SMALL,
+       [&] {
+         return stiff_compensate_path(out, 5, &needed, nullptr, f.model, pose, w, 1, nullptr);
+       }},
+      {"stiff_truth_deviation", STIFF_E_IO,
+       [&] {
+         return stiff_truth_deviation(out, 64, &needed, f.robot, "/nonexistent.yaml", q, pose, w,
+                                      1);
+       }},
+      {"stiff_path_read", STIFF_E_IO,
+       [&] {
+         return stiff_path_read(out, out, nullptr, 1, &needed, &flag, "/nonexistent.csv", nullptr);
+       }},
+  };
+  for (const auto& c : cases) {
+    const stiff_status s = c.call();
+    EXPECT_EQ(s, c.expected) << c.function << ": " << stiff_status_name(s) << " - "
+                             << stiff_last_error();
+    const std::string msg = stiff_last_error();
+    EXPECT_EQ(msg.rfind(c.function, 0), 0u)
+        << "message does not name " << c.function << ": " << msg;
+    EXPECT_GT(msg.size(), std::strlen(c.function) + 4) << c.function;
+  }
+  // Failed creators leave their out-parameters NULL.
+  EXPECT_EQ(r, nullptr);
+  EXPECT_EQ(d, nullptr);
+  EXPECT_EQ(res, nullptr);
+  EXPECT_EQ(m, nullptr);
+  EXPECT_EQ(p, nullptr);
+  EXPECT_EQ(dg, nullptr);
+  // Buffer protocol: `needed` tells the size, and a second call with it succeeds.
+  ASSERT_EQ(stiff_robot_jacobian(out, 0, &needed, f.robot, q, 6), STIFF_E_BUFFER_TOO_SMALL);
+  EXPECT_EQ(needed, 36u);
+  EXPECT_EQ(stiff_robot_jacobian(out, needed, &needed, f.robot, q, 6), STIFF_OK);
+  // Destroy(NULL) is a no-op for every handle type.
+  stiff_robot_destroy(nullptr);
+  stiff_dataset_destroy(nullptr);
+  stiff_result_destroy(nullptr);
+  stiff_model_destroy(nullptr);
+  stiff_plan_destroy(nullptr);
+  stiff_diagnosis_destroy(nullptr);
+}
+
+TEST(CApiMisuse, LastErrorIsPerThread) {
+  stiff_robot* r = nullptr;
+  ASSERT_EQ(stiff_robot_load(&r, "/nonexistent-main.yaml"), STIFF_E_IO);
+  std::string other;
+  std::thread t([&] {
+    stiff_robot* r2 = nullptr;
+    stiff_robot_load(&r2, "/nonexistent-thread.yaml");
+    other = stiff_last_error();
+  });
+  t.join();
+  EXPECT_NE(std::string(stiff_last_error()).find("nonexistent-main"), std::string::npos);
+  EXPECT_NE(other.find("nonexistent-thread"), std::string::npos);
+}
+
+}  // namespace
