@@ -56,6 +56,27 @@ stiff_status stiff_plan_create(stiff_plan** out,
       plan.refine.enabled = o.optimizers & STIFF_PLAN_REFINE;
     }
     if (o.annealing_iterations) plan.annealing.iterations = o.annealing_iterations;
+    if (o.use_workspace_box) {
+      require_finite(o.box_min_m, 3, "box_min_m");
+      require_finite(o.box_max_m, 3, "box_max_m");
+      pool.use_workspace_box = true;
+      pool.box_min_m = Eigen::Vector3d(o.box_min_m);
+      pool.box_max_m = Eigen::Vector3d(o.box_max_m);
+      for (int k = 0; k < 3; ++k)
+        if (!(pool.box_min_m(k) < pool.box_max_m(k)))
+          throw InvalidArgument("workspace box: min must be below max on every axis");
+    }
+    if (o.fixture_direction_count) {
+      require(o.fixture_directions, "fixture_directions");
+      require(o.fixture_forces_N, "fixture_forces_N");
+      if (!o.fixture_force_count) throw InvalidArgument("fixture_forces_N: no force given");
+      require_finite(o.fixture_directions, 3 * o.fixture_direction_count, "fixture_directions");
+      require_finite(o.fixture_forces_N, o.fixture_force_count, "fixture_forces_N");
+      for (size_t k = 0; k < o.fixture_direction_count; ++k)
+        pool.fixture_directions.emplace_back(o.fixture_directions[3 * k], o.fixture_directions[3 * k + 1],
+                                             o.fixture_directions[3 * k + 2]);
+      pool.fixture_forces_N.assign(o.fixture_forces_N, o.fixture_forces_N + o.fixture_force_count);
+    }
     if (o.task) plan.task = o.task->data;
     if (o.progress) {
       const auto fn = o.progress;

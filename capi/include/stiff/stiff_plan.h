@@ -48,6 +48,15 @@ typedef struct stiff_plan_options {
   double tracker_ppm;             /**< distance-proportional tracker noise [0] */
   stiff_plan_progress_fn progress;
   void* progress_user_data;
+  uint32_t use_workspace_box;     /**< non-zero: keep only poses whose measured point lies in the
+                                       box below */
+  double box_min_m[3];            /**< workspace box, base frame [m] */
+  double box_max_m[3];
+  const double* fixture_directions; /**< k x 3 load directions of a loading fixture (base frame,
+                                         normalised inside); NULL: per-axis loads as above */
+  size_t fixture_direction_count;   /**< k */
+  const double* fixture_forces_N;   /**< force magnitudes applied along each direction [N] */
+  size_t fixture_force_count;
 } stiff_plan_options;
 
 /** Plan measurements for robot. Errors: INVALID_ARGUMENT (count larger than the pool, too few

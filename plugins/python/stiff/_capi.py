@@ -211,6 +211,13 @@ class PlanOptions(C.Structure):
         ("tracker_ppm", C.c_double),
         ("progress", PLAN_PROGRESS_FN),
         ("progress_user_data", C.c_void_p),
+        ("use_workspace_box", C.c_uint32),
+        ("box_min_m", C.c_double * 3),
+        ("box_max_m", C.c_double * 3),
+        ("fixture_directions", c_double_p),
+        ("fixture_direction_count", C.c_size_t),
+        ("fixture_forces_N", c_double_p),
+        ("fixture_force_count", C.c_size_t),
     ]
 
 

@@ -74,6 +74,9 @@ def plan(robot: Robot, count: int = 10, criterion: str = "d_opt", *, seed: int =
          q_fixed: Optional[Sequence[float]] = None, optimizers: Sequence[str] = ("annealing", "exchange"),
          annealing_iterations: int = 100000, candidate_file=None, task: Optional[Dataset] = None,
          tracker_sigma_m: float = 10e-6, tracker_ppm: float = 0.0,
+         workspace_box_m: Optional[Sequence[Sequence[float]]] = None,
+         fixture_directions: Optional[Sequence[Sequence[float]]] = None,
+         fixture_forces_N: Optional[Sequence[float]] = None,
          progress: Optional[Callable[[str, int, int, float], bool]] = None) -> Plan:
     """Plan `count` measurements (poses and loads) on `criterion` (default d_opt: it predicts
     best in the Monte-Carlo study of docs/paper-study.md; "kappa_a" is the paper's). `q_fixed` holds joints at
@@ -107,6 +110,18 @@ def plan(robot: Robot, count: int = 10, criterion: str = "d_opt", *, seed: int =
     if task is not None:
         o.task = task._h
     o.tracker_sigma_m, o.tracker_ppm = tracker_sigma_m, tracker_ppm
+    if workspace_box_m is not None:
+        lo, hi = (list(map(float, v)) for v in workspace_box_m)
+        o.use_workspace_box = 1
+        o.box_min_m[:], o.box_max_m[:] = lo, hi
+    if fixture_directions is not None:
+        if fixture_forces_N is None:
+            raise ValueError("fixture_directions need fixture_forces_N")
+        dirs = np.ascontiguousarray(fixture_directions, dtype=np.float64).reshape(-1, 3)
+        forces = _c.as_array(fixture_forces_N).ravel()
+        keep += [dirs, forces]
+        o.fixture_directions, o.fixture_direction_count = _c.ptr(dirs), dirs.shape[0]
+        o.fixture_forces_N, o.fixture_force_count = _c.ptr(forces), forces.size
     raised = []
     if progress is not None:
         def trampoline(opt, it, total, best, _):

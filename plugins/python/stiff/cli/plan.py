@@ -56,6 +56,11 @@ def register(sub):
                    help="comma-separated: annealing, exchange (default both)")
     p.add_argument("--refine", action="store_true", help="refine poses and loads continuously with NLopt")
     p.add_argument("--candidates", help="CSV whose poses are the candidates")
+    p.add_argument("--box", metavar="XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
+                   help="workspace box of the measured point, base frame [mm]")
+    p.add_argument("--fixture", metavar="X,Y,Z;X,Y,Z;...",
+                   help="load directions of a loading fixture (base frame); with --fixture-forces")
+    p.add_argument("--fixture-forces", metavar="F1,F2,...", help="force magnitudes along each fixture direction [N]")
     p.add_argument("--task", help="CSV of task poses and loads (for --criterion task)")
     p.add_argument("--tracker-sigma-um", type=float, default=10.0, help="row weighting noise [um]")
     p.add_argument("--evaluate", help="only evaluate every criterion for this set (CSV)")
@@ -109,6 +114,23 @@ def run(args):
     if args.refine:
         optimizers.append("refine")
     task = api.Dataset.read(args.task, robot) if args.task else None
+    box = None
+    if args.box:
+        try:
+            v = [float(x) * 1e-3 for x in args.box.split(",")]
+            assert len(v) == 6
+        except (ValueError, AssertionError):
+            raise UserError(f"--box {args.box}: expected six numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX in mm")
+        box = (v[:3], v[3:])
+    dirs = forces = None
+    if args.fixture or args.fixture_forces:
+        try:
+            dirs = [[float(x) for x in d.split(",")] for d in args.fixture.split(";")]
+            forces = [float(x) for x in args.fixture_forces.split(",")]
+            assert all(len(d) == 3 for d in dirs)
+        except (ValueError, AssertionError, AttributeError):
+            raise UserError("--fixture X,Y,Z;... and --fixture-forces F1,F2,... go together "
+                            "(directions of three numbers, forces in N)")
     with ProgressBar("planning") as bar:
         def progress(optimizer, it, total, best):
             return bar.update(it, total or 1, f"{optimizer} best {best:.4g}")
@@ -119,7 +141,8 @@ def run(args):
                           min_sigma_m=args.min_sigma, q_fixed=_fixed(args, robot.dof),
                           optimizers=optimizers, annealing_iterations=args.iterations,
                           candidate_file=args.candidates, task=task,
-                          tracker_sigma_m=args.tracker_sigma_um * 1e-6, progress=progress)
+                          tracker_sigma_m=args.tracker_sigma_um * 1e-6, workspace_box_m=box,
+                          fixture_directions=dirs, fixture_forces_N=forces, progress=progress)
         except CancelledError:
             raise UserError("stopped (Ctrl-C); nothing written")
     s = result.summary
