@@ -1,132 +1,59 @@
-// FMI 2.0 glue (Model Exchange and Co-Simulation in one binary): state machine, argument
-// checks, logging with the declared categories, FMU state. The model is in model.cpp.
-#include <cmath>
-#include <cstring>
-#include <exception>
+// FMI 2.0 glue (Model Exchange and Co-Simulation in one binary): the FMI 2 signatures, the
+// logger callback and the status mapping. State machine, argument checks, logging, value access
+// and FMU state are in glue_common.cpp (shared with fmi3_glue.cpp), the model in model.cpp.
 #include <memory>
-#include <new>
 #include <string>
+#include <type_traits>
 
 #include "fmi2Functions.h"
-#include "glue_util.h"
-#include "model.h"
+#include "glue_common.h"
 
 namespace {
 
-using stiff::fmu::Model;
-using stiff::fmu::Status;
-using stiff::fmu::Variable;
+namespace fmu = stiff::fmu;
+using fmu::Instance;
+using fmu::Status;
 
-enum State : unsigned {
-  kInstantiated = 1u << 0,
-  kInitializationMode = 1u << 1,
-  kEventMode = 1u << 2,
-  kContinuousTimeMode = 1u << 3,
-  kStepComplete = 1u << 4,
-  kTerminated = 1u << 5,
-  kError = 1u << 6,
+static_assert(std::is_same_v<fmi2ValueReference, uint32_t> &&
+                  std::is_same_v<fmi2Integer, int32_t> && std::is_same_v<fmi2Real, double>,
+              "glue_common.h value types");
+
+fmi2Status st(Status s) {
+  switch (s) {
+    case Status::ok:
+      return fmi2OK;
+    case Status::warning:
+      return fmi2Warning;
+    case Status::discard:
+      return fmi2Discard;
+    default:
+      return fmi2Error;
+  }
+}
+
+// FMI 2 loggers take the instance name and a printf format: messages are passed as "%s".
+class Fmi2Instance final : public Instance {
+ public:
+  explicit Fmi2Instance(const fmi2CallbackFunctions& callbacks) : callbacks_(callbacks) {}
+  void emit(Status status, const char* category, const std::string& msg) const override {
+    if (callbacks_.logger)
+      callbacks_.logger(callbacks_.componentEnvironment, name.c_str(), st(status), category, "%s",
+                        msg.c_str());
+  }
+  std::unique_ptr<Instance> relocate() override {
+    return std::make_unique<Fmi2Instance>(std::move(*this));
+  }
+
+ private:
+  fmi2CallbackFunctions callbacks_;
 };
-constexpr unsigned kAnyState = ~0u;
-constexpr unsigned kGetMask =
-    kInitializationMode | kEventMode | kContinuousTimeMode | kStepComplete | kTerminated | kError;
-constexpr unsigned kSetMask =
-    kInstantiated | kInitializationMode | kEventMode | kContinuousTimeMode | kStepComplete;
-
-// Declared in modelDescription.xml <LogCategories>, in this order.
-constexpr const char* kCategories[] = {"logStatusError", "logStatusWarning", "logCalls"};
-enum Category { kLogError, kLogWarning, kLogCalls, kCategoryCount };
-
-struct Instance {
-  std::string name;
-  fmi2Type type = fmi2CoSimulation;
-  fmi2CallbackFunctions callbacks{};
-  bool logging_on = false;
-  bool category_on[kCategoryCount] = {true, true, true};
-  unsigned state = kInstantiated;
-  std::unique_ptr<Model> model;
-
-  void log(fmi2Status status, Category c, const std::string& msg) const {
-    // Errors and warnings are always reported; OK-level messages only when asked for.
-    if (status == fmi2OK && (!logging_on || !category_on[c])) return;
-    if (callbacks.logger)
-      callbacks.logger(callbacks.componentEnvironment, name.c_str(), status, kCategories[c], "%s",
-                       msg.c_str());
-  }
-  fmi2Status error(const std::string& msg) {
-    log(fmi2Error, kLogError, msg);
-    state = kError;
-    return fmi2Error;
-  }
-  // A rejected call that leaves the instance usable (bad argument, wrong state).
-  fmi2Status reject(const std::string& msg) {
-    log(fmi2Error, kLogError, msg);
-    return fmi2Error;
-  }
-  fmi2Status from(Status s, const std::string& msg) {
-    switch (s) {
-      case Status::ok:
-        return fmi2OK;
-      case Status::warning:
-        log(fmi2Warning, kLogWarning, msg);
-        return fmi2Warning;
-      case Status::discard:
-        log(fmi2Discard, kLogWarning, msg);
-        return fmi2Discard;
-      default:
-        return error(msg);
-    }
-  }
-  // False (and logs) when `f` is not allowed in the current state.
-  bool allowed(const char* f, unsigned mask) {
-    if (state & mask) return true;
-    log(fmi2Error, kLogError, std::string(f) + " is not allowed in the current state");
-    return false;
-  }
-};
-
-template <typename Body>
-fmi2Status guarded(fmi2Component c, const char* f, unsigned mask, Body&& body) {
-  if (!c) return fmi2Error;
-  auto* inst = static_cast<Instance*>(c);
-  if (!inst->allowed(f, mask)) return fmi2Error;
-  inst->log(fmi2OK, kLogCalls, f);
-  try {
-    return body(*inst);
-  } catch (const std::bad_alloc&) {
-    return inst->error(std::string(f) + ": out of memory");
-  } catch (const std::exception& e) {
-    return inst->error(std::string(f) + ": " + e.what());
-  } catch (...) {
-    return inst->error(std::string(f) + ": unknown exception");
-  }
-}
-
-fmi2Status check_array(
-    Instance& inst, const char* f, const fmi2ValueReference* vr, size_t nvr, const void* value) {
-  if (nvr > 0 && (!vr || !value)) return inst.reject(std::string(f) + ": NULL argument");
-  return fmi2OK;
-}
-
-const Variable* lookup(Instance& inst, const char* f, fmi2ValueReference vr, bool integer) {
-  const Variable* v = inst.model->variable(vr);
-  if (!v) {
-    inst.reject(std::string(f) + ": unknown value reference " + std::to_string(vr));
-    return nullptr;
-  }
-  if (v->is_integer() != integer || v->size(inst.model->dof()) != 1) {
-    inst.reject(std::string(f) + ": value reference " + std::to_string(vr) + " ('" + v->name +
-                "') has another type");
-    return nullptr;
-  }
-  return v;
-}
-
-fmi2Status not_supported(fmi2Component c, const char* f) {
-  if (!c) return fmi2Error;
-  return static_cast<Instance*>(c)->reject(std::string(f) + " is not supported by this FMU");
-}
 
 }  // namespace
+
+// A call this FMU does not support: Error, "<Func> is not supported by this FMU". `Params` is
+// the parameter list with the instance named c (fmi2Functions.h checks the signature).
+#define STIFF_NOT_SUPPORTED(Func, Params) \
+  fmi2Status Func Params { return st(fmu::not_supported(c, #Func)); }
 
 extern "C" {
 
@@ -138,364 +65,157 @@ fmi2Component fmi2Instantiate(fmi2String instanceName,
                               fmi2String fmuGUID,
                               fmi2String fmuResourceLocation,
                               const fmi2CallbackFunctions* functions,
-                              fmi2Boolean visible,
+                              fmi2Boolean /*visible*/,
                               fmi2Boolean loggingOn) {
-  (void)visible;
   if (!functions || !functions->logger) return nullptr;
-  auto say = [&](const std::string& msg) {
-    functions->logger(functions->componentEnvironment, instanceName ? instanceName : "", fmi2Error,
-                      kCategories[kLogError], "%s", msg.c_str());
-  };
-  if (!instanceName || !*instanceName)
-    return say("fmi2Instantiate: missing instance name"), nullptr;
-  if (!fmuGUID || !*fmuGUID) return say("fmi2Instantiate: missing GUID"), nullptr;
-  if (fmuType != fmi2ModelExchange && fmuType != fmi2CoSimulation)
-    return say("fmi2Instantiate: unknown FMU type"), nullptr;
-  const std::string dir = stiff::fmu::uri_to_path(fmuResourceLocation);
-  if (dir.empty())
-    return say(std::string("fmi2Instantiate: resource location '") +
-               (fmuResourceLocation ? fmuResourceLocation : "(null)") + "' is not a file: URI"),
-           nullptr;
-  try {
-    auto layout = stiff::fmu::read_layout(dir);
-    if (layout->fmi != 2) return say("fmi2Instantiate: resources are for FMI 3"), nullptr;
-    if (layout->guid != fmuGUID)
-      return say(std::string("fmi2Instantiate: GUID '") + fmuGUID +
-                 "' does not match the resources' GUID '" + layout->guid + "'"),
-             nullptr;
-    auto inst = std::make_unique<Instance>();
-    inst->name = instanceName;
-    inst->type = fmuType;
-    inst->callbacks = *functions;
-    inst->logging_on = loggingOn != fmi2False;
-    inst->model = std::make_unique<Model>(std::move(layout));
-    inst->log(fmi2OK, kLogCalls, "fmi2Instantiate");
-    return inst.release();
-  } catch (const std::exception& e) {
-    say(std::string("fmi2Instantiate: ") + e.what());
-  } catch (...) {
-    say("fmi2Instantiate: unknown exception");
-  }
-  return nullptr;
+  Fmi2Instance staged(*functions);
+  fmu::InstantiateArgs a;
+  a.fmi = 2;
+  a.instance_name = instanceName;
+  a.token = fmuGUID;
+  a.resources = fmuResourceLocation;
+  a.known_type = fmuType == fmi2ModelExchange || fmuType == fmi2CoSimulation;
+  a.kind = fmuType == fmi2ModelExchange ? fmu::Kind::me : fmu::Kind::cs;
+  a.logging_on = loggingOn != fmi2False;
+  return fmu::instantiate(staged, a);
 }
 
-void fmi2FreeInstance(fmi2Component c) {
-  if (!c) return;
-  auto* inst = static_cast<Instance*>(c);
-  inst->log(fmi2OK, kLogCalls, "fmi2FreeInstance");
-  delete inst;
-}
+void fmi2FreeInstance(fmi2Component c) { fmu::free_instance(c, "fmi2FreeInstance"); }
 
 fmi2Status fmi2SetDebugLogging(fmi2Component c,
                                fmi2Boolean loggingOn,
                                size_t nCategories,
                                const fmi2String categories[]) {
-  return guarded(c, "fmi2SetDebugLogging", kAnyState, [&](Instance& inst) {
-    if (nCategories > 0 && !categories) return inst.reject("fmi2SetDebugLogging: NULL categories");
-    inst.logging_on = loggingOn != fmi2False;
-    if (nCategories == 0)
-      for (bool& on : inst.category_on) on = inst.logging_on;
-    for (size_t i = 0; i < nCategories; ++i) {
-      int k = -1;
-      for (int j = 0; j < kCategoryCount; ++j)
-        if (categories[i] && std::strcmp(categories[i], kCategories[j]) == 0) k = j;
-      if (k < 0)
-        return inst.reject(std::string("fmi2SetDebugLogging: unknown log category '") +
-                           (categories[i] ? categories[i] : "(null)") + "'");
-      inst.category_on[k] = loggingOn != fmi2False;
-    }
-    return fmi2OK;
-  });
+  return st(fmu::set_debug_logging(c, "fmi2SetDebugLogging", loggingOn != fmi2False, nCategories,
+                                   categories));
 }
 
 fmi2Status fmi2SetupExperiment(fmi2Component c,
-                               fmi2Boolean toleranceDefined,
-                               fmi2Real tolerance,
+                               fmi2Boolean /*toleranceDefined*/,
+                               fmi2Real /*tolerance*/,
                                fmi2Real startTime,
-                               fmi2Boolean stopTimeDefined,
-                               fmi2Real stopTime) {
-  (void)toleranceDefined, (void)tolerance, (void)stopTimeDefined, (void)stopTime;
-  return guarded(c, "fmi2SetupExperiment", kInstantiated, [&](Instance& inst) {
-    if (!std::isfinite(startTime)) return inst.reject("fmi2SetupExperiment: start time not finite");
-    inst.model->set_time(startTime);
-    return fmi2OK;
-  });
+                               fmi2Boolean /*stopTimeDefined*/,
+                               fmi2Real /*stopTime*/) {
+  return st(fmu::setup_experiment(c, "fmi2SetupExperiment", startTime, false));
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
-  return guarded(c, "fmi2EnterInitializationMode", kInstantiated, [&](Instance& inst) {
-    inst.state = kInitializationMode;
-    return fmi2OK;
-  });
+  return st(fmu::enter_initialization_mode(c, "fmi2EnterInitializationMode"));
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
-  return guarded(c, "fmi2ExitInitializationMode", kInitializationMode, [&](Instance& inst) {
-    std::string msg;
-    if (inst.model->validate(&msg) != Status::ok) return inst.error(msg);
-    inst.state = inst.type == fmi2ModelExchange ? kEventMode : kStepComplete;
-    return fmi2OK;
-  });
+  return st(fmu::exit_initialization_mode(c, "fmi2ExitInitializationMode"));
 }
 
-fmi2Status fmi2Terminate(fmi2Component c) {
-  return guarded(c, "fmi2Terminate", kEventMode | kContinuousTimeMode | kStepComplete | kError,
-                 [&](Instance& inst) {
-                   inst.state = kTerminated;
-                   return fmi2OK;
-                 });
-}
+fmi2Status fmi2Terminate(fmi2Component c) { return st(fmu::terminate(c, "fmi2Terminate")); }
 
-fmi2Status fmi2Reset(fmi2Component c) {
-  return guarded(c, "fmi2Reset", kAnyState, [&](Instance& inst) {
-    inst.model->reset();
-    inst.state = kInstantiated;
-    return fmi2OK;
-  });
-}
+fmi2Status fmi2Reset(fmi2Component c) { return st(fmu::reset(c, "fmi2Reset")); }
 
 fmi2Status fmi2GetReal(fmi2Component c,
                        const fmi2ValueReference vr[],
                        size_t nvr,
                        fmi2Real value[]) {
-  return guarded(c, "fmi2GetReal", kGetMask, [&](Instance& inst) {
-    if (check_array(inst, "fmi2GetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
-    fmi2Status worst = fmi2OK;
-    for (size_t i = 0; i < nvr; ++i) {
-      const Variable* v = lookup(inst, "fmi2GetReal", vr[i], false);
-      if (!v) return fmi2Error;
-      std::string msg;
-      const Status s = inst.model->get_real(*v, &value[i], &msg);
-      if (s != Status::ok) {
-        const fmi2Status f = inst.from(s, "fmi2GetReal: " + msg);
-        if (f == fmi2Error) return f;
-        if (f > worst) worst = f;
-      }
-    }
-    return worst;
-  });
+  return st(fmu::get_float64(c, "fmi2GetReal", {vr, nvr, nullptr}, value));
 }
 
 fmi2Status fmi2GetInteger(fmi2Component c,
                           const fmi2ValueReference vr[],
                           size_t nvr,
                           fmi2Integer value[]) {
-  return guarded(c, "fmi2GetInteger", kGetMask, [&](Instance& inst) {
-    if (check_array(inst, "fmi2GetInteger", vr, nvr, value) != fmi2OK) return fmi2Error;
-    for (size_t i = 0; i < nvr; ++i) {
-      const Variable* v = lookup(inst, "fmi2GetInteger", vr[i], true);
-      if (!v) return fmi2Error;
-      value[i] = static_cast<fmi2Integer>(inst.model->get_integer(*v));
-    }
-    return fmi2OK;
-  });
+  return st(fmu::get_int32(c, "fmi2GetInteger", {vr, nvr, nullptr}, value));
 }
 
-fmi2Status fmi2GetBoolean(fmi2Component c,
-                          const fmi2ValueReference vr[],
-                          size_t nvr,
-                          fmi2Boolean value[]) {
-  (void)vr, (void)value;
-  return guarded(c, "fmi2GetBoolean", kGetMask, [&](Instance& inst) {
-    return nvr == 0 ? fmi2OK : inst.reject("fmi2GetBoolean: this FMU has no Boolean variables");
-  });
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference[], size_t nvr, fmi2Boolean[]) {
+  return st(fmu::expect_none(c, "fmi2GetBoolean", fmu::kGetMask, nvr,
+                             "this FMU has no Boolean variables"));
 }
 
-fmi2Status fmi2GetString(fmi2Component c,
-                         const fmi2ValueReference vr[],
-                         size_t nvr,
-                         fmi2String value[]) {
-  (void)vr, (void)value;
-  return guarded(c, "fmi2GetString", kGetMask, [&](Instance& inst) {
-    return nvr == 0 ? fmi2OK : inst.reject("fmi2GetString: this FMU has no String variables");
-  });
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference[], size_t nvr, fmi2String[]) {
+  return st(
+      fmu::expect_none(c, "fmi2GetString", fmu::kGetMask, nvr, "this FMU has no String variables"));
 }
 
 fmi2Status fmi2SetReal(fmi2Component c,
                        const fmi2ValueReference vr[],
                        size_t nvr,
                        const fmi2Real value[]) {
-  return guarded(c, "fmi2SetReal", kSetMask, [&](Instance& inst) {
-    if (check_array(inst, "fmi2SetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
-    for (size_t i = 0; i < nvr; ++i) {
-      const Variable* v = lookup(inst, "fmi2SetReal", vr[i], false);
-      if (!v) return fmi2Error;
-      if (v->role == stiff::fmu::Role::parameter && inst.state == kContinuousTimeMode)
-        return inst.reject("fmi2SetReal: parameter '" + v->name +
-                           "' cannot be set in Continuous-Time Mode");
-      std::string msg;
-      const Status s = inst.model->set_real(*v, &value[i], &msg);
-      if (s != Status::ok) return inst.from(s, "fmi2SetReal: " + msg);
-    }
-    return fmi2OK;
-  });
+  return st(fmu::set_float64(c, "fmi2SetReal", {vr, nvr, nullptr}, value));
 }
 
 fmi2Status fmi2SetInteger(fmi2Component c,
                           const fmi2ValueReference vr[],
                           size_t nvr,
                           const fmi2Integer value[]) {
-  return guarded(c, "fmi2SetInteger", kSetMask & ~unsigned{kContinuousTimeMode},
-                 [&](Instance& inst) {
-                   if (check_array(inst, "fmi2SetInteger", vr, nvr, value) != fmi2OK)
-                     return fmi2Error;
-                   for (size_t i = 0; i < nvr; ++i) {
-                     const Variable* v = lookup(inst, "fmi2SetInteger", vr[i], true);
-                     if (!v) return fmi2Error;
-                     std::string msg;
-                     const Status s = inst.model->set_integer(*v, value[i], &msg);
-                     if (s != Status::ok) return inst.from(s, "fmi2SetInteger: " + msg);
-                   }
-                   return fmi2OK;
-                 });
+  return st(fmu::set_int32(c, "fmi2SetInteger", {vr, nvr, nullptr}, value));
 }
 
 fmi2Status fmi2SetBoolean(fmi2Component c,
-                          const fmi2ValueReference vr[],
+                          const fmi2ValueReference[],
                           size_t nvr,
-                          const fmi2Boolean value[]) {
-  (void)vr, (void)value;
-  return guarded(c, "fmi2SetBoolean", kSetMask, [&](Instance& inst) {
-    return nvr == 0 ? fmi2OK : inst.reject("fmi2SetBoolean: this FMU has no Boolean variables");
-  });
+                          const fmi2Boolean[]) {
+  return st(fmu::expect_none(c, "fmi2SetBoolean", fmu::kSetMask, nvr,
+                             "this FMU has no Boolean variables"));
 }
 
 fmi2Status fmi2SetString(fmi2Component c,
-                         const fmi2ValueReference vr[],
+                         const fmi2ValueReference[],
                          size_t nvr,
-                         const fmi2String value[]) {
-  (void)vr, (void)value;
-  return guarded(c, "fmi2SetString", kSetMask, [&](Instance& inst) {
-    return nvr == 0 ? fmi2OK : inst.reject("fmi2SetString: this FMU has no String variables");
-  });
+                         const fmi2String[]) {
+  return st(
+      fmu::expect_none(c, "fmi2SetString", fmu::kSetMask, nvr, "this FMU has no String variables"));
 }
 
-// FMU state: a heap copy of the instance's values and state-machine state.
-struct StateCopy {
-  stiff::fmu::Values values;
-  unsigned state;
-};
-
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* FMUstate) {
-  return guarded(c, "fmi2GetFMUstate", kAnyState, [&](Instance& inst) {
-    if (!FMUstate) return inst.reject("fmi2GetFMUstate: NULL FMUstate");
-    auto* copy = static_cast<StateCopy*>(*FMUstate);
-    if (copy) {
-      copy->values = inst.model->save();
-      copy->state = inst.state;
-    } else {
-      *FMUstate = new StateCopy{inst.model->save(), inst.state};
-    }
-    return fmi2OK;
-  });
+  return st(fmu::get_fmu_state(c, "fmi2GetFMUstate", "FMUstate", FMUstate));
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
-  return guarded(c, "fmi2SetFMUstate", kAnyState, [&](Instance& inst) {
-    if (!FMUstate) return inst.reject("fmi2SetFMUstate: NULL FMUstate");
-    const auto* copy = static_cast<const StateCopy*>(FMUstate);
-    if (copy->values.q.size() != static_cast<size_t>(inst.model->dof()) ||
-        copy->values.theta.size() != inst.model->values().theta.size())
-      return inst.reject("fmi2SetFMUstate: state of another model");
-    inst.model->restore(copy->values);
-    inst.state = copy->state;
-    return fmi2OK;
-  });
+  return st(fmu::set_fmu_state(c, "fmi2SetFMUstate", "FMUstate", FMUstate));
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* FMUstate) {
-  return guarded(c, "fmi2FreeFMUstate", kAnyState, [&](Instance& inst) {
-    if (!FMUstate) return inst.reject("fmi2FreeFMUstate: NULL FMUstate");
-    delete static_cast<StateCopy*>(*FMUstate);
-    *FMUstate = nullptr;
-    return fmi2OK;
-  });
-}
-
-// Serialized form: the model's blob followed by the state-machine state (u32).
-static std::vector<uint8_t> serialize_state(Instance& inst, const StateCopy& copy) {
-  const stiff::fmu::Values now = inst.model->save();
-  inst.model->restore(copy.values);
-  std::vector<uint8_t> b = inst.model->serialize();
-  inst.model->restore(now);
-  const uint32_t st = copy.state;
-  b.insert(b.end(), reinterpret_cast<const uint8_t*>(&st),
-           reinterpret_cast<const uint8_t*>(&st) + 4);
-  return b;
+  return st(fmu::free_fmu_state(c, "fmi2FreeFMUstate", "FMUstate", FMUstate));
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t* size) {
-  return guarded(c, "fmi2SerializedFMUstateSize", kAnyState, [&](Instance& inst) {
-    if (!FMUstate || !size) return inst.reject("fmi2SerializedFMUstateSize: NULL argument");
-    *size = serialize_state(inst, *static_cast<const StateCopy*>(FMUstate)).size();
-    return fmi2OK;
-  });
+  return st(fmu::serialized_fmu_state_size(c, "fmi2SerializedFMUstateSize", FMUstate, size));
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c,
                                  fmi2FMUstate FMUstate,
                                  fmi2Byte serializedState[],
                                  size_t size) {
-  return guarded(c, "fmi2SerializeFMUstate", kAnyState, [&](Instance& inst) {
-    if (!FMUstate || !serializedState) return inst.reject("fmi2SerializeFMUstate: NULL argument");
-    const auto b = serialize_state(inst, *static_cast<const StateCopy*>(FMUstate));
-    if (size < b.size())
-      return inst.reject("fmi2SerializeFMUstate: buffer of " + std::to_string(size) + " bytes, " +
-                         std::to_string(b.size()) + " needed");
-    std::memcpy(serializedState, b.data(), b.size());
-    return fmi2OK;
-  });
+  return st(fmu::serialize_fmu_state(c, "fmi2SerializeFMUstate", FMUstate, serializedState, size));
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c,
                                    const fmi2Byte serializedState[],
                                    size_t size,
                                    fmi2FMUstate* FMUstate) {
-  return guarded(c, "fmi2DeSerializeFMUstate", kAnyState, [&](Instance& inst) {
-    if (!serializedState || !FMUstate) return inst.reject("fmi2DeSerializeFMUstate: NULL argument");
-    if (size < 4) return inst.reject("fmi2DeSerializeFMUstate: blob too short");
-    const auto* bytes = reinterpret_cast<const uint8_t*>(serializedState);
-    uint32_t st = 0;
-    std::memcpy(&st, bytes + size - 4, 4);
-    const stiff::fmu::Values now = inst.model->save();
-    std::string msg;
-    if (!inst.model->deserialize(bytes, size - 4, &msg))
-      return inst.reject("fmi2DeSerializeFMUstate: " + msg);
-    auto copy = std::make_unique<StateCopy>(StateCopy{inst.model->save(), st});
-    inst.model->restore(now);
-    if (st == 0 || (st & (st - 1)) != 0 || st > kError)
-      return inst.reject("fmi2DeSerializeFMUstate: invalid state in blob");
-    if (*FMUstate) {
-      *static_cast<StateCopy*>(*FMUstate) = *copy;
-    } else {
-      *FMUstate = copy.release();
-    }
-    return fmi2OK;
-  });
+  return st(fmu::deserialize_fmu_state(c, "fmi2DeSerializeFMUstate", serializedState, size,
+                                       FMUstate, fmu::BlobOrder::values_first));
 }
 
-fmi2Status fmi2GetDirectionalDerivative(fmi2Component c,
-                                        const fmi2ValueReference vUnknown_ref[],
-                                        size_t nUnknown,
-                                        const fmi2ValueReference vKnown_ref[],
-                                        size_t nKnown,
-                                        const fmi2Real dvKnown[],
-                                        fmi2Real dvUnknown[]) {
-  (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown,
-      (void)dvUnknown;
-  return not_supported(c, "fmi2GetDirectionalDerivative");
-}
+STIFF_NOT_SUPPORTED(fmi2GetDirectionalDerivative,
+                    (fmi2Component c,
+                     const fmi2ValueReference[],
+                     size_t,
+                     const fmi2ValueReference[],
+                     size_t,
+                     const fmi2Real[],
+                     fmi2Real[]))
 
 // Model Exchange: the model is algebraic (no states, no event indicators).
 fmi2Status fmi2EnterEventMode(fmi2Component c) {
-  return guarded(c, "fmi2EnterEventMode", kEventMode | kContinuousTimeMode, [&](Instance& inst) {
-    inst.state = kEventMode;
-    return fmi2OK;
-  });
+  return st(fmu::guarded(c, "fmi2EnterEventMode", fmu::kEventMode | fmu::kContinuousTimeMode,
+                         [&](Instance& inst) {
+                           inst.state = fmu::kEventMode;
+                           return Status::ok;
+                         }));
 }
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo* info) {
-  return guarded(c, "fmi2NewDiscreteStates", kEventMode, [&](Instance& inst) {
+  return st(fmu::guarded(c, "fmi2NewDiscreteStates", fmu::kEventMode, [&](Instance& inst) {
     if (!info) return inst.reject("fmi2NewDiscreteStates: NULL eventInfo");
     info->newDiscreteStatesNeeded = fmi2False;
     info->terminateSimulation = fmi2False;
@@ -503,140 +223,80 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo* info) {
     info->valuesOfContinuousStatesChanged = fmi2False;
     info->nextEventTimeDefined = fmi2False;
     info->nextEventTime = 0.0;
-    return fmi2OK;
-  });
+    return Status::ok;
+  }));
 }
 
 fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) {
-  return guarded(c, "fmi2EnterContinuousTimeMode", kEventMode, [&](Instance& inst) {
-    inst.state = kContinuousTimeMode;
-    return fmi2OK;
-  });
+  return st(fmu::enter_continuous_time_mode(c, "fmi2EnterContinuousTimeMode"));
 }
 
 fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
-                                       fmi2Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi2Boolean /*noSetFMUStatePriorToCurrentPoint*/,
                                        fmi2Boolean* enterEventMode,
                                        fmi2Boolean* terminateSimulation) {
-  (void)noSetFMUStatePriorToCurrentPoint;
-  return guarded(c, "fmi2CompletedIntegratorStep", kContinuousTimeMode, [&](Instance& inst) {
-    if (!enterEventMode || !terminateSimulation)
-      return inst.reject("fmi2CompletedIntegratorStep: NULL argument");
-    *enterEventMode = fmi2False;
-    *terminateSimulation = fmi2False;
-    return fmi2OK;
-  });
+  return st(fmu::completed_integrator_step(c, "fmi2CompletedIntegratorStep", enterEventMode,
+                                           terminateSimulation));
 }
 
 fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time) {
-  return guarded(c, "fmi2SetTime", kEventMode | kContinuousTimeMode, [&](Instance& inst) {
-    if (!std::isfinite(time)) return inst.reject("fmi2SetTime: time is not finite");
-    inst.model->set_time(time);
-    return fmi2OK;
-  });
+  return st(fmu::set_time(c, "fmi2SetTime", time));
 }
 
-fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx) {
-  (void)x;
-  return guarded(c, "fmi2SetContinuousStates", kContinuousTimeMode, [&](Instance& inst) {
-    return nx == 0 ? fmi2OK : inst.reject("fmi2SetContinuousStates: the FMU has no states");
-  });
+fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real[], size_t nx) {
+  return st(fmu::expect_none(c, "fmi2SetContinuousStates", fmu::kContinuousTimeMode, nx,
+                             "the FMU has no states"));
 }
 
-fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx) {
-  (void)derivatives;
-  return guarded(c, "fmi2GetDerivatives", kGetMask, [&](Instance& inst) {
-    return nx == 0 ? fmi2OK : inst.reject("fmi2GetDerivatives: the FMU has no states");
-  });
+fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real[], size_t nx) {
+  return st(fmu::expect_none(c, "fmi2GetDerivatives", fmu::kGetMask, nx, "the FMU has no states"));
 }
 
-fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) {
-  (void)eventIndicators;
-  return guarded(c, "fmi2GetEventIndicators", kGetMask, [&](Instance& inst) {
-    return ni == 0 ? fmi2OK
-                   : inst.reject("fmi2GetEventIndicators: the FMU has no event indicators");
-  });
+fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real[], size_t ni) {
+  return st(fmu::expect_none(c, "fmi2GetEventIndicators", fmu::kGetMask, ni,
+                             "the FMU has no event indicators"));
 }
 
-fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {
-  (void)x;
-  return guarded(c, "fmi2GetContinuousStates", kGetMask, [&](Instance& inst) {
-    return nx == 0 ? fmi2OK : inst.reject("fmi2GetContinuousStates: the FMU has no states");
-  });
+fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real[], size_t nx) {
+  return st(
+      fmu::expect_none(c, "fmi2GetContinuousStates", fmu::kGetMask, nx, "the FMU has no states"));
 }
 
-fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx) {
-  (void)x_nominal;
-  return guarded(c, "fmi2GetNominalsOfContinuousStates", kGetMask, [&](Instance& inst) {
-    return nx == 0 ? fmi2OK
-                   : inst.reject("fmi2GetNominalsOfContinuousStates: the FMU has no states");
-  });
+fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real[], size_t nx) {
+  return st(fmu::expect_none(c, "fmi2GetNominalsOfContinuousStates", fmu::kGetMask, nx,
+                             "the FMU has no states"));
 }
 
 // Co-Simulation.
-fmi2Status fmi2SetRealInputDerivatives(fmi2Component c,
-                                       const fmi2ValueReference vr[],
-                                       size_t nvr,
-                                       const fmi2Integer order[],
-                                       const fmi2Real value[]) {
-  (void)vr, (void)nvr, (void)order, (void)value;
-  return not_supported(c, "fmi2SetRealInputDerivatives");
-}
+STIFF_NOT_SUPPORTED(
+    fmi2SetRealInputDerivatives,
+    (fmi2Component c, const fmi2ValueReference[], size_t, const fmi2Integer[], const fmi2Real[]))
 
-fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c,
-                                        const fmi2ValueReference vr[],
-                                        size_t nvr,
-                                        const fmi2Integer order[],
-                                        fmi2Real value[]) {
-  (void)vr, (void)nvr, (void)order, (void)value;
-  return not_supported(c, "fmi2GetRealOutputDerivatives");
-}
+STIFF_NOT_SUPPORTED(
+    fmi2GetRealOutputDerivatives,
+    (fmi2Component c, const fmi2ValueReference[], size_t, const fmi2Integer[], fmi2Real[]))
 
 fmi2Status fmi2DoStep(fmi2Component c,
                       fmi2Real currentCommunicationPoint,
                       fmi2Real communicationStepSize,
-                      fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
-  (void)noSetFMUStatePriorToCurrentPoint;
-  return guarded(c, "fmi2DoStep", kStepComplete, [&](Instance& inst) {
-    if (inst.type != fmi2CoSimulation) return inst.reject("fmi2DoStep: instance is not CS");
-    if (!(communicationStepSize > 0) || !std::isfinite(communicationStepSize))
-      return inst.reject(
-          stiff::fmu::format("fmi2DoStep: step size %g must be > 0", communicationStepSize));
-    const double t = inst.model->values().time;
-    if (!(std::fabs(currentCommunicationPoint - t) <= 1e-9 * std::max(1.0, std::fabs(t))))
-      return inst.reject(stiff::fmu::format(
-          "fmi2DoStep: communication point %.17g differs from the FMU time %.17g",
-          currentCommunicationPoint, t));
-    inst.model->set_time(currentCommunicationPoint + communicationStepSize);
-    return fmi2OK;
-  });
+                      fmi2Boolean /*noSetFMUStatePriorToCurrentPoint*/) {
+  return st(
+      fmu::do_step(c, "fmi2DoStep", currentCommunicationPoint, communicationStepSize, nullptr));
 }
 
-fmi2Status fmi2CancelStep(fmi2Component c) { return not_supported(c, "fmi2CancelStep"); }
+STIFF_NOT_SUPPORTED(fmi2CancelStep, (fmi2Component c))
 
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status* value) {
-  (void)s, (void)value;
-  return not_supported(c, "fmi2GetStatus");
-}
+STIFF_NOT_SUPPORTED(fmi2GetStatus, (fmi2Component c, const fmi2StatusKind, fmi2Status*))
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real* value) {
-  return guarded(c, "fmi2GetRealStatus", kGetMask, [&](Instance& inst) {
+  return st(fmu::guarded(c, "fmi2GetRealStatus", fmu::kGetMask, [&](Instance& inst) {
     if (s != fmi2LastSuccessfulTime || !value)
       return inst.reject("fmi2GetRealStatus: only fmi2LastSuccessfulTime is supported");
     *value = inst.model->values().time;
-    return fmi2OK;
-  });
+    return Status::ok;
+  }));
 }
-fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer* value) {
-  (void)s, (void)value;
-  return not_supported(c, "fmi2GetIntegerStatus");
-}
-fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean* value) {
-  (void)s, (void)value;
-  return not_supported(c, "fmi2GetBooleanStatus");
-}
-fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String* value) {
-  (void)s, (void)value;
-  return not_supported(c, "fmi2GetStringStatus");
-}
+STIFF_NOT_SUPPORTED(fmi2GetIntegerStatus, (fmi2Component c, const fmi2StatusKind, fmi2Integer*))
+STIFF_NOT_SUPPORTED(fmi2GetBooleanStatus, (fmi2Component c, const fmi2StatusKind, fmi2Boolean*))
+STIFF_NOT_SUPPORTED(fmi2GetStringStatus, (fmi2Component c, const fmi2StatusKind, fmi2String*))
 
 }  // extern "C"

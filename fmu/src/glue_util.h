@@ -1,5 +1,4 @@
-// Helpers shared by fmi2_glue.cpp and fmi3_glue.cpp: resource URIs, message formatting,
-// state masks.
+// Helpers of the FMI glue (glue_common.cpp): resource URIs, message formatting.
 #pragma once
 
 #include <cstdarg>
