@@ -39,6 +39,7 @@ fi
 
 export ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1
 export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
+export LSAN_OPTIONS=suppressions=$PWD/tests/fuzz/lsan.supp:print_suppressions=0
 stats=build-fuzz/fuzz-stats.md
 {
   echo "| target | seconds | executions | exec/s | coverage (edges) | features | corpus | result |"

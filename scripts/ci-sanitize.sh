@@ -35,6 +35,7 @@ if [[ $what == all || $what == asan ]]; then
   # detect_leaks: LeakSanitizer at exit; halt_on_error: the first UB report fails the test.
   export ASAN_OPTIONS=detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1:check_initialization_order=1
   export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
+  export LSAN_OPTIONS=suppressions=$PWD/tests/fuzz/lsan.supp:print_suppressions=0
   (cd build-asan-ubsan && "$CTEST" --output-on-failure --no-tests=error -j "$JOBS" \
      -LE "slow|python" -E "Slow" --timeout 900)
 fi

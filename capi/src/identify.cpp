@@ -60,6 +60,13 @@ stiff_status stiff_identify(stiff_result** out,
       }
       r->fit = identify(robot->model, data->data, effects, io);
     }
+    // Finite but absurd inputs (e.g. a displacement of 1e308 m) can overflow the solution:
+    // never hand back a "successful" fit with inf/NaN parameters (docs/reliability.md).
+    for (const FitParameter& p : r->fit.parameters)
+      if (!std::isfinite(p.value))
+        throw NumericalError("identify: parameter " + p.effect + "." + p.name +
+                             " is not finite: the data's magnitudes overflow the solution "
+                             "(check the units: displacements in m, forces in N)");
     *out = r.release();
     return STIFF_OK;
   });

@@ -104,7 +104,7 @@ FitResult fit_from_json(const std::string& text, const std::string& file) {
   json j;
   try {
     j = json::parse(text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for number overflow
     throw ParseError(file, 0, 0, std::string("not valid JSON: ") + e.what());
   }
   auto need = [&](const json& obj, const char* key) -> const json& {

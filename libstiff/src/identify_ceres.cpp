@@ -42,33 +42,109 @@ struct Setup {
   std::vector<MeasurementContext> ctx;
   Eigen::VectorXd row_weight;  ///< 1 / (sigma of the row) [1/m]
   Eigen::VectorXd typical;     ///< parameter scaling: theta_k = typical_k * z_k
+  /// Scratch of the evaluations (Ceres runs single-threaded here: num_threads = 1).
+  mutable EvalState<Jet> scratch;
+  mutable std::vector<Jet> theta_jet;
+  mutable std::vector<double> theta_double;
+  mutable std::vector<double> jac_scratch;
 };
 
-/// Residual of one measurement, (measured - predicted) / sigma, over the free parameters in
-/// scaled form; the held parameters come from `held`.
-struct Residual {
-  const Setup* setup;
-  int row;
-  const std::vector<int>* free;
-  const Eigen::VectorXd* held;
-
-  template <typename T>
-  bool operator()(T const* const* z, T* r) const {
-    const DeflectionModel& model = *setup->model;
-    const int p = model.parameter_count();
-    std::vector<T> theta(p);
-    for (int k = 0; k < p; ++k) theta[k] = T((*held)(k));
-    for (size_t f = 0; f < free->size(); ++f) {
-      const int k = (*free)[f];
-      theta[k] = z[0][f] * setup->typical(k);
+/// Derivatives of the predicted displacement of measurement `row` with respect to
+/// theta(cols[i]) * scale[i], by kJetStride parameters per pass of
+/// DeflectionModel::evaluate_jet; `theta` is the full parameter vector. Writes d (3) and the
+/// 3 x cols.size() derivatives (column-major, leading dimension 3) into `out`.
+void displacement_and_jacobian(const Setup& s, int row, const double* theta,
+                               const std::vector<int>& cols, const double* scale,
+                               Eigen::Vector3d& d, double* out) {
+  const DeflectionModel& model = *s.model;
+  const int p = model.parameter_count();
+  auto& t = s.theta_jet;
+  t.resize(p);
+  for (int k = 0; k < p; ++k) t[k] = Jet(theta[k]);
+  const int nc = static_cast<int>(cols.size());
+  const Measurement& m = s.data->rows[row];
+  Vector3<Jet> dj;
+  if (nc == 0) {
+    model.evaluate_jet(t.data(), m, s.ctx[row], s.scratch, &dj);
+    for (int k = 0; k < 3; ++k) d(k) = dj(k).a;
+    return;
+  }
+  for (int first = 0; first < nc; first += kJetStride) {
+    const int last = std::min(nc, first + kJetStride);
+    for (int i = first; i < last; ++i) t[cols[i]].v(i - first) = scale[i];
+    model.evaluate_jet(t.data(), m, s.ctx[row], s.scratch, &dj);
+    for (int i = first; i < last; ++i) {
+      t[cols[i]].v(i - first) = 0.0;
+      for (int k = 0; k < 3; ++k) out[3 * i + k] = dj(k).v(i - first);
     }
-    const Measurement& m = setup->data->rows[row];
-    Vector3<T> d;
-    model.evaluate<T>(theta.data(), m, setup->ctx[row], &d, nullptr);
-    const double w = setup->row_weight(row);
-    for (int k = 0; k < 3; ++k) r[k] = (T(m.displacement(k)) - d(k)) * w;
+    if (first == 0)
+      for (int k = 0; k < 3; ++k) d(k) = dj(k).a;
+  }
+}
+
+/// Residual of one measurement, (measured - predicted) / sigma, over the free parameters in
+/// scaled form; the held parameters come from `held`. Derivatives by
+/// displacement_and_jacobian (one model pass per kJetStride free parameters).
+class Residual final : public ceres::CostFunction {
+ public:
+  Residual(const Setup* setup, int row, const std::vector<int>* free, const Eigen::VectorXd* held,
+           const std::vector<double>* free_typical)
+      : setup_(setup), row_(row), free_(free), held_(held), free_typical_(free_typical) {
+    set_num_residuals(3);
+    mutable_parameter_block_sizes()->push_back(static_cast<int>(free->size()));
+  }
+
+  bool Evaluate(double const* const* z, double* r, double** jacobians) const override {
+    const Setup& s = *setup_;
+    const DeflectionModel& model = *s.model;
+    const int p = model.parameter_count();
+    const int nf = static_cast<int>(free_->size());
+    auto& theta = s.theta_double;
+    theta.assign(held_->data(), held_->data() + p);
+    for (int f = 0; f < nf; ++f) {
+      const int k = (*free_)[f];
+      theta[k] = z[0][f] * s.typical(k);
+    }
+    const Measurement& m = s.data->rows[row_];
+    const double w = s.row_weight(row_);
+    const bool want_jacobian = jacobians && jacobians[0];
+    // The trust-region minimizer evaluates the Jacobian at a trial point in its line search
+    // and again when it accepts that point: the second is a copy of the first.
+    if (cached_ && std::equal(z[0], z[0] + nf, cache_z_.begin())) {
+      for (int k = 0; k < 3; ++k) r[k] = cache_r_[k];
+      if (want_jacobian) std::copy(cache_j_.begin(), cache_j_.end(), jacobians[0]);
+      return true;
+    }
+    if (!want_jacobian) {
+      Vector3<double> d;
+      model.evaluate<double>(theta.data(), m, s.ctx[row_], &d, nullptr);
+      for (int k = 0; k < 3; ++k) r[k] = (m.displacement(k) - d(k)) * w;
+      return true;
+    }
+    Eigen::Vector3d d;
+    auto& jac = s.jac_scratch;
+    jac.resize(3 * nf);
+    displacement_and_jacobian(s, row_, theta.data(), *free_, free_typical_->data(), d,
+                              jac.data());
+    for (int k = 0; k < 3; ++k) {
+      r[k] = (m.displacement(k) - d(k)) * w;
+      for (int f = 0; f < nf; ++f) jacobians[0][k * nf + f] = -jac[3 * f + k] * w;
+    }
+    cache_z_.assign(z[0], z[0] + nf);
+    cache_r_.assign(r, r + 3);
+    cache_j_.assign(jacobians[0], jacobians[0] + 3 * nf);
+    cached_ = true;
     return true;
   }
+
+ private:
+  const Setup* setup_;
+  int row_;
+  const std::vector<int>* free_;
+  const Eigen::VectorXd* held_;
+  const std::vector<double>* free_typical_;
+  mutable bool cached_ = false;
+  mutable std::vector<double> cache_z_, cache_r_, cache_j_;
 };
 
 /// Weighted residuals e (3N, sigma units) at theta.
@@ -86,10 +162,17 @@ Eigen::VectorXd weighted_residuals(const Setup& s, const Eigen::VectorXd& theta)
 /// Jacobian of the predicted, weighted displacement with respect to theta (3N x P).
 Eigen::MatrixXd weighted_jacobian(const Setup& s, const Eigen::VectorXd& theta) {
   const int n = static_cast<int>(s.data->rows.size());
-  Eigen::MatrixXd j(3 * n, s.model->parameter_count());
-  for (int r = 0; r < n; ++r)
-    j.middleRows(3 * r, 3) =
-        s.model->displacement_jacobian(theta, s.data->rows[r], s.ctx[r]) * s.row_weight(r);
+  const int p = s.model->parameter_count();
+  Eigen::MatrixXd j(3 * n, p);
+  std::vector<int> all(p);
+  for (int k = 0; k < p; ++k) all[k] = k;
+  const std::vector<double> ones(p, 1.0);
+  Eigen::Matrix<double, 3, Eigen::Dynamic> blk(3, p);
+  Eigen::Vector3d d;
+  for (int r = 0; r < n; ++r) {
+    displacement_and_jacobian(s, r, theta.data(), all, ones.data(), d, blk.data());
+    j.middleRows(3 * r, 3) = blk * s.row_weight(r);
+  }
   return j;
 }
 
@@ -202,15 +285,13 @@ SolveOutcome solve(const Setup& s,
     const double t = std::min(std::max(theta(free[f]), spec.lower), spec.upper);
     z[f] = t / s.typical(free[f]);
   }
+  std::vector<double> free_typical(nf);
+  for (int f = 0; f < nf; ++f) free_typical[f] = s.typical(free[f]);
   ceres::Problem problem;
   const int n = static_cast<int>(s.data->rows.size());
-  for (int r = 0; r < n; ++r) {
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<Residual, kJetStride>(
-        new Residual{&s, r, &free, &theta});
-    cost->AddParameterBlock(nf);
-    cost->SetNumResiduals(3);
-    problem.AddResidualBlock(cost, make_loss(opt.loss, loss_scale(r)), z.data());
-  }
+  for (int r = 0; r < n; ++r)
+    problem.AddResidualBlock(new Residual(&s, r, &free, &theta, &free_typical),
+                             make_loss(opt.loss, loss_scale(r)), z.data());
   for (int f = 0; f < nf; ++f) {
     const auto& spec = model.spec(free[f]);
     if (spec.lower > -1e299)
@@ -353,6 +434,8 @@ FitResult identify(const RobotModel& robot,
   std::vector<int> free;
   int iterations = 0;
   SolveOutcome last;
+  Eigen::MatrixXd last_jacobian;
+  Eigen::VectorXd last_jacobian_theta;
   auto fit_passes = [&]() {
     idf = check_identifiability(model, weighted_jacobian(s, theta), s.typical, opt.rank_tolerance);
     for (int pass = 0;; ++pass) {
@@ -374,8 +457,10 @@ FitResult identify(const RobotModel& robot,
                               std::to_string(free.size() / 3 + 1) + " measurements are needed");
       last = solve(s, free, theta, opt, loss_scale);
       iterations += last.iterations;
+      last_jacobian = weighted_jacobian(s, theta);
+      last_jacobian_theta = theta;
       Identifiability again =
-          check_identifiability(model, weighted_jacobian(s, theta), s.typical, opt.rank_tolerance);
+          check_identifiability(model, last_jacobian, s.typical, opt.rank_tolerance);
       if (again == idf || pass == 2) break;
       // A parameter held so far became visible (or the reverse): solve again from here.
       for (int k = 0; k < p; ++k)
@@ -414,7 +499,12 @@ FitResult identify(const RobotModel& robot,
     f.weights(r) = std::min(1.0, std::max(0.0, rho[1]));
   }
   const int nf = static_cast<int>(free.size());
-  const Eigen::MatrixXd jall = weighted_jacobian(s, theta);
+  // The Jacobian of the last identifiability check is the one at the solution unless the
+  // clamping above moved theta.
+  const Eigen::MatrixXd jall =
+      last_jacobian_theta.size() == theta.size() && last_jacobian_theta == theta
+          ? std::move(last_jacobian)
+          : weighted_jacobian(s, theta);
   Eigen::MatrixXd jf(3 * n, nf);
   for (int i = 0; i < nf; ++i) jf.col(i) = jall.col(free[i]);
   // Residual variance of the (robustly) weighted problem: sum w^2 |e|^2 / (sum 3 w - p), which
@@ -431,7 +521,15 @@ FitResult identify(const RobotModel& robot,
   for (int i = 0; i < nf; ++i)
     if (!(norms(i) > 0)) norms(i) = 1.0;
   const Eigen::MatrixXd js = jf * norms.cwiseInverse().asDiagonal();
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(js, Eigen::ComputeThinV);
+  // Singular values and V of the tall js from its QR: js = Q R, R = U S V^T.
+  Eigen::MatrixXd rs = Eigen::MatrixXd::Zero(nf, nf);
+  if (js.rows() >= nf) {
+    Eigen::HouseholderQR<Eigen::MatrixXd> qr(js);
+    rs = qr.matrixQR().topRows(nf).triangularView<Eigen::Upper>();
+  } else {
+    rs = js;
+  }
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(rs, Eigen::ComputeThinV);
   const Eigen::VectorXd sv = svd.singularValues();
   int rank = 0;
   for (int i = 0; i < sv.size(); ++i)

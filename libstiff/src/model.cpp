@@ -168,6 +168,121 @@ template void DeflectionModel::evaluate<Jet>(const Jet*, const Measurement&,
                                              const MeasurementContext&, Vector3<Jet>*,
                                              Vector3<Jet>*) const;
 
+void DeflectionModel::evaluate_jet(const Jet* theta, const Measurement& m,
+                                   const MeasurementContext& c, EvalState<Jet>& s,
+                                   Vector3<Jet>* d) const {
+  using Block = Eigen::Matrix<double, 3, kJetStride>;
+  constexpr int kMax = 32;  // joints held in fixed-capacity buffers (no allocation)
+  const int n = robot_.dof();
+  if (n > kMax) {
+    evaluate<Jet>(theta, m, c, d, nullptr);
+    return;
+  }
+  s.robot = &robot_;
+  s.measurement = &m;
+  s.context = &c;
+  for (int k = 0; k < 3; ++k) {
+    s.force(k) = Jet(m.force(k));
+    s.moment(k) = Jet(m.moment(k));
+    s.r_meas(k) = Jet(robot_.measured_point(k));
+    s.r_load(k) = Jet(robot_.load_point(k));
+  }
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->wrench(theta + offsets_[e], s);
+
+  // Stage 1 geometry in double; derivative parts as 3 x kJetStride blocks.
+  Eigen::Vector3d rm, rl, f, mo;
+  Block rmv, rlv, fv, mv;
+  for (int k = 0; k < 3; ++k) {
+    rm(k) = s.r_meas(k).a;
+    rl(k) = s.r_load(k).a;
+    f(k) = s.force(k).a;
+    mo(k) = s.moment(k).a;
+    rmv.row(k) = s.r_meas(k).v.transpose();
+    rlv.row(k) = s.r_load(k).v.transpose();
+    fv.row(k) = s.force(k).v.transpose();
+    mv.row(k) = s.moment(k).v.transpose();
+  }
+  const bool moved = !rmv.isZero(0.0) || !rlv.isZero(0.0);
+  const bool wrench_moved = !fv.isZero(0.0) || !mv.isZero(0.0);
+  const Eigen::Matrix3d rf = c.chain.flange.block<3, 3>(0, 0);
+  const Eigen::Vector3d pf = c.chain.flange.block<3, 1>(0, 3);
+  const Eigen::Vector3d pm = rf * rm + pf, pl = rf * rl + pf;
+  Block pmv, plv;
+  if (moved) {
+    pmv.noalias() = rf * rmv;
+    plv.noalias() = rf * rlv;
+  } else {
+    pmv.setZero();
+    plv.setZero();
+  }
+  for (int k = 0; k < 3; ++k) {
+    s.p_meas(k) = Jet(pm(k), pmv.row(k).transpose());
+    s.p_load(k) = Jet(pl(k), plv.row(k).transpose());
+  }
+  s.jac_meas.resize(6, n);
+  s.jac_load.resize(6, n);
+  s.tau.resize(n);
+  auto cross_block = [](const Eigen::Vector3d& z, const Block& v) {
+    Block out;
+    out.row(0) = z(1) * v.row(2) - z(2) * v.row(1);
+    out.row(1) = z(2) * v.row(0) - z(0) * v.row(2);
+    out.row(2) = z(0) * v.row(1) - z(1) * v.row(0);
+    return out;
+  };
+  Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMax> jm(3, n);
+  for (int j = 0; j < n; ++j) {
+    const Eigen::Vector3d z = c.chain.axis.col(j);
+    const Eigen::Vector3d o = c.chain.origin.col(j);
+    const Eigen::Vector3d wm = z.cross(pm - o), wl = z.cross(pl - o);
+    jm.col(j) = wm;
+    const double tau = wl.dot(f) + z.dot(mo);
+    Eigen::Matrix<double, kJetStride, 1> tv = Eigen::Matrix<double, kJetStride, 1>::Zero();
+    if (moved) {
+      const Block wmv = cross_block(z, pmv), wlv = cross_block(z, plv);
+      for (int k = 0; k < 3; ++k) {
+        s.jac_meas(k, j) = Jet(wm(k), wmv.row(k).transpose());
+        s.jac_load(k, j) = Jet(wl(k), wlv.row(k).transpose());
+      }
+      tv.noalias() += wlv.transpose() * f;
+    } else {
+      for (int k = 0; k < 3; ++k) {
+        s.jac_meas(k, j) = Jet(wm(k));
+        s.jac_load(k, j) = Jet(wl(k));
+      }
+    }
+    if (wrench_moved) tv.noalias() += fv.transpose() * wl + mv.transpose() * z;
+    for (int k = 0; k < 3; ++k) {
+      s.jac_meas(3 + k, j) = Jet(z(k));
+      s.jac_load(3 + k, j) = Jet(z(k));
+    }
+    s.tau(j) = Jet(tau, tv);
+  }
+  s.dtheta.resize(n);
+  for (int j = 0; j < n; ++j) s.dtheta(j) = Jet(0.0);
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->joint(theta + offsets_[e], s);
+  // d = J_p dtheta, rot = J_r dtheta as small products of the values and derivative parts.
+  Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMax, 1> dt(n);
+  Eigen::Matrix<double, Eigen::Dynamic, kJetStride, 0, kMax, kJetStride> dtv(n, kJetStride);
+  for (int j = 0; j < n; ++j) {
+    dt(j) = s.dtheta(j).a;
+    dtv.row(j) = s.dtheta(j).v.transpose();
+  }
+  const Eigen::Vector3d da = jm * dt;
+  Block dv = jm * dtv;
+  if (moved)
+    for (int j = 0; j < n; ++j)
+      for (int k = 0; k < 3; ++k) dv.row(k) += dt(j) * s.jac_meas(k, j).v.transpose();
+  const Eigen::Vector3d ra = c.chain.axis * dt;
+  const Block rv = c.chain.axis * dtv;
+  for (int k = 0; k < 3; ++k) {
+    s.d(k) = Jet(da(k), dv.row(k).transpose());
+    s.rot(k) = Jet(ra(k), rv.row(k).transpose());
+  }
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->cartesian(theta + offsets_[e], s);
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
+  *d = s.d;
+}
+
 Eigen::Matrix<double, 6, 1> DeflectionModel::predict(const Eigen::VectorXd& theta,
                                                      const Measurement& m,
                                                      const MeasurementContext& c) const {

@@ -81,7 +81,23 @@ Eigen::Matrix4d matrix4(const YamlReader& r, const YAML::Node& node, const std::
 
 }  // namespace
 
+namespace {
+RobotModel parse_robot_yaml_unguarded(const std::string& text, const std::string& file);
+}  // namespace
+
 RobotModel parse_robot_yaml(const std::string& text, const std::string& file) {
+  // yaml-cpp throws on conversions the reader does not check itself (e.g. a key that is a
+  // list); it must never escape as anything but a ParseError with its location.
+  try {
+    return parse_robot_yaml_unguarded(text, file);
+  } catch (const YAML::Exception& e) {
+    throw ParseError(file, e.mark.is_null() ? 0 : e.mark.line + 1,
+                     e.mark.is_null() ? 0 : e.mark.column + 1, e.msg);
+  }
+}
+
+namespace {
+RobotModel parse_robot_yaml_unguarded(const std::string& text, const std::string& file) {
   YamlReader r{file};
   YAML::Node root;
   try {
@@ -182,8 +198,6 @@ RobotModel parse_robot_yaml(const std::string& text, const std::string& file) {
   if (const auto g = root["gravity"]) robot.gravity = r.vec3(g, "gravity", 1.0);
   return robot;
 }
-
-namespace {
 
 Eigen::Matrix4d urdf_pose(const urdf::Pose& p) {
   Eigen::Matrix4d t = Eigen::Matrix4d::Identity();

@@ -59,7 +59,8 @@ Truth joint_truth(const Eigen::VectorXd& k) {
   return t;
 }
 
-Truth parse_truth_yaml(const std::string& text, const std::string& file, const RobotModel& robot) {
+static Truth parse_truth_yaml_unguarded(const std::string& text, const std::string& file,
+                                        const RobotModel& robot) {
   const YAML::Node root = load_yaml(text, file);
   for (const auto& kv : root) {
     const auto key = kv.first.as<std::string>();
@@ -117,11 +118,26 @@ Truth parse_truth_yaml(const std::string& text, const std::string& file, const R
   return t;
 }
 
+// yaml-cpp throws on conversions the readers do not check themselves (e.g. a key that is a
+// list); it must never escape as anything but a ParseError with its location.
+static ParseError yaml_parse_error(const std::string& file, const YAML::Exception& e) {
+  return ParseError(file, e.mark.is_null() ? 0 : e.mark.line + 1,
+                    e.mark.is_null() ? 0 : e.mark.column + 1, e.msg);
+}
+
+Truth parse_truth_yaml(const std::string& text, const std::string& file, const RobotModel& robot) {
+  try {
+    return parse_truth_yaml_unguarded(text, file, robot);
+  } catch (const YAML::Exception& e) {
+    throw yaml_parse_error(file, e);
+  }
+}
+
 Truth read_truth(const std::string& path, const RobotModel& robot) {
   return parse_truth_yaml(read_text_file(path), path, robot);
 }
 
-NoiseModel parse_noise_yaml(const std::string& text, const std::string& file) {
+static NoiseModel parse_noise_yaml_unguarded(const std::string& text, const std::string& file) {
   const YAML::Node root = load_yaml(text, file);
   NoiseModel n;
   for (const auto& kv : root) {
@@ -163,6 +179,14 @@ NoiseModel parse_noise_yaml(const std::string& text, const std::string& file) {
                   "outlier_rate, outlier_size_m, seed)");
   }
   return n;
+}
+
+NoiseModel parse_noise_yaml(const std::string& text, const std::string& file) {
+  try {
+    return parse_noise_yaml_unguarded(text, file);
+  } catch (const YAML::Exception& e) {
+    throw yaml_parse_error(file, e);
+  }
 }
 
 NoiseModel read_noise(const std::string& path) { return parse_noise_yaml(read_text_file(path), path); }

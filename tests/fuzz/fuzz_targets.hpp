@@ -255,9 +255,9 @@ inline void capi_arrays(const uint8_t* data, size_t size) {
 
   stiff_dataset* ds = nullptr;
   const stiff_status s = stiff_dataset_create(
-      &ds, rows, dof, rows * dof ? q.data() : nullptr, rows ? force.data() : nullptr,
-      flags & 1 ? moment.data() : nullptr, flags & 2 ? disp.data() : nullptr,
-      flags & 4 ? sigma.data() : nullptr);
+      &ds, rows, dof, (rows * dof != 0) ? q.data() : nullptr, rows != 0 ? force.data() : nullptr,
+      (flags & 1) != 0 ? moment.data() : nullptr, (flags & 2) != 0 ? disp.data() : nullptr,
+      (flags & 4) != 0 ? sigma.data() : nullptr);
   if (!capi_ok(s, "stiff_dataset_create")) {
     if (ds) finding("capi", "stiff_dataset_create failed but set *out");
     return;
@@ -277,8 +277,10 @@ inline void capi_arrays(const uint8_t* data, size_t size) {
     if (!capi_ok(stiff_result_parameters(theta.data(), se.data(), needed, &needed, fit),
                  "stiff_result_parameters"))
       finding("capi", "parameters not readable after a successful fit");
-    for (double v : theta)
-      if (!std::isfinite(v)) finding("capi", "a successful fit has a non-finite parameter");
+    for (size_t i = 0; i < theta.size(); ++i)
+      if (!std::isfinite(theta[i]))
+        finding("capi", "a successful fit has a non-finite parameter " + std::to_string(i) +
+                            " = " + std::to_string(theta[i]));
     stiff_model* model = nullptr;
     if (capi_ok(stiff_model_create(&model, robot.robot, fit), "stiff_model_create")) {
       const size_t prow = 1 + src.byte() % 4;

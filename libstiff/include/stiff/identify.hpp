@@ -20,7 +20,9 @@ struct LinearOptions {
 };
 
 /// Least-squares identification of the diagonal joint compliances (`joint` model), c =
-/// argmin ||A c - X||, by column-pivoted QR of the column-scaled A. Joints whose columns the
+/// argmin ||A c - X||, with the rank decision of the column-pivoted QR of the column-scaled A
+/// (taken on the small normal matrix when no pivot is near the tolerance, else by the QR
+/// itself) and the solution at QR accuracy. Joints whose columns the
 /// data cannot identify (zero or dependent) are named in `warnings`, held at 0 and marked
 /// unidentified. Throws InvalidArgument for bad data and NumericalError when nothing is
 /// identifiable.

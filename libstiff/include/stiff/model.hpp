@@ -48,6 +48,14 @@ class DeflectionModel {
   template <typename T>
   void evaluate(const T* theta, const Measurement& m, const MeasurementContext& c, Vector3<T>* d,
                 Vector3<T>* rot) const;
+  /// evaluate<Jet> for repeated derivative evaluations (identification): the same stages,
+  /// values and derivatives equal up to round-off, but the geometry stage (lever arms and
+  /// external joint torques) is computed in double with the derivative parts as 3 x
+  /// kJetStride blocks, skipped when no effect moved the points or the wrench in its wrench
+  /// stage, and `scratch` (reused between calls with this model, one per thread) avoids
+  /// allocations. Only the displacement d is produced.
+  void evaluate_jet(const Jet* theta, const Measurement& m, const MeasurementContext& c,
+                    EvalState<Jet>& scratch, Vector3<Jet>* d) const;
   /// Same in double: (dx, dy, dz, rx, ry, rz).
   Eigen::Matrix<double, 6, 1> predict(const Eigen::VectorXd& theta, const Measurement& m,
                                       const MeasurementContext& c) const;

@@ -56,17 +56,25 @@ class LinkCompliance : public EffectT<LinkCompliance> {
     const auto& chain = s.context->chain;
     for (size_t k = 0; k < springs_.size(); ++k) {
       const int i = springs_[k].link;
-      const Eigen::Vector3d u_d = chain.link[i].template block<3, 3>(0, 0) * springs_[k].axis;
-      const Vector3<T> u = u_d.cast<T>();
-      const Vector3<T> o = chain.origin.col(i).template cast<T>();
-      const T torque = u.cross(s.p_load - o).dot(s.force) + u.dot(s.moment);
+      // The spring axis and origin do not depend on the parameters: keep them in double so
+      // that automatic differentiation only carries derivatives where they can be non-zero.
+      const Eigen::Vector3d u = chain.link[i].template block<3, 3>(0, 0) * springs_[k].axis;
+      const Eigen::Vector3d o = chain.origin.col(i);
+      const T torque = cross(u, s.p_load, o).dot(s.force) + s.moment.dot(u.cast<T>());
       const T angle = p[k] * torque;
-      s.d += angle * u.cross(s.p_meas - o);
-      s.rot += angle * u;
+      s.d += angle * cross(u, s.p_meas, o);
+      for (int r = 0; r < 3; ++r) s.rot(r) += angle * u(r);
     }
   }
 
  private:
+  // u x (p - o) with a constant axis u and origin o.
+  template <typename T>
+  static Vector3<T> cross(const Eigen::Vector3d& u, const Vector3<T>& p, const Eigen::Vector3d& o) {
+    const Vector3<T> r(p(0) - o(0), p(1) - o(1), p(2) - o(2));
+    return Vector3<T>(u(1) * r(2) - u(2) * r(1), u(2) * r(0) - u(0) * r(2),
+                      u(0) * r(1) - u(1) * r(0));
+  }
   struct Spring {
     int link;              ///< 0-based link index
     Eigen::Vector3d axis;  ///< unit axis in the link frame

@@ -254,3 +254,44 @@ TEST(IdentifyCeres, WithoutSigmaUsesRobustScale) {
 
 }  // namespace
 }  // namespace stiff
+
+namespace stiff {
+namespace {
+
+// The identification's fast derivative path (DeflectionModel::evaluate_jet, geometry in double
+// with 3 x kJetStride derivative blocks) equals the generic evaluate<Jet> to round-off, for
+// parameters that move the points (point_offset), that act after the geometry (joint, link,
+// tracker_frame) and with every parameter seeded, pass by pass.
+TEST(IdentifyCeres, FastJetEvaluationEqualsTheGenericOne) {
+  const RobotModel robot = test::rokae();
+  const Dataset data = test::design60(3, 12);
+  for (const std::vector<std::string> effects :
+       {std::vector<std::string>{"joint"}, std::vector<std::string>{"joint", "link", "point_offset"},
+        std::vector<std::string>{"joint", "point_offset", "tracker_frame"}}) {
+    const DeflectionModel model(robot, effects, &data);
+    const int p = model.parameter_count();
+    Eigen::VectorXd theta = model.start_parameters();
+    for (int k = 0; k < p; ++k) theta(k) += 0.1 * std::abs(model.spec(k).typical) * (k % 3 - 1);
+    const auto ctx = model.contexts(data);
+    EvalState<Jet> scratch;
+    for (size_t r = 0; r < data.rows.size(); ++r) {
+      for (int first = 0; first < p; first += kJetStride) {
+        std::vector<Jet> t(p);
+        for (int k = 0; k < p; ++k) t[k] = Jet(theta(k));
+        for (int k = first; k < std::min(p, first + kJetStride); ++k) t[k].v(k - first) = 1.0;
+        Vector3<Jet> slow, fast;
+        model.evaluate<Jet>(t.data(), data.rows[r], ctx[r], &slow, nullptr);
+        model.evaluate_jet(t.data(), data.rows[r], ctx[r], scratch, &fast);
+        for (int i = 0; i < 3; ++i) {
+          EXPECT_NEAR(fast(i).a, slow(i).a, 1e-15 + 1e-12 * std::abs(slow(i).a));
+          for (int k = 0; k < kJetStride; ++k)
+            EXPECT_NEAR(fast(i).v(k), slow(i).v(k), 1e-15 + 1e-11 * slow(i).v.cwiseAbs().maxCoeff())
+                << model.model_string() << " row " << r << " pass " << first << " slot " << k;
+        }
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace stiff

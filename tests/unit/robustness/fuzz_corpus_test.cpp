@@ -66,7 +66,7 @@ std::vector<std::string> names() {
 }
 
 INSTANTIATE_TEST_SUITE_P(AllTargets, FuzzCorpus, ::testing::ValuesIn(names()),
-                         [](const auto& info) { return info.param; });
+                         [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });
 
 // Every target built by tests/fuzz has a corpus here, and every corpus a target.
 TEST(FuzzCorpusLayout, EveryCorpusDirectoryHasATarget) {

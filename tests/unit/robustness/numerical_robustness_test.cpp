@@ -59,7 +59,9 @@ void expect_sound(const FitResult& fit) {
   EXPECT_TRUE(std::isfinite(fit.rms_m));
   EXPECT_TRUE(std::isfinite(fit.sigma_hat_m));
   EXPECT_TRUE(std::isfinite(fit.condition_number) || fit.rank == 0);
-  if (any_unidentified) EXPECT_FALSE(fit.warnings.empty());
+  if (any_unidentified) {
+    EXPECT_FALSE(fit.warnings.empty());
+  }
 }
 
 // ---------------------------------------------------------------- near-singular poses
@@ -74,10 +76,11 @@ TEST(Robustness, WristSingularPosesAreFlaggedNotNaN) {
   // Each lost joint is named with the reason (zero column: no torque or no motion; dependent
   // column: "add poses or loads that move it").
   for (int j = 0; j < 6; ++j)
-    if (!fit.joint_identified()[j])
+    if (!fit.joint_identified()[j]) {
       EXPECT_NE(joined(fit.warnings).find("joint " + std::to_string(j + 1) + " is not identifiable"),
                 std::string::npos)
           << joined(fit.warnings);
+    }
 }
 
 TEST(Robustness, JacobianAndPredictionAtExactSingularityAreFinite) {

@@ -1,0 +1,96 @@
+// Bugs found by fuzzing (docs/reliability.md, "Bugs found and fixed"), one test each. The
+// inputs that found them are also in tests/fuzz/corpus/<target>/regression-* (FuzzCorpus).
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "stiff/error.hpp"
+#include "stiff/fit.hpp"
+#include "stiff/robot_io.hpp"
+#include "stiff/simulate.hpp"
+#include "stiff/stiff.h"
+#include "test_support.hpp"
+
+namespace stiff {
+namespace {
+
+// yaml-cpp's BadConversion escaped parse_robot_yaml (C ABI: STIFF_E_INTERNAL) for a key or
+// value of the wrong YAML type, e.g. a flow list where a key was expected.
+TEST(FuzzRegressions, RobotYamlWithAListAsKeyIsAParseError) {
+  const std::string text =
+      "name: x\nconvention: standard_dh\nunits: {length: m, angle: deg}\njoints:\n"
+      "  - {alpha: 0, a: 0.4, d: 0, [-266, 266]: 1}\n";
+  EXPECT_THROW(parse_robot_yaml(text, "r.yaml"), ParseError);
+  EXPECT_THROW(parse_robot_yaml("[a, b]: 1\n", "r.yaml"), ParseError);
+}
+
+TEST(FuzzRegressions, TruthAndNoiseYamlWithAMapAsKeyAreParseErrors) {
+  try {
+    parse_truth_yaml("{}:\n  1\n", "t.yaml", test::rokae());
+    FAIL();
+  } catch (const ParseError& e) {
+    EXPECT_NE(std::string(e.what()).find("t.yaml:"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(parse_noise_yaml("{a: 1}: 2\n", "n.yaml"), ParseError);
+  EXPECT_THROW(parse_truth_yaml("effects:\n  [backlash]: {b1: 1}\n", "t.yaml", test::rokae()),
+               ParseError);
+}
+
+// nlohmann::json throws out_of_range (406), not parse_error, for a number that overflows.
+TEST(FuzzRegressions, FitJsonWithAnOverflowingNumberIsAParseError) {
+  try {
+    fit_from_json("{\"format\": \"stiff-fit\", \"version\": 1e1873}", "f.json");
+    FAIL();
+  } catch (const ParseError& e) {
+    EXPECT_NE(std::string(e.what()).find("f.json"), std::string::npos) << e.what();
+  }
+}
+
+// Finite but absurd values (1e308) overflowed the linear identification: an Eigen assertion
+// on an empty vector (moment 1e308) and a "successful" fit with an infinite compliance
+// (displacement -1e308). Both are now STIFF_E_NUMERICAL naming the units.
+class Overflow : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    ASSERT_EQ(stiff_robot_load(&robot, test::source_path("examples/robots/rokae.yaml").c_str()),
+              STIFF_OK);
+  }
+  void TearDown() override { stiff_robot_destroy(robot); }
+  stiff_status identify(double moment_x, double displacement_y) {
+    const double q[18] = {0.4, 0.3, 0.2, 0.1, 0.5, 0.0, 0.0, 0.0, 0.0, -0.5, -0.5, 0.5,
+                          0.1, 0.8, 0.4, -0.3, 1.0, 0.2};
+    const double f[9] = {40, 50, 50, 50, 50, 50, 50, 50, 50};
+    const double m[9] = {moment_x, -0.4, -0.5, 0, 5, 5, 5, 4.9, 5};
+    const double d[9] = {-1.6e-5, displacement_y, 0, -1.4e-5, -9.2e-5, 1e-16, 1.3e-5, 2e-5, -3e-5};
+    stiff_dataset* ds = nullptr;
+    EXPECT_EQ(stiff_dataset_create(&ds, 3, 6, q, f, m, d, nullptr), STIFF_OK);
+    stiff_result* fit = nullptr;
+    const stiff_status s = stiff_identify(&fit, robot, ds, nullptr);
+    if (s == STIFF_OK) {
+      double c[6];
+      EXPECT_EQ(stiff_result_parameters(c, nullptr, 6, nullptr, fit), STIFF_OK);
+      for (double v : c) EXPECT_TRUE(std::isfinite(v));
+    } else {
+      EXPECT_EQ(fit, nullptr);
+    }
+    stiff_result_destroy(fit);
+    stiff_dataset_destroy(ds);
+    return s;
+  }
+  stiff_robot* robot = nullptr;
+};
+
+TEST_F(Overflow, HugeMomentIsANumericalError) {
+  EXPECT_EQ(identify(-1e308, 1e-5), STIFF_E_NUMERICAL);
+  EXPECT_NE(std::string(stiff_last_error()).find("units"), std::string::npos) << stiff_last_error();
+}
+
+TEST_F(Overflow, HugeDisplacementIsANumericalError) {
+  EXPECT_EQ(identify(5.0, -1e308), STIFF_E_NUMERICAL);
+  EXPECT_NE(std::string(stiff_last_error()).find("units"), std::string::npos) << stiff_last_error();
+}
+
+TEST_F(Overflow, OrdinaryValuesStillIdentify) { EXPECT_EQ(identify(5.0, 1e-5), STIFF_OK); }
+
+}  // namespace
+}  // namespace stiff
