@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "stiff/plan.hpp"
+#include "plan_test_support.hpp"
 #include "test_support.hpp"
 
 namespace stiff {
@@ -13,14 +14,7 @@ namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-PoolOptions paper_pool(int poses, int loads, uint64_t seed = 1) {
-  PoolOptions o;
-  o.pose_count = poses;
-  o.load_count = loads;
-  o.q_fixed = {kNaN, kNaN, kNaN, kNaN, kNaN, 0.0};
-  o.seed = seed;
-  return o;
-}
+using test::paper_pool;
 
 TEST(PlanAnnealing, FindsExhaustiveOptimumOnSmallPool) {
   const RobotModel robot = test::rokae();

@@ -8,6 +8,7 @@
 #include "stiff/error.hpp"
 #include "stiff/model.hpp"
 #include "stiff/random.hpp"
+#include "plan_test_support.hpp"
 #include "test_support.hpp"
 // The optimizers' packed fast path is internal; it is tested against the generic kernels.
 #include "../../../libstiff/src/plan/plan_internal.hpp"
@@ -17,14 +18,7 @@ namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-PoolOptions paper_pool(int poses, int loads, uint64_t seed = 1) {
-  PoolOptions o;
-  o.pose_count = poses;
-  o.load_count = loads;
-  o.q_fixed = {kNaN, kNaN, kNaN, kNaN, kNaN, 0.0};
-  o.seed = seed;
-  return o;
-}
+using test::paper_pool;
 
 TEST(PlanPool, BlocksEqualObservationBlockAndJoint6Drops) {
   const RobotModel robot = test::rokae();
