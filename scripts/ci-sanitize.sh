@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Sanitizer CI (docs/reliability.md): builds everything (core, C ABI, C and C++ tests, FMU) with
 # AddressSanitizer + UndefinedBehaviorSanitizer (CMakePresets.json "asan-ubsan", build-asan-ubsan)
-# and runs the whole ctest suite except slow tests (label `slow`, or "Slow" in the name) and the
-# python ones; then builds the concurrency test with ThreadSanitizer (preset "tsan",
+# and runs the whole ctest suite except slow tests (label `slow`, or "Slow" in the name), the
+# python ones and the outside-project install test (label `install`: it links an unsanitized
+# consumer against the sanitized library); then builds the concurrency test with ThreadSanitizer (preset "tsan",
 # build-tsan) and runs every test whose name contains "Threads".
 #   bash scripts/ci-sanitize.sh            # both
 #   bash scripts/ci-sanitize.sh asan       # or: tsan
@@ -37,7 +38,7 @@ if [[ $what == all || $what == asan ]]; then
   export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
   export LSAN_OPTIONS=suppressions=$PWD/tests/fuzz/lsan.supp:print_suppressions=0
   (cd build-asan-ubsan && "$CTEST" --output-on-failure --no-tests=error -j "$JOBS" \
-     -LE "slow|python" -E "Slow" --timeout 900)
+     -LE "slow|python|install" -E "Slow" --timeout 900)
 fi
 
 if [[ $what == all || $what == tsan ]]; then

@@ -196,7 +196,10 @@ double parse_number(const Field& f, const Column& c, const std::string& file, in
 }
 
 std::string quote_if_needed(const std::string& s) {
-  if (s.find_first_of(",\"\n#") == std::string::npos) return s;
+  // Unquoted fields are trimmed on reading: quote anything whose blanks must survive.
+  const bool blank_edge = !s.empty() && (s.front() == ' ' || s.front() == '\t' ||
+                                         s.back() == ' ' || s.back() == '\t');
+  if (!blank_edge && s.find_first_of(",\"\n\r#") == std::string::npos) return s;
   std::string o = "\"";
   for (char ch : s) o += ch == '"' ? std::string("\"\"") : std::string(1, ch);
   return o + "\"";

@@ -195,6 +195,12 @@ Identifiability check_identifiability(const DeflectionModel& model,
                                       const Eigen::VectorXd& typical,
                                       double tolerance) {
   const int p = model.parameter_count();
+  // Finite but absurd data (a displacement of 1e308 m) overflow the Jacobian; the rank test
+  // below would then run a QR on an empty matrix.
+  if (!j.allFinite())
+    throw NumericalError(
+        "identify: the Jacobian is not finite (overflow): check the units and sizes of the loads "
+        "and displacements (N, N*m, m)");
   Identifiability out;
   out.fixed.assign(p, false);
   out.reason.assign(p, "");
@@ -226,6 +232,10 @@ Identifiability check_identifiability(const DeflectionModel& model,
       continue;
     }
     out.fixed[k] = true;
+    if (accepted.empty()) {
+      out.reason[k] = "it has no effect on any of these measurements";
+      continue;
+    }
     // Name the combination: least-squares coefficients on the accepted (normalised) columns.
     Eigen::MatrixXd a(j.rows(), accepted.size());
     for (size_t i = 0; i < accepted.size(); ++i)

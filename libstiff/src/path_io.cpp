@@ -459,8 +459,15 @@ ToolPath parse_gcode(const std::string& text, const std::string& file, const Pat
     if (motion == 1 && feed <= 0)
       throw ParseError(file, line_no, words.front().col, "G1 move without a feed (F word)");
     int pieces = 1;
-    if (motion == 1 && o.segment_m > 0)
-      pieces = std::max(1, static_cast<int>(std::ceil((end - pos).norm() / o.segment_m - 1e-9)));
+    if (motion == 1 && o.segment_m > 0) {
+      // Checked before the conversion to int: a huge move (or coordinate) would overflow it.
+      const double want = std::ceil((end - pos).norm() / o.segment_m - 1e-9);
+      if (!(want <= 1e6))
+        throw ParseError(file, line_no, words.front().col,
+                         "this move splits into more than 1000000 segments of " +
+                             std::to_string(o.segment_m) + " m: check the units or the segment length");
+      pieces = std::max(1, static_cast<int>(want));
+    }
     if (path.points.empty() && pieces > 1) pieces = 1;  // no known start point yet
     for (int k = 1; k <= pieces; ++k) {
       PathPoint pt;

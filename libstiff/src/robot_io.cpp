@@ -333,19 +333,41 @@ RobotModel load_robot(const std::string& path) {
   return urdf_file ? parse_robot_urdf(text, path) : parse_robot_yaml(text, path);
 }
 
+namespace {
+/// A YAML double-quoted scalar: names may hold quotes, backslashes or control characters
+/// (anything the reader accepted must be written back readable).
+std::string yaml_quoted(const std::string& s) {
+  std::string q = "\"";
+  for (const unsigned char c : s) {
+    if (c == '"' || c == '\\') {
+      q += '\\';
+      q += static_cast<char>(c);
+    } else if (c < 0x20 || c == 0x7f) {
+      static const char hex[] = "0123456789abcdef";
+      q += "\\x";
+      q += hex[c >> 4];
+      q += hex[c & 0xf];
+    } else {
+      q += static_cast<char>(c);
+    }
+  }
+  return q + "\"";
+}
+}  // namespace
+
 std::string robot_to_yaml(const RobotModel& robot) {
   std::ostringstream o;
   o << std::setprecision(17);
   auto vec = [&](const Eigen::Vector3d& v) {
     o << "[" << v(0) << ", " << v(1) << ", " << v(2) << "]";
   };
-  o << "name: \"" << robot.name << "\"\n";
+  o << "name: " << yaml_quoted(robot.name) << "\n";
   o << "units: {length: m, angle: rad}\n";
   const bool dh = robot.convention != Convention::urdf;
   o << "convention: " << (dh ? to_string(robot.convention) : "general") << "\n";
   o << "joints:\n";
   for (const auto& j : robot.joints) {
-    o << "  - name: \"" << j.name << "\"\n";
+    o << "  - name: " << yaml_quoted(j.name) << "\n";
     if (dh) {
       o << "    alpha: " << j.dh[0] << "\n    a: " << j.dh[1] << "\n    d: " << j.dh[2]
         << "\n    theta_offset: " << j.dh[3] << "\n";

@@ -6,6 +6,7 @@
 
 #include "stiff/error.hpp"
 #include "stiff/fit.hpp"
+#include "stiff/path_io.hpp"
 #include "stiff/robot_io.hpp"
 #include "stiff/simulate.hpp"
 #include "stiff/stiff.h"
@@ -36,6 +37,19 @@ TEST(FuzzRegressions, TruthAndNoiseYamlWithAMapAsKeyAreParseErrors) {
                ParseError);
 }
 
+// robot_to_yaml wrote names in double quotes without escaping: a name holding a quote, a
+// backslash or a control character gave a file its own reader rejects (e.g. the robot.yaml
+// of an exported FMU).
+TEST(FuzzRegressions, RobotNamesWithQuotesAndControlCharactersRoundTrip) {
+  RobotModel r = test::rokae();
+  r.name = "arm \"7\" \\ {x: 1} # not a comment\t";
+  r.joints[2].name = "j\"3\\";
+  const RobotModel again = parse_robot_yaml(robot_to_yaml(r), "roundtrip.yaml");
+  EXPECT_EQ(again.name, r.name);
+  EXPECT_EQ(again.joints[2].name, r.joints[2].name);
+  EXPECT_EQ(again.dof(), r.dof());
+}
+
 // nlohmann::json throws out_of_range (406), not parse_error, for a number that overflows.
 TEST(FuzzRegressions, FitJsonWithAnOverflowingNumberIsAParseError) {
   try {
@@ -56,7 +70,7 @@ class Overflow : public ::testing::Test {
               STIFF_OK);
   }
   void TearDown() override { stiff_robot_destroy(robot); }
-  stiff_status identify(double moment_x, double displacement_y) {
+  stiff_status identify(double moment_x, double displacement_y, const char* model = nullptr) {
     const double q[18] = {0.4, 0.3, 0.2, 0.1, 0.5, 0.0, 0.0, 0.0, 0.0, -0.5, -0.5, 0.5,
                           0.1, 0.8, 0.4, -0.3, 1.0, 0.2};
     const double f[9] = {40, 50, 50, 50, 50, 50, 50, 50, 50};
@@ -65,7 +79,10 @@ class Overflow : public ::testing::Test {
     stiff_dataset* ds = nullptr;
     EXPECT_EQ(stiff_dataset_create(&ds, 3, 6, q, f, m, d, nullptr), STIFF_OK);
     stiff_result* fit = nullptr;
-    const stiff_status s = stiff_identify(&fit, robot, ds, nullptr);
+    stiff_identify_options o = STIFF_IDENTIFY_OPTIONS_INIT;
+    o.model = model;
+    o.max_iterations = 20;
+    const stiff_status s = stiff_identify(&fit, robot, ds, &o);
     if (s == STIFF_OK) {
       double c[6];
       EXPECT_EQ(stiff_result_parameters(c, nullptr, 6, nullptr, fit), STIFF_OK);
@@ -90,7 +107,24 @@ TEST_F(Overflow, HugeDisplacementIsANumericalError) {
   EXPECT_NE(std::string(stiff_last_error()).find("units"), std::string::npos) << stiff_last_error();
 }
 
+// The Ceres path: the overflowing Jacobian reached a QR of an empty matrix (Eigen assertion).
+TEST_F(Overflow, HugeDisplacementWithCeresIsANumericalError) {
+  EXPECT_EQ(identify(5e-324, -1e308, "joint+link"), STIFF_E_NUMERICAL) << stiff_last_error();
+}
+
 TEST_F(Overflow, OrdinaryValuesStillIdentify) { EXPECT_EQ(identify(5.0, 1e-5), STIFF_OK); }
+
+// A G1 move of 1e30 mm with segmentation converted ~1e31 segments to int (UB).
+TEST(FuzzRegressions, GcodeMoveWithTooManySegmentsIsAParseError) {
+  PathOptions o;
+  o.segment_m = 0.01;
+  try {
+    parse_gcode("G21 G90\nG1 X0 Y0 Z0 F100\nG1 X1e30\n", "p.nc", o);
+    FAIL();
+  } catch (const ParseError& e) {
+    EXPECT_NE(std::string(e.what()).find("p.nc:3"), std::string::npos) << e.what();
+  }
+}
 
 }  // namespace
 }  // namespace stiff
