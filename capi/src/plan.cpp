@@ -73,7 +73,8 @@ stiff_status stiff_plan_create(stiff_plan** out,
       require_finite(o.fixture_directions, 3 * o.fixture_direction_count, "fixture_directions");
       require_finite(o.fixture_forces_N, o.fixture_force_count, "fixture_forces_N");
       for (size_t k = 0; k < o.fixture_direction_count; ++k)
-        pool.fixture_directions.emplace_back(o.fixture_directions[3 * k], o.fixture_directions[3 * k + 1],
+        pool.fixture_directions.emplace_back(o.fixture_directions[3 * k],
+                                             o.fixture_directions[3 * k + 1],
                                              o.fixture_directions[3 * k + 2]);
       pool.fixture_forces_N.assign(o.fixture_forces_N, o.fixture_forces_N + o.fixture_force_count);
     }

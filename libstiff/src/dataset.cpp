@@ -1,8 +1,8 @@
 #include "stiff/dataset.hpp"
 
 #include <cmath>
-#include <cstdlib>
 #include <cstdio>
+#include <cstdlib>
 #include <map>
 #include <set>
 #include <sstream>
@@ -147,13 +147,12 @@ Column classify(const std::string& name, const std::string& file, int line, int 
     Kind kind;
     int index;
   };
-  std::vector<Base> bases = {{"fx", Kind::force, 0},        {"fy", Kind::force, 1},
-                             {"fz", Kind::force, 2},        {"mx", Kind::moment, 0},
-                             {"my", Kind::moment, 1},       {"mz", Kind::moment, 2},
-                             {"dx", Kind::displacement, 0}, {"dy", Kind::displacement, 1},
-                             {"dz", Kind::displacement, 2}, {"rx", Kind::rotation, 0},
-                             {"ry", Kind::rotation, 1},     {"rz", Kind::rotation, 2},
-                             {"sigma_d", Kind::sigma, 0},   {"t", Kind::time, 0}};
+  std::vector<Base> bases = {
+      {"fx", Kind::force, 0},        {"fy", Kind::force, 1},        {"fz", Kind::force, 2},
+      {"mx", Kind::moment, 0},       {"my", Kind::moment, 1},       {"mz", Kind::moment, 2},
+      {"dx", Kind::displacement, 0}, {"dy", Kind::displacement, 1}, {"dz", Kind::displacement, 2},
+      {"rx", Kind::rotation, 0},     {"ry", Kind::rotation, 1},     {"rz", Kind::rotation, 2},
+      {"sigma_d", Kind::sigma, 0},   {"t", Kind::time, 0}};
   // q<k>: joint columns.
   if (name.size() >= 2 && name[0] == 'q' && std::isdigit(static_cast<unsigned char>(name[1]))) {
     size_t k = 1;
@@ -163,9 +162,9 @@ Column classify(const std::string& name, const std::string& file, int line, int 
   }
   for (const auto& b : bases) {
     if (name == b.base)
-      throw ParseError(file, line, col,
-                       "column '" + name + "' has no unit suffix (use " +
-                           accepted_units(b.kind) + ")");
+      throw ParseError(
+          file, line, col,
+          "column '" + name + "' has no unit suffix (use " + accepted_units(b.kind) + ")");
     if (name.compare(0, b.base.size() + 1, b.base + "_") != 0) continue;
     const std::string unit = name.substr(b.base.size() + 1);
     if (unit.find('_') != std::string::npos) continue;  // e.g. fx_flange_N: an extra column
@@ -173,8 +172,8 @@ Column classify(const std::string& name, const std::string& file, int line, int 
     c.index = b.index;
     if (!lookup_unit(b.kind, unit, &c.scale))
       throw ParseError(file, line, col,
-                       "column '" + name + "': unknown unit '" + unit + "' (accepted: " +
-                           accepted_units(b.kind) + ")");
+                       "column '" + name + "': unknown unit '" + unit +
+                           "' (accepted: " + accepted_units(b.kind) + ")");
     return c;
   }
   c.kind = Kind::extra;
@@ -182,8 +181,7 @@ Column classify(const std::string& name, const std::string& file, int line, int 
 }
 
 double parse_number(const Field& f, const Column& c, const std::string& file, int line) {
-  if (f.text.empty())
-    throw ParseError(file, line, f.col, "column '" + c.name + "': empty value");
+  if (f.text.empty()) throw ParseError(file, line, f.col, "column '" + c.name + "': empty value");
   char* end = nullptr;
   const double v = std::strtod(f.text.c_str(), &end);
   if (end != f.text.c_str() + f.text.size())
@@ -197,8 +195,8 @@ double parse_number(const Field& f, const Column& c, const std::string& file, in
 
 std::string quote_if_needed(const std::string& s) {
   // Unquoted fields are trimmed on reading: quote anything whose blanks must survive.
-  const bool blank_edge = !s.empty() && (s.front() == ' ' || s.front() == '\t' ||
-                                         s.back() == ' ' || s.back() == '\t');
+  const bool blank_edge =
+      !s.empty() && (s.front() == ' ' || s.front() == '\t' || s.back() == ' ' || s.back() == '\t');
   if (!blank_edge && s.find_first_of(",\"\n\r#") == std::string::npos) return s;
   std::string o = "\"";
   for (char ch : s) o += ch == '"' ? std::string("\"\"") : std::string(1, ch);
@@ -311,8 +309,7 @@ Dataset parse_measurements_csv(const std::string& text_in, const std::string& fi
         if (count == 3) return true;
         if (count == 0 && !required) return false;
         throw ParseError(file, line_no, 1,
-                         std::string("missing required column: ") + names +
-                             " must all be present");
+                         std::string("missing required column: ") + names + " must all be present");
       };
       group(Kind::force, "fx, fy, fz", true);
       data.has_moment = group(Kind::moment, "mx, my, mz", false);
@@ -326,8 +323,9 @@ Dataset parse_measurements_csv(const std::string& text_in, const std::string& fi
     }
     if (fields.size() != columns.size())
       throw ParseError(file, line_no, fields.back().col,
-                       "wrong field count: " + std::to_string(fields.size()) + " fields, the header (line " +
-                           std::to_string(header_line) + ") has " + std::to_string(columns.size()));
+                       "wrong field count: " + std::to_string(fields.size()) +
+                           " fields, the header (line " + std::to_string(header_line) + ") has " +
+                           std::to_string(columns.size()));
     Measurement m;
     m.q = Eigen::VectorXd::Zero(data.dof);
     m.extra.resize(data.extra_columns.size());
@@ -436,15 +434,14 @@ void validate_dataset(const Dataset& data, int dof, bool need_displacement) {
     const auto& m = data.rows[r];
     const std::string where = "measurement " + std::to_string(r + 1) + " (id '" + m.id + "')";
     if (m.q.size() != dof)
-      throw InvalidArgument(where + ": " + std::to_string(m.q.size()) +
-                            " joint values for a " + std::to_string(dof) + "-joint robot");
+      throw InvalidArgument(where + ": " + std::to_string(m.q.size()) + " joint values for a " +
+                            std::to_string(dof) + "-joint robot");
     if (!m.q.allFinite() || !m.force.allFinite() || !m.moment.allFinite() ||
         !m.displacement.allFinite() || !m.rotation.allFinite() || !std::isfinite(m.sigma_d) ||
         !std::isfinite(m.time))
       throw InvalidArgument(where + ": a value is not finite");
     if (m.sigma_d < 0) throw InvalidArgument(where + ": sigma_d must be >= 0");
-    if (!m.id.empty() && !ids.insert(m.id).second)
-      throw InvalidArgument(where + ": duplicate id");
+    if (!m.id.empty() && !ids.insert(m.id).second) throw InvalidArgument(where + ": duplicate id");
   }
 }
 

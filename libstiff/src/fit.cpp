@@ -135,7 +135,8 @@ FitResult fit_from_json(const std::string& text, const std::string& file) {
       q.meaning = p.value("meaning", "");
       q.value = number_from(need(p, "value"));
       if (!std::isfinite(q.value))
-        throw ParseError(file, 0, 0, "parameter " + q.effect + "." + q.name + " is not a finite number");
+        throw ParseError(file, 0, 0,
+                         "parameter " + q.effect + "." + q.name + " is not a finite number");
       q.standard_error = p.contains("standard_error") ? number_from(p["standard_error"]) : NAN;
       q.identified = p.value("identified", true);
       f.parameters.push_back(q);
@@ -145,7 +146,8 @@ FitResult fit_from_json(const std::string& text, const std::string& file) {
       f.measurements = s.value("measurements", 0);
       f.rank = s.value("rank", 0);
       f.dof = s.value("dof", 0);
-      f.condition_number = s.contains("condition_number") ? number_from(s["condition_number"]) : NAN;
+      f.condition_number =
+          s.contains("condition_number") ? number_from(s["condition_number"]) : NAN;
       f.rms_m = s.value("rms_m", 0.0);
       f.sigma_hat_m = s.contains("sigma_hat_m") ? number_from(s["sigma_hat_m"]) : NAN;
       f.noise_floor_m = s.value("noise_floor_m", 0.0);
@@ -186,7 +188,8 @@ double stated_noise_m(const Dataset& data) {
   return 0.0;
 }
 
-Eigen::MatrixXd predict_dataset(const RobotModel& robot, const FitResult& fit,
+Eigen::MatrixXd predict_dataset(const RobotModel& robot,
+                                const FitResult& fit,
                                 const Dataset& data) {
   validate_dataset(data, robot.dof(), false);
   DeflectionModel model(robot, fit.model, &data);
@@ -198,12 +201,14 @@ Eigen::MatrixXd predict_dataset(const RobotModel& robot, const FitResult& fit,
   for (int k = 0; k < model.parameter_count(); ++k)
     if (model.spec(k).name != fit.parameters[k].name)
       throw InvalidArgument("fit parameter " + std::to_string(k + 1) + " is '" +
-                            fit.parameters[k].name + "', the model expects '" + model.spec(k).name + "'");
+                            fit.parameters[k].name + "', the model expects '" + model.spec(k).name +
+                            "'");
   const Eigen::VectorXd theta = fit.theta();
   Eigen::MatrixXd out(data.rows.size(), 6);
   for (size_t r = 0; r < data.rows.size(); ++r)
-    out.row(r) = model.predict(theta, data.rows[r], model.context(data.rows[r], static_cast<int>(r)))
-                     .transpose();
+    out.row(r) =
+        model.predict(theta, data.rows[r], model.context(data.rows[r], static_cast<int>(r)))
+            .transpose();
   return out;
 }
 

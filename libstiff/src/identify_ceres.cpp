@@ -53,9 +53,13 @@ struct Setup {
 /// theta(cols[i]) * scale[i], by kJetStride parameters per pass of
 /// DeflectionModel::evaluate_jet; `theta` is the full parameter vector. Writes d (3) and the
 /// 3 x cols.size() derivatives (column-major, leading dimension 3) into `out`.
-void displacement_and_jacobian(const Setup& s, int row, const double* theta,
-                               const std::vector<int>& cols, const double* scale,
-                               Eigen::Vector3d& d, double* out) {
+void displacement_and_jacobian(const Setup& s,
+                               int row,
+                               const double* theta,
+                               const std::vector<int>& cols,
+                               const double* scale,
+                               Eigen::Vector3d& d,
+                               double* out) {
   const DeflectionModel& model = *s.model;
   const int p = model.parameter_count();
   auto& t = s.theta_jet;
@@ -87,7 +91,10 @@ void displacement_and_jacobian(const Setup& s, int row, const double* theta,
 /// displacement_and_jacobian (one model pass per kJetStride free parameters).
 class Residual final : public ceres::CostFunction {
  public:
-  Residual(const Setup* setup, int row, const std::vector<int>* free, const Eigen::VectorXd* held,
+  Residual(const Setup* setup,
+           int row,
+           const std::vector<int>* free,
+           const Eigen::VectorXd* held,
            const std::vector<double>* free_typical)
       : setup_(setup), row_(row), free_(free), held_(held), free_typical_(free_typical) {
     set_num_residuals(3);
@@ -124,8 +131,7 @@ class Residual final : public ceres::CostFunction {
     Eigen::Vector3d d;
     auto& jac = s.jac_scratch;
     jac.resize(3 * nf);
-    displacement_and_jacobian(s, row_, theta.data(), *free_, free_typical_->data(), d,
-                              jac.data());
+    displacement_and_jacobian(s, row_, theta.data(), *free_, free_typical_->data(), d, jac.data());
     for (int k = 0; k < 3; ++k) {
       r[k] = (m.displacement(k) - d(k)) * w;
       for (int f = 0; f < nf; ++f) jacobians[0][k * nf + f] = -jac[3 * f + k] * w;

@@ -17,8 +17,8 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
-#include <string_view>
 #include <functional>
+#include <string_view>
 #include <vector>
 
 #include "stiff/error.hpp"
@@ -41,9 +41,9 @@ void validate_identification_data(const Dataset& data, int dof) {
   bool bad = false;
   for (size_t r = 0; r < n && !bad; ++r) {
     const auto& m = data.rows[r];
-    if (m.q.size() != dof || !m.q.allFinite() || !m.force.allFinite() ||
-        !m.moment.allFinite() || !m.displacement.allFinite() || !m.rotation.allFinite() ||
-        !std::isfinite(m.sigma_d) || !std::isfinite(m.time) || m.sigma_d < 0) {
+    if (m.q.size() != dof || !m.q.allFinite() || !m.force.allFinite() || !m.moment.allFinite() ||
+        !m.displacement.allFinite() || !m.rotation.allFinite() || !std::isfinite(m.sigma_d) ||
+        !std::isfinite(m.time) || m.sigma_d < 0) {
       bad = true;
       break;
     }
@@ -101,8 +101,11 @@ class FastChain {
   }
 
   /// z (3 x n) axes, o (3 x n) points on them, flange rotation and position.
-  void operator()(const Eigen::VectorXd& q, Eigen::Matrix3Xd& z, Eigen::Matrix3Xd& o,
-                  Eigen::Matrix3d& r, Eigen::Vector3d& p) const {
+  void operator()(const Eigen::VectorXd& q,
+                  Eigen::Matrix3Xd& z,
+                  Eigen::Matrix3Xd& o,
+                  Eigen::Matrix3d& r,
+                  Eigen::Vector3d& p) const {
     r.setIdentity();
     p.setZero();
     for (size_t i = 0; i < steps_.size(); ++i) {
@@ -277,15 +280,15 @@ Eigen::VectorXd pivoted_cholesky_diagonal(Eigen::MatrixXd g) {
       break;
     }
     for (int i = k + 1; i < p; ++i)
-      for (int l = k + 1; l < p; ++l)
-        g(left[i], left[l]) -= g(left[i], c) * g(c, left[l]) / d;
+      for (int l = k + 1; l < p; ++l) g(left[i], left[l]) -= g(left[i], c) * g(c, left[l]) / d;
   }
   return out;
 }
 
 }  // namespace
 
-FitResult identify_joint_linear(const RobotModel& robot, const Dataset& data,
+FitResult identify_joint_linear(const RobotModel& robot,
+                                const Dataset& data,
                                 const LinearOptions& options) {
   detail::validate_identification_data(data, robot.dof());
   const int n = robot.dof();
@@ -302,7 +305,8 @@ FitResult identify_joint_linear(const RobotModel& robot, const Dataset& data,
   // Column scaling makes the rank decision independent of units and lever arms.
   Eigen::VectorXd norms = ob.g.diagonal().cwiseMax(0.0).cwiseSqrt();
   const double max_norm = norms.maxCoeff();
-  if (!(max_norm > 0)) throw NumericalError("identify: every observation column is zero (no load?)");
+  if (!(max_norm > 0))
+    throw NumericalError("identify: every observation column is zero (no load?)");
   // Finite but absurd inputs (loads or displacements near 1e308) overflow the normal equations.
   if (!std::isfinite(max_norm) || !ob.g.allFinite() || !ob.b.allFinite())
     throw NumericalError(
@@ -339,7 +343,8 @@ FitResult identify_joint_linear(const RobotModel& robot, const Dataset& data,
     Eigen::MatrixXd as(m, nc);
     for (int k = 0; k < nc; ++k)
       for (int r = 0; r < N; ++r)
-        as.block<3, 1>(3 * r, k) = a.block<3, 1>(3 * r, candidates[k]) * (ob.w(r) / norms(candidates[k]));
+        as.block<3, 1>(3 * r, k) =
+            a.block<3, 1>(3 * r, candidates[k]) * (ob.w(r) / norms(candidates[k]));
     Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(as);
     qr.setThreshold(options.rank_tolerance);
     const int rank = static_cast<int>(qr.rank());
@@ -414,7 +419,8 @@ FitResult identify_joint_linear(const RobotModel& robot, const Dataset& data,
   for (int k = 0; k < p; ++k) theta(ident[k]) = cs(k) / scale(k);
   f.residuals = x - a * theta;
   double rss_w = 0;
-  for (int r = 0; r < N; ++r) rss_w += f.residuals.segment<3>(3 * r).squaredNorm() * (ob.w(r) * ob.w(r));
+  for (int r = 0; r < N; ++r)
+    rss_w += f.residuals.segment<3>(3 * r).squaredNorm() * (ob.w(r) * ob.w(r));
   const int dof = m - p;
   const double s2 = rss_w / dof;
 

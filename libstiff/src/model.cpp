@@ -12,7 +12,8 @@ std::vector<std::string> parse_model_string(const std::string& text) {
   size_t start = 0;
   while (true) {
     const size_t plus = text.find('+', start);
-    std::string name = text.substr(start, plus == std::string::npos ? std::string::npos : plus - start);
+    std::string name =
+        text.substr(start, plus == std::string::npos ? std::string::npos : plus - start);
     const auto b = name.find_first_not_of(" \t");
     const auto e = name.find_last_not_of(" \t");
     name = b == std::string::npos ? std::string() : name.substr(b, e - b + 1);
@@ -26,7 +27,8 @@ std::vector<std::string> parse_model_string(const std::string& text) {
   return names;
 }
 
-DeflectionModel::DeflectionModel(const RobotModel& robot, const std::vector<std::string>& effects,
+DeflectionModel::DeflectionModel(const RobotModel& robot,
+                                 const std::vector<std::string>& effects,
                                  const Dataset* data)
     : robot_(robot) {
   if (robot.dof() == 0) throw InvalidArgument("robot has no joints");
@@ -121,8 +123,11 @@ std::vector<MeasurementContext> DeflectionModel::contexts(const Dataset& data) c
 }
 
 template <typename T>
-void DeflectionModel::evaluate(const T* theta, const Measurement& m, const MeasurementContext& c,
-                               Vector3<T>* d, Vector3<T>* rot) const {
+void DeflectionModel::evaluate(const T* theta,
+                               const Measurement& m,
+                               const MeasurementContext& c,
+                               Vector3<T>* d,
+                               Vector3<T>* rot) const {
   const int n = robot_.dof();
   EvalState<T> s;
   s.robot = &robot_;
@@ -161,15 +166,18 @@ void DeflectionModel::evaluate(const T* theta, const Measurement& m, const Measu
   if (rot) *rot = s.rot;
 }
 
-template void DeflectionModel::evaluate<double>(const double*, const Measurement&,
-                                                const MeasurementContext&, Vector3<double>*,
+template void DeflectionModel::evaluate<double>(const double*,
+                                                const Measurement&,
+                                                const MeasurementContext&,
+                                                Vector3<double>*,
                                                 Vector3<double>*) const;
-template void DeflectionModel::evaluate<Jet>(const Jet*, const Measurement&,
-                                             const MeasurementContext&, Vector3<Jet>*,
-                                             Vector3<Jet>*) const;
+template void DeflectionModel::evaluate<Jet>(
+    const Jet*, const Measurement&, const MeasurementContext&, Vector3<Jet>*, Vector3<Jet>*) const;
 
-void DeflectionModel::evaluate_jet(const Jet* theta, const Measurement& m,
-                                   const MeasurementContext& c, EvalState<Jet>& s,
+void DeflectionModel::evaluate_jet(const Jet* theta,
+                                   const Measurement& m,
+                                   const MeasurementContext& c,
+                                   EvalState<Jet>& s,
                                    Vector3<Jet>* d) const {
   using Block = Eigen::Matrix<double, 3, kJetStride>;
   constexpr int kMax = 32;  // joints held in fixed-capacity buffers (no allocation)
@@ -287,8 +295,8 @@ Eigen::Matrix<double, 6, 1> DeflectionModel::predict(const Eigen::VectorXd& thet
                                                      const Measurement& m,
                                                      const MeasurementContext& c) const {
   if (theta.size() != count_)
-    throw InvalidArgument("predict: " + std::to_string(theta.size()) + " parameters for a model with " +
-                          std::to_string(count_));
+    throw InvalidArgument("predict: " + std::to_string(theta.size()) +
+                          " parameters for a model with " + std::to_string(count_));
   Vector3<double> d, rot;
   evaluate<double>(theta.data(), m, c, &d, &rot);
   Eigen::Matrix<double, 6, 1> out;
@@ -315,7 +323,8 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> DeflectionModel::displacement_jacobian(
 }
 
 Eigen::Matrix<double, 3, Eigen::Dynamic> observation_block(
-    const Matrix6X<double>& jac_meas, const Matrix6X<double>& jac_load,
+    const Matrix6X<double>& jac_meas,
+    const Matrix6X<double>& jac_load,
     const Eigen::Matrix<double, 6, 1>& wrench) {
   const Eigen::VectorXd tau = jac_load.transpose() * wrench;
   return jac_meas.topRows<3>() * tau.asDiagonal();

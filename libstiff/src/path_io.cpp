@@ -465,7 +465,8 @@ ToolPath parse_gcode(const std::string& text, const std::string& file, const Pat
       if (!(want <= 1e6))
         throw ParseError(file, line_no, words.front().col,
                          "this move splits into more than 1000000 segments of " +
-                             std::to_string(o.segment_m) + " m: check the units or the segment length");
+                             std::to_string(o.segment_m) +
+                             " m: check the units or the segment length");
       pieces = std::max(1, static_cast<int>(want));
     }
     if (path.points.empty() && pieces > 1) pieces = 1;  // no known start point yet

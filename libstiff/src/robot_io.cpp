@@ -1,17 +1,17 @@
 #include "stiff/robot_io.hpp"
 
+#include <console_bridge/console.h>
+#include <urdf_model/model.h>
+#include <urdf_parser/urdf_parser.h>
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
 #include <fstream>
 #include <iomanip>
 #include <map>
-#include <set>
 #include <mutex>
+#include <set>
 #include <sstream>
-#include <console_bridge/console.h>
-#include <urdf_model/model.h>
-#include <urdf_parser/urdf_parser.h>
 
 #include "stiff/error.hpp"
 #include "stiff/text_io.hpp"
@@ -48,7 +48,8 @@ struct YamlReader {
     return v;
   }
 
-  void check_keys(const YAML::Node& map, const std::set<std::string>& allowed,
+  void check_keys(const YAML::Node& map,
+                  const std::set<std::string>& allowed,
                   const std::string& where) const {
     for (const auto& kv : map) {
       const auto key = kv.first.as<std::string>();
@@ -133,7 +134,8 @@ RobotModel parse_robot_yaml_unguarded(const std::string& text, const std::string
   else if (conv == "general" || conv == "urdf")
     robot.convention = Convention::urdf;
   else
-    r.fail(conv_node, "unknown convention '" + conv + "' (use modified_dh, standard_dh or general)");
+    r.fail(conv_node,
+           "unknown convention '" + conv + "' (use modified_dh, standard_dh or general)");
 
   const auto joints = root["joints"];
   if (!joints || !joints.IsSequence() || joints.size() == 0)
@@ -165,17 +167,20 @@ RobotModel parse_robot_yaml_unguarded(const std::string& text, const std::string
       const double alpha = r.number(jn["alpha"], where + " alpha") * as;
       const double a = r.number(jn["a"], where + " a") * ls;
       const double d = r.number(jn["d"], where + " d") * ls;
-      const double off = jn["theta_offset"] ? r.number(jn["theta_offset"], where + " theta_offset") * as : 0.0;
+      const double off =
+          jn["theta_offset"] ? r.number(jn["theta_offset"], where + " theta_offset") * as : 0.0;
       j = robot.convention == Convention::modified_dh ? modified_dh_joint(alpha, a, d, off)
                                                       : standard_dh_joint(alpha, a, d, off);
     }
     j.name = jn["name"] ? jn["name"].as<std::string>() : "joint" + std::to_string(index);
     if (const auto lim = jn["limits"]) {
-      if (!lim.IsSequence() || lim.size() != 2) r.fail(lim, where + " limits must be [lower, upper]");
+      if (!lim.IsSequence() || lim.size() != 2)
+        r.fail(lim, where + " limits must be [lower, upper]");
       j.lower = r.number(lim[0], where + " lower limit") * as;
       j.upper = r.number(lim[1], where + " upper limit") * as;
       if (!(j.lower < j.upper))
-        r.fail(lim, where + " limits: lower must be less than upper (got an empty or negative range)");
+        r.fail(lim,
+               where + " limits: lower must be less than upper (got an empty or negative range)");
     }
     if (jn["mass"]) {
       j.mass = r.number(jn["mass"], where + " mass");
@@ -185,7 +190,8 @@ RobotModel parse_robot_yaml_unguarded(const std::string& text, const std::string
     robot.joints.push_back(j);
   }
 
-  if (const auto mp = root["measured_point"]) robot.measured_point = r.vec3(mp, "measured_point", ls);
+  if (const auto mp = root["measured_point"])
+    robot.measured_point = r.vec3(mp, "measured_point", ls);
   robot.load_point = robot.measured_point;
   if (const auto lp = root["load_point"]) robot.load_point = r.vec3(lp, "load_point", ls);
   if (const auto tool = root["tool"]) {
@@ -209,7 +215,8 @@ Eigen::Matrix4d urdf_pose(const urdf::Pose& p) {
 
 }  // namespace
 
-RobotModel parse_robot_urdf(const std::string& text, const std::string& file,
+RobotModel parse_robot_urdf(const std::string& text,
+                            const std::string& file,
                             const std::string& tip_link) {
   // urdfdom reports problems through console_bridge, which prints to stderr by default; the
   // library never prints (stiff.h): capture them for the error message instead.
@@ -235,10 +242,10 @@ RobotModel parse_robot_urdf(const std::string& text, const std::string& file,
     console_bridge::useOutputHandler(previous);
   }
   if (!model)
-    throw ParseError(file, 0, 0,
-                     "not a valid URDF document" +
-                         (capture.first_error.empty() ? std::string()
-                                                      : " (" + capture.first_error + ")"));
+    throw ParseError(
+        file, 0, 0,
+        "not a valid URDF document" +
+            (capture.first_error.empty() ? std::string() : " (" + capture.first_error + ")"));
   auto root = model->getRoot();
   if (!root) throw ParseError(file, 0, 0, "URDF has no root link");
 
@@ -301,9 +308,10 @@ RobotModel parse_robot_urdf(const std::string& text, const std::string& file,
       for (double& v : j.dh) v = NAN;
       robot.joints.push_back(j);
     } else {
-      throw ParseError(file, 0, 0, "URDF joint '" + joint->name +
-                                       "' is not revolute, continuous or fixed; only serial "
-                                       "revolute chains are supported");
+      throw ParseError(file, 0, 0,
+                       "URDF joint '" + joint->name +
+                           "' is not revolute, continuous or fixed; only serial "
+                           "revolute chains are supported");
     }
     if (const auto& inertial = chain[i]->inertial; inertial && !robot.joints.empty()) {
       // Express the link's centre of mass in the frame of the last moving joint.

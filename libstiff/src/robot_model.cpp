@@ -52,16 +52,14 @@ Eigen::VectorXd gravity_torques(const RobotModel& robot, const ChainState& s) {
     const Eigen::Vector3d c = t.block<3, 3>(0, 0) * com_local + t.block<3, 1>(0, 3);
     const Eigen::Vector3d w = mass * robot.gravity;
     // Only joints up to and including `link` carry the weight of that link.
-    for (int j = 0; j <= link; ++j)
-      tau(j) += s.axis.col(j).cross(c - s.origin.col(j)).dot(w);
+    for (int j = 0; j <= link; ++j) tau(j) += s.axis.col(j).cross(c - s.origin.col(j)).dot(w);
   };
   for (int i = 0; i < n; ++i) add_weight(i, robot.joints[i].mass, robot.joints[i].com);
   if (n > 0) add_weight(n - 1, robot.tool_mass, robot.tool_com);
   return tau;
 }
 
-JacobianConditioning translational_conditioning(const RobotModel& robot,
-                                                const Eigen::VectorXd& q) {
+JacobianConditioning translational_conditioning(const RobotModel& robot, const Eigen::VectorXd& q) {
   const Eigen::Matrix<double, 3, Eigen::Dynamic> jt = robot.jacobian(q).topRows<3>();
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(jt);
   const auto& sv = svd.singularValues();
@@ -69,7 +67,8 @@ JacobianConditioning translational_conditioning(const RobotModel& robot,
   return {smin, smin > 0 ? sv(0) / smin : INFINITY};
 }
 
-void check_joint_vector(const RobotModel& robot, const Eigen::VectorXd& q,
+void check_joint_vector(const RobotModel& robot,
+                        const Eigen::VectorXd& q,
                         const std::string& where) {
   if (q.size() != robot.dof())
     throw InvalidArgument(where + ": " + std::to_string(q.size()) + " joint values for a " +

@@ -59,7 +59,8 @@ Truth joint_truth(const Eigen::VectorXd& k) {
   return t;
 }
 
-static Truth parse_truth_yaml_unguarded(const std::string& text, const std::string& file,
+static Truth parse_truth_yaml_unguarded(const std::string& text,
+                                        const std::string& file,
                                         const RobotModel& robot) {
   const YAML::Node root = load_yaml(text, file);
   for (const auto& kv : root) {
@@ -71,8 +72,9 @@ static Truth parse_truth_yaml_unguarded(const std::string& text, const std::stri
   if (!ks || !ks.IsSequence())
     throw ParseError(file, 1, 1, "missing 'stiffness_Nm_per_rad: [k1, ..., kn]'");
   if (static_cast<int>(ks.size()) != robot.dof())
-    fail_at(file, ks, "stiffness_Nm_per_rad has " + std::to_string(ks.size()) +
-                          " values for a " + std::to_string(robot.dof()) + "-joint robot");
+    fail_at(file, ks,
+            "stiffness_Nm_per_rad has " + std::to_string(ks.size()) + " values for a " +
+                std::to_string(robot.dof()) + "-joint robot");
   std::vector<std::string> names{"joint"};
   std::map<std::string, std::map<std::string, std::pair<double, YAML::Node>>> values;
   if (const auto eff = root["effects"]) {
@@ -82,7 +84,8 @@ static Truth parse_truth_yaml_unguarded(const std::string& text, const std::stri
       if (ename == "joint") fail_at(file, kv.first, "give joint stiffness in stiffness_Nm_per_rad");
       names.push_back(ename);
       if (kv.second.IsNull()) continue;
-      if (!kv.second.IsMap()) fail_at(file, kv.second, "parameters of '" + ename + "' must be a mapping");
+      if (!kv.second.IsMap())
+        fail_at(file, kv.second, "parameters of '" + ename + "' must be a mapping");
       for (const auto& pv : kv.second)
         values[ename][pv.first.as<std::string>()] = {
             yaml_number(file, pv.second, ename + "." + pv.first.as<std::string>()), pv.first};
@@ -94,7 +97,8 @@ static Truth parse_truth_yaml_unguarded(const std::string& text, const std::stri
   t.theta = model.null_parameters();
   for (int j = 0; j < robot.dof(); ++j) {
     const double k = yaml_number(file, ks[j], "stiffness of joint " + std::to_string(j + 1));
-    if (!(k > 0)) fail_at(file, ks[j], "stiffness of joint " + std::to_string(j + 1) + " must be > 0");
+    if (!(k > 0))
+      fail_at(file, ks[j], "stiffness of joint " + std::to_string(j + 1) + " must be > 0");
     t.theta(j) = 1.0 / k;
   }
   for (size_t e = 1; e < names.size(); ++e) {
@@ -105,9 +109,10 @@ static Truth parse_truth_yaml_unguarded(const std::string& text, const std::stri
       const auto it = given.find(spec.name);
       if (it == given.end()) continue;
       if (it->second.first < spec.lower || it->second.first > spec.upper)
-        fail_at(file, it->second.second, names[e] + "." + spec.name + " = " + fmt(it->second.first) +
-                                            " is outside its physical range [" + fmt(spec.lower) +
-                                            ", " + fmt(spec.upper) + "] " + spec.unit);
+        fail_at(file, it->second.second,
+                names[e] + "." + spec.name + " = " + fmt(it->second.first) +
+                    " is outside its physical range [" + fmt(spec.lower) + ", " + fmt(spec.upper) +
+                    "] " + spec.unit);
       t.theta(model.offset(static_cast<int>(e)) + k) = it->second.first;
       given.erase(it);
     }
@@ -189,7 +194,9 @@ NoiseModel parse_noise_yaml(const std::string& text, const std::string& file) {
   }
 }
 
-NoiseModel read_noise(const std::string& path) { return parse_noise_yaml(read_text_file(path), path); }
+NoiseModel read_noise(const std::string& path) {
+  return parse_noise_yaml(read_text_file(path), path);
+}
 
 Dataset random_design(const RobotModel& robot, const RandomDesignOptions& o) {
   const int n = robot.dof();
@@ -212,7 +219,8 @@ Dataset random_design(const RobotModel& robot, const RandomDesignOptions& o) {
     m.q.resize(n);
     for (int j = 0; j < n; ++j) {
       const auto& jt = robot.joints[j];
-      const double mid = 0.5 * (jt.lower + jt.upper), half = 0.5 * (jt.upper - jt.lower) * o.range_fraction;
+      const double mid = 0.5 * (jt.lower + jt.upper),
+                   half = 0.5 * (jt.upper - jt.lower) * o.range_fraction;
       const double fixed = o.q_fixed.empty() ? NAN : o.q_fixed[j];
       m.q(j) = std::isnan(fixed) ? rng.uniform(mid - half, mid + half) : fixed;
     }
@@ -229,8 +237,11 @@ Dataset random_design(const RobotModel& robot, const RandomDesignOptions& o) {
   return d;
 }
 
-Dataset simulate(const RobotModel& robot, const Truth& truth, const Dataset& design,
-                 const NoiseModel& noise, std::vector<int>* outlier_rows) {
+Dataset simulate(const RobotModel& robot,
+                 const Truth& truth,
+                 const Dataset& design,
+                 const NoiseModel& noise,
+                 std::vector<int>* outlier_rows) {
   validate_dataset(design, robot.dof(), false);
   DeflectionModel model(robot, truth.effects, &design);
   if (truth.theta.size() != model.parameter_count())
@@ -259,8 +270,8 @@ Dataset simulate(const RobotModel& robot, const Truth& truth, const Dataset& des
     out.has_sigma = out.has_sigma || sigma > 0;
     // What the force sensor and the encoders report, not what acted.
     for (int k = 0; k < 3; ++k)
-      m.force(k) += noise.force_relative * m.force(k) * rng.normal() +
-                    noise.force_absolute_N * rng.normal();
+      m.force(k) +=
+          noise.force_relative * m.force(k) * rng.normal() + noise.force_absolute_N * rng.normal();
     for (int j = 0; j < m.q.size(); ++j) m.q(j) += noise.joint_sigma_rad * rng.normal();
     if (m.id.empty()) m.id = std::to_string(r + 1);
   }

@@ -26,7 +26,8 @@ void write_text_file_atomic(const std::string& path, const std::string& content)
   if (path.empty()) throw IoError("output path is empty");
   std::string tmp = path + ".tmp.XXXXXX";
   const int fd = mkstemp(tmp.data());
-  if (fd < 0) throw IoError(path + ": cannot create a temporary file (" + std::strerror(errno) + ")");
+  if (fd < 0)
+    throw IoError(path + ": cannot create a temporary file (" + std::strerror(errno) + ")");
   // mkstemp creates 0600; outputs are ordinary files, readable as the umask allows.
   const mode_t mask = ::umask(0);
   ::umask(mask);

@@ -73,8 +73,8 @@ inline std::string text_of(const uint8_t* data, size_t size) {
 }
 
 inline const RobotModel& rokae() {
-  static const RobotModel robot = load_robot(std::string(STIFF_SOURCE_DIR) +
-                                             "/examples/robots/rokae.yaml");
+  static const RobotModel robot =
+      load_robot(std::string(STIFF_SOURCE_DIR) + "/examples/robots/rokae.yaml");
   return robot;
 }
 
@@ -205,15 +205,24 @@ class DoubleSource {
   double next(double scale) {
     const uint8_t tag = byte();
     switch (tag % 16) {
-      case 0: return std::nan("");
-      case 1: return tag & 0x80 ? HUGE_VAL : -HUGE_VAL;
-      case 2: return tag & 0x80 ? 1e308 : -1e308;
-      case 3: return 4.9e-324;       // smallest denormal
-      case 4: return 2.2e-310;       // denormal
-      case 5: return 0.0;
-      case 6: return -0.0;
-      case 7: return scale * 1e9;    // huge but finite
-      case 8: return scale * 1e-12;  // tiny
+      case 0:
+        return std::nan("");
+      case 1:
+        return tag & 0x80 ? HUGE_VAL : -HUGE_VAL;
+      case 2:
+        return tag & 0x80 ? 1e308 : -1e308;
+      case 3:
+        return 4.9e-324;  // smallest denormal
+      case 4:
+        return 2.2e-310;  // denormal
+      case 5:
+        return 0.0;
+      case 6:
+        return -0.0;
+      case 7:
+        return scale * 1e9;  // huge but finite
+      case 8:
+        return scale * 1e-12;  // tiny
       default: {
         uint16_t v = static_cast<uint16_t>(byte() | (byte() << 8));
         return scale * (static_cast<double>(v) / 32767.5 - 1.0);
@@ -245,8 +254,7 @@ inline void capi_arrays(const uint8_t* data, size_t size) {
   const size_t rows = shape & 0x0f;                 // 0..15 (0 is invalid)
   const size_t dof = (shape >> 4) % 9;              // 0..8: wrong sizes on purpose
   const size_t n_claimed = flags & 0x40 ? dof : 6;  // the size the caller says it passes
-  std::vector<double> q(rows * dof), force(rows * 3), moment(rows * 3), disp(rows * 3),
-      sigma(rows);
+  std::vector<double> q(rows * dof), force(rows * 3), moment(rows * 3), disp(rows * 3), sigma(rows);
   for (double& v : q) v = src.next(3.0);
   for (double& v : force) v = src.next(50.0);
   for (double& v : moment) v = src.next(5.0);
@@ -279,8 +287,8 @@ inline void capi_arrays(const uint8_t* data, size_t size) {
       finding("capi", "parameters not readable after a successful fit");
     for (size_t i = 0; i < theta.size(); ++i)
       if (!std::isfinite(theta[i]))
-        finding("capi", "a successful fit has a non-finite parameter " + std::to_string(i) +
-                            " = " + std::to_string(theta[i]));
+        finding("capi", "a successful fit has a non-finite parameter " + std::to_string(i) + " = " +
+                            std::to_string(theta[i]));
     stiff_model* model = nullptr;
     if (capi_ok(stiff_model_create(&model, robot.robot, fit), "stiff_model_create")) {
       const size_t prow = 1 + src.byte() % 4;
@@ -288,8 +296,8 @@ inline void capi_arrays(const uint8_t* data, size_t size) {
       for (double& v : pq) v = src.next(3.0);
       for (double& v : pw) v = src.next(100.0);
       const size_t capacity = src.byte() & 1 ? out.size() : out.size() / 2;
-      const stiff_status ps = stiff_predict_batch(out.data(), capacity, &needed, model,
-                                                  pq.data(), pw.data(), prow, n_claimed);
+      const stiff_status ps = stiff_predict_batch(out.data(), capacity, &needed, model, pq.data(),
+                                                  pw.data(), prow, n_claimed);
       if (capi_ok(ps, "stiff_predict_batch"))
         for (double v : out)
           if (!std::isfinite(v)) finding("capi", "stiff_predict_batch returned a non-finite value");

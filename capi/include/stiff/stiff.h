@@ -228,7 +228,7 @@ typedef struct stiff_identify_options {
 } stiff_identify_options;
 /* Every field spelled out: a bare {sizeof(...)} trips -Wmissing-field-initializers. */
 #define STIFF_IDENTIFY_OPTIONS_INIT \
-  {sizeof(stiff_identify_options), NULL, NULL, 0.0, 0, 0, NULL, NULL}
+  { sizeof(stiff_identify_options), NULL, NULL, 0.0, 0, 0, NULL, NULL }
 
 /** Identify the model from data with measured displacements. Joints or parameters that the
  *  data cannot identify are named in the result's warnings and held fixed. Errors:
@@ -342,9 +342,9 @@ STIFF_API stiff_status stiff_effect_describe(
 #endif
 
 /* Further parts of the ABI, each in its own header. */
-#include "stiff/stiff_plan.h"
-#include "stiff/stiff_fmu.h"
-#include "stiff/stiff_diagnose.h"
 #include "stiff/stiff_compensate.h"
+#include "stiff/stiff_diagnose.h"
+#include "stiff/stiff_fmu.h"
+#include "stiff/stiff_plan.h"
 
 #endif /* STIFF_H */

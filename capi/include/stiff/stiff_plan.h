@@ -14,8 +14,8 @@ typedef struct stiff_plan stiff_plan; /**< a planned set of measurements */
 /** Progress of planning: optimizer name ("annealing", "exchange", "nlopt"), iteration of
  *  total (0: unknown) and the best score so far. Return 0 to continue, non-zero to stop (the
  *  call then returns STIFF_E_CANCELLED). Called on the calling thread. */
-typedef int (*stiff_plan_progress_fn)(const char* optimizer, uint64_t iteration, uint64_t total,
-                                      double best_score, void* user_data);
+typedef int (*stiff_plan_progress_fn)(
+    const char* optimizer, uint64_t iteration, uint64_t total, double best_score, void* user_data);
 
 /** Optimizers, a bit mask. */
 #define STIFF_PLAN_ANNEALING 1u /**< the paper's simulated annealing */
@@ -25,32 +25,32 @@ typedef int (*stiff_plan_progress_fn)(const char* optimizer, uint64_t iteration,
 /** Planning options; zero fields take the defaults in brackets. */
 typedef struct stiff_plan_options {
   uint32_t struct_size;
-  uint32_t count;                 /**< measurements N [10] */
-  const char* criterion;          /**< d_opt, kappa_a, kappa_j, a_opt, e_opt, o1, task [d_opt] */
-  uint64_t seed;                  /**< random seed; same seed, same plan [1] */
-  uint32_t pool_poses;            /**< random candidate poses [500] */
-  uint32_t pool_loads;            /**< candidate loads [100] */
-  double range_fraction;          /**< poses within this fraction of each joint range [0.95] */
-  double load_min_N;              /**< per-axis load magnitude, lower bound [15] */
-  double load_max_N;              /**< per-axis load magnitude, upper bound [35] */
-  double load_step_N;             /**< grid step of the magnitudes [5]; negative: continuous */
-  double load_max_magnitude_N;    /**< largest |F| [unlimited] */
-  double min_sigma_m;             /**< reject poses whose translational Jacobian has a smallest
-                                       singular value below this [0.05 m] */
-  const double* q_fixed;          /**< per joint a value [rad] to hold it at, NaN = free; may be
-                                       NULL (all free) */
-  size_t q_fixed_count;           /**< number of values in q_fixed (the robot's dof) */
-  uint32_t optimizers;            /**< STIFF_PLAN_* mask [ANNEALING | EXCHANGE] */
-  uint32_t annealing_iterations;  /**< [100000] */
-  const char* candidate_file;     /**< CSV whose poses are the candidates; NULL: random */
-  const stiff_dataset* task;      /**< task poses and loads for the `task` criterion */
-  double tracker_sigma_m;         /**< row weighting noise [10e-6] */
-  double tracker_ppm;             /**< distance-proportional tracker noise [0] */
+  uint32_t count;                /**< measurements N [10] */
+  const char* criterion;         /**< d_opt, kappa_a, kappa_j, a_opt, e_opt, o1, task [d_opt] */
+  uint64_t seed;                 /**< random seed; same seed, same plan [1] */
+  uint32_t pool_poses;           /**< random candidate poses [500] */
+  uint32_t pool_loads;           /**< candidate loads [100] */
+  double range_fraction;         /**< poses within this fraction of each joint range [0.95] */
+  double load_min_N;             /**< per-axis load magnitude, lower bound [15] */
+  double load_max_N;             /**< per-axis load magnitude, upper bound [35] */
+  double load_step_N;            /**< grid step of the magnitudes [5]; negative: continuous */
+  double load_max_magnitude_N;   /**< largest |F| [unlimited] */
+  double min_sigma_m;            /**< reject poses whose translational Jacobian has a smallest
+                                      singular value below this [0.05 m] */
+  const double* q_fixed;         /**< per joint a value [rad] to hold it at, NaN = free; may be
+                                      NULL (all free) */
+  size_t q_fixed_count;          /**< number of values in q_fixed (the robot's dof) */
+  uint32_t optimizers;           /**< STIFF_PLAN_* mask [ANNEALING | EXCHANGE] */
+  uint32_t annealing_iterations; /**< [100000] */
+  const char* candidate_file;    /**< CSV whose poses are the candidates; NULL: random */
+  const stiff_dataset* task;     /**< task poses and loads for the `task` criterion */
+  double tracker_sigma_m;        /**< row weighting noise [10e-6] */
+  double tracker_ppm;            /**< distance-proportional tracker noise [0] */
   stiff_plan_progress_fn progress;
   void* progress_user_data;
-  uint32_t use_workspace_box;     /**< non-zero: keep only poses whose measured point lies in the
-                                       box below */
-  double box_min_m[3];            /**< workspace box, base frame [m] */
+  uint32_t use_workspace_box; /**< non-zero: keep only poses whose measured point lies in the
+                                   box below */
+  double box_min_m[3];        /**< workspace box, base frame [m] */
   double box_max_m[3];
   const double* fixture_directions; /**< k x 3 load directions of a loading fixture (base frame,
                                          normalised inside); NULL: per-axis loads as above */
@@ -62,7 +62,8 @@ typedef struct stiff_plan_options {
 /** Plan measurements for robot. Errors: INVALID_ARGUMENT (count larger than the pool, too few
  *  to identify the compliances, empty load range, every pose singular, unknown criterion),
  *  PARSE/IO (candidate file), CANCELLED. Release with stiff_plan_destroy. @since 0.1 */
-STIFF_API stiff_status stiff_plan_create(stiff_plan** out, const stiff_robot* robot,
+STIFF_API stiff_status stiff_plan_create(stiff_plan** out,
+                                         const stiff_robot* robot,
                                          const stiff_plan_options* options);
 STIFF_API void stiff_plan_destroy(stiff_plan* plan);
 /** The plan as a plan file (a measurement dataset without displacements, with extra columns
@@ -70,16 +71,23 @@ STIFF_API void stiff_plan_destroy(stiff_plan* plan);
 STIFF_API stiff_status stiff_plan_dataset(stiff_dataset** out, const stiff_plan* plan);
 /** JSON summary: criterion, value, which optimizer found the set, every criterion's value,
  *  optimizer traces, pool size, the measurements. UTF-8 with NUL, buffer in bytes. */
-STIFF_API stiff_status stiff_plan_json(char* json, size_t capacity, size_t* needed,
+STIFF_API stiff_status stiff_plan_json(char* json,
+                                       size_t capacity,
+                                       size_t* needed,
                                        const stiff_plan* plan);
 /** Every criterion's value (JSON object name -> value; also "count", "m") for any given set of
  *  poses and loads, e.g. a printed design. tracker_sigma_m weights the rows (0: 10e-6). */
-STIFF_API stiff_status stiff_criteria_json(char* json, size_t capacity, size_t* needed,
-                                           const stiff_robot* robot, const stiff_dataset* set,
+STIFF_API stiff_status stiff_criteria_json(char* json,
+                                           size_t capacity,
+                                           size_t* needed,
+                                           const stiff_robot* robot,
+                                           const stiff_dataset* set,
                                            double tracker_sigma_m);
 /** Number of criteria and the name of criterion i. @since 0.1 */
 STIFF_API size_t stiff_criterion_count(void);
-STIFF_API stiff_status stiff_criterion_name(char* name, size_t capacity, size_t* needed,
+STIFF_API stiff_status stiff_criterion_name(char* name,
+                                            size_t capacity,
+                                            size_t* needed,
                                             size_t index);
 
 #ifdef __cplusplus

@@ -14,21 +14,21 @@ namespace stiff {
 /// One loaded measurement, SI units, base frame.
 struct Measurement {
   std::string id;
-  Eigen::VectorXd q;                                   ///< joint positions [rad]
-  Eigen::Vector3d force = Eigen::Vector3d::Zero();     ///< force at the load point [N]
-  Eigen::Vector3d moment = Eigen::Vector3d::Zero();    ///< moment about the load point [N*m]
+  Eigen::VectorXd q;                                       ///< joint positions [rad]
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();         ///< force at the load point [N]
+  Eigen::Vector3d moment = Eigen::Vector3d::Zero();        ///< moment about the load point [N*m]
   Eigen::Vector3d displacement = Eigen::Vector3d::Zero();  ///< loaded - unloaded [m]
   Eigen::Vector3d rotation = Eigen::Vector3d::Zero();      ///< small rotation [rad]
-  double sigma_d = 0.0;   ///< std. deviation of each displacement component [m]; 0: unknown
-  double time = 0.0;      ///< time of the loaded reading [s]; NaN-free, 0 when absent
-  std::string session;    ///< measurement session label; empty when absent
+  double sigma_d = 0.0;  ///< std. deviation of each displacement component [m]; 0: unknown
+  double time = 0.0;     ///< time of the loaded reading [s]; NaN-free, 0 when absent
+  std::string session;   ///< measurement session label; empty when absent
   std::vector<std::string> extra;  ///< values of the dataset's extra columns, in order
 };
 
 /// One experiment: rows, which optional columns exist, metadata and unknown columns kept.
 struct Dataset {
   std::vector<Measurement> rows;
-  int dof = 0;                  ///< joint count (columns q1..qn)
+  int dof = 0;  ///< joint count (columns q1..qn)
   bool has_id = false;
   bool has_moment = false;
   bool has_displacement = false;

@@ -55,21 +55,21 @@ struct EvalState {
   const RobotModel* robot = nullptr;
   const Measurement* measurement = nullptr;
   const MeasurementContext* context = nullptr;
-  Vector3<T> force;    ///< force at L, base frame [N]
-  Vector3<T> moment;   ///< moment about L, base frame [N*m]
-  Vector3<T> r_meas;   ///< measured point P in the flange frame [m]
-  Vector3<T> r_load;   ///< load point L in the flange frame [m]
-  Vector3<T> p_meas;   ///< P in the base frame [m] (after stage 1)
-  Vector3<T> p_load;   ///< L in the base frame [m] (after stage 1)
+  Vector3<T> force;      ///< force at L, base frame [N]
+  Vector3<T> moment;     ///< moment about L, base frame [N*m]
+  Vector3<T> r_meas;     ///< measured point P in the flange frame [m]
+  Vector3<T> r_load;     ///< load point L in the flange frame [m]
+  Vector3<T> p_meas;     ///< P in the base frame [m] (after stage 1)
+  Vector3<T> p_load;     ///< L in the base frame [m] (after stage 1)
   Matrix6X<T> jac_meas;  ///< geometric Jacobian at P (after stage 1)
   Matrix6X<T> jac_load;  ///< geometric Jacobian at L (after stage 1)
-  VectorX<T> tau;      ///< external joint torques J(L)^T W [N*m] (after stage 1)
-  VectorX<T> dtheta;   ///< joint deflection [rad] (stage 2)
+  VectorX<T> tau;        ///< external joint torques J(L)^T W [N*m] (after stage 1)
+  VectorX<T> dtheta;     ///< joint deflection [rad] (stage 2)
   /// Diagonal joint compliances c_j [rad/(N*m)] as set by the `joint` effect in stage 2
   /// (empty when the model has no joint effect); read by second-order effects in stage 3.
   VectorX<T> compliance;
-  Vector3<T> d;        ///< displacement of P [m] (stages 3-4)
-  Vector3<T> rot;      ///< small rotation of the flange [rad] (stages 3-4)
+  Vector3<T> d;    ///< displacement of P [m] (stages 3-4)
+  Vector3<T> rot;  ///< small rotation of the flange [rad] (stages 3-4)
 };
 
 /// What an effect needs from the robot file or the data.

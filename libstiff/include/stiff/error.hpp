@@ -20,7 +20,7 @@ enum class Status : int {
   numerical = -6,         ///< singular, non-finite or unidentifiable problem
   cancelled = -7,         ///< a user callback asked to stop
   no_memory = -8,
-  internal = -99          ///< a bug
+  internal = -99  ///< a bug
 };
 
 /// Base of every exception the core throws on bad input.
@@ -71,7 +71,9 @@ class ParseError : public Error {
   int column() const noexcept { return column_; }
 
  private:
-  static std::string format(const std::string& path, int line, int column,
+  static std::string format(const std::string& path,
+                            int line,
+                            int column,
                             const std::string& reason) {
     std::string s = path;
     if (line > 0) s += ":" + std::to_string(line);

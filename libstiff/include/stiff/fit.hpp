@@ -39,9 +39,9 @@ struct FitResult {
   std::string loss = "none";
   double loss_scale_m = 0.0;
   std::vector<FitParameter> parameters;
-  Eigen::MatrixXd covariance;       ///< P x P (NaN rows/cols for unidentified parameters)
-  Eigen::VectorXd residuals;        ///< 3N residuals (measured - predicted) [m]
-  Eigen::VectorXd weights;          ///< N robust weights (1 without a robust loss)
+  Eigen::MatrixXd covariance;  ///< P x P (NaN rows/cols for unidentified parameters)
+  Eigen::VectorXd residuals;   ///< 3N residuals (measured - predicted) [m]
+  Eigen::VectorXd weights;     ///< N robust weights (1 without a robust loss)
   std::vector<Outlier> outliers;
   int measurements = 0;
   int rank = 0;

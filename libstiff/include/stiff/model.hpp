@@ -21,7 +21,8 @@ class DeflectionModel {
  public:
   /// Build from effect names. `data` (may be null) supplies sessions and time for effects that
   /// need them. Throws InvalidArgument for unknown names or missing requirements.
-  DeflectionModel(const RobotModel& robot, const std::vector<std::string>& effects,
+  DeflectionModel(const RobotModel& robot,
+                  const std::vector<std::string>& effects,
                   const Dataset* data = nullptr);
 
   const RobotModel& robot() const { return robot_; }
@@ -46,7 +47,10 @@ class DeflectionModel {
 
   /// Predicted displacement d [m] and rotation [rad] of the measured point, base frame.
   template <typename T>
-  void evaluate(const T* theta, const Measurement& m, const MeasurementContext& c, Vector3<T>* d,
+  void evaluate(const T* theta,
+                const Measurement& m,
+                const MeasurementContext& c,
+                Vector3<T>* d,
                 Vector3<T>* rot) const;
   /// evaluate<Jet> for repeated derivative evaluations (identification): the same stages,
   /// values and derivatives equal up to round-off, but the geometry stage (lever arms and
@@ -54,15 +58,20 @@ class DeflectionModel {
   /// kJetStride blocks, skipped when no effect moved the points or the wrench in its wrench
   /// stage, and `scratch` (reused between calls with this model, one per thread) avoids
   /// allocations. Only the displacement d is produced.
-  void evaluate_jet(const Jet* theta, const Measurement& m, const MeasurementContext& c,
-                    EvalState<Jet>& scratch, Vector3<Jet>* d) const;
+  void evaluate_jet(const Jet* theta,
+                    const Measurement& m,
+                    const MeasurementContext& c,
+                    EvalState<Jet>& scratch,
+                    Vector3<Jet>* d) const;
   /// Same in double: (dx, dy, dz, rx, ry, rz).
-  Eigen::Matrix<double, 6, 1> predict(const Eigen::VectorXd& theta, const Measurement& m,
+  Eigen::Matrix<double, 6, 1> predict(const Eigen::VectorXd& theta,
+                                      const Measurement& m,
                                       const MeasurementContext& c) const;
   /// Jacobian of the predicted displacement d (3 x P) with respect to theta at theta
   /// (automatic differentiation).
-  Eigen::Matrix<double, 3, Eigen::Dynamic> displacement_jacobian(
-      const Eigen::VectorXd& theta, const Measurement& m, const MeasurementContext& c) const;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> displacement_jacobian(const Eigen::VectorXd& theta,
+                                                                 const Measurement& m,
+                                                                 const MeasurementContext& c) const;
 
   /// Index of a session label (0 for unknown labels and for data without sessions).
   int session_index(const std::string& label) const;
@@ -75,19 +84,21 @@ class DeflectionModel {
   std::map<std::string, int> sessions_;
 };
 
-extern template void DeflectionModel::evaluate<double>(const double*, const Measurement&,
+extern template void DeflectionModel::evaluate<double>(const double*,
+                                                       const Measurement&,
                                                        const MeasurementContext&,
-                                                       Vector3<double>*, Vector3<double>*) const;
-extern template void DeflectionModel::evaluate<Jet>(const Jet*, const Measurement&,
-                                                    const MeasurementContext&, Vector3<Jet>*,
-                                                    Vector3<Jet>*) const;
+                                                       Vector3<double>*,
+                                                       Vector3<double>*) const;
+extern template void DeflectionModel::evaluate<Jet>(
+    const Jet*, const Measurement&, const MeasurementContext&, Vector3<Jet>*, Vector3<Jet>*) const;
 
 /// The paper's observation block (method.md eq. 3): the 3 x n matrix with
 /// A[r, j] = Jp(P)[r, j] * (J(L)[:, j] . W), so that d = A c for joint compliances c.
 /// `jac_meas`, `jac_load`: 6 x n geometric Jacobians; `wrench` = (F, M) at L.
-Eigen::Matrix<double, 3, Eigen::Dynamic> observation_block(const Matrix6X<double>& jac_meas,
-                                                           const Matrix6X<double>& jac_load,
-                                                           const Eigen::Matrix<double, 6, 1>& wrench);
+Eigen::Matrix<double, 3, Eigen::Dynamic> observation_block(
+    const Matrix6X<double>& jac_meas,
+    const Matrix6X<double>& jac_load,
+    const Eigen::Matrix<double, 6, 1>& wrench);
 /// Stacked observation matrix A (3N x n) of a dataset for the joint-compliance model.
 Eigen::MatrixXd observation_matrix(const RobotModel& robot, const Dataset& data);
 

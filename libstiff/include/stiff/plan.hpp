@@ -299,7 +299,7 @@ struct RefineOptions {
 
 /// Options of plan_measurements().
 struct PlanOptions {
-  int count = 10;                     ///< N, number of measurements (3N >= m)
+  int count = 10;  ///< N, number of measurements (3N >= m)
   /// Registry name. The default d_opt predicts deflections best in our Monte-Carlo study of
   /// the paper's setup (docs/paper-study.md); kappa_a (the paper's) stays available.
   std::string criterion = "d_opt";

@@ -18,7 +18,8 @@ RobotModel parse_robot_yaml(const std::string& text, const std::string& name_for
 /// Parse a URDF serial chain from text: the chain from the root link to `tip_link` (empty:
 /// the unique leaf; an error if the tree branches). Revolute and continuous joints become
 /// joints; fixed joints fold into the neighbouring transforms.
-RobotModel parse_robot_urdf(const std::string& text, const std::string& name_for_errors,
+RobotModel parse_robot_urdf(const std::string& text,
+                            const std::string& name_for_errors,
                             const std::string& tip_link = "");
 
 /// Write the robot in the YAML format (SI units), e.g. into an FMU's resources.

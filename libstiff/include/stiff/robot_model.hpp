@@ -159,7 +159,9 @@ JacobianConditioning translational_conditioning(const RobotModel& robot, const E
 
 /// Check that q has the robot's joint count and finite values; throws InvalidArgument naming
 /// `where` otherwise.
-void check_joint_vector(const RobotModel& robot, const Eigen::VectorXd& q, const std::string& where);
+void check_joint_vector(const RobotModel& robot,
+                        const Eigen::VectorXd& q,
+                        const std::string& where);
 
 }  // namespace stiff
 

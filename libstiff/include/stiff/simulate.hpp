@@ -23,7 +23,8 @@ Truth joint_truth(const Eigen::VectorXd& stiffness_Nm_per_rad);
 
 /// Parse a truth file (docs/formats.md): `stiffness_Nm_per_rad: [...]` and `effects:` with
 /// parameters by name (missing parameters take their null value). Throws ParseError.
-Truth parse_truth_yaml(const std::string& text, const std::string& name_for_errors,
+Truth parse_truth_yaml(const std::string& text,
+                       const std::string& name_for_errors,
                        const RobotModel& robot);
 Truth read_truth(const std::string& path, const RobotModel& robot);
 
@@ -32,11 +33,11 @@ struct NoiseModel {
   double tracker_sigma_m = 10e-6;  ///< constant part of the tracker's per-axis sigma [m]
   double tracker_ppm = 0.0;        ///< distance-proportional part [1e-6 of the distance]
   Eigen::Vector3d tracker_position_m{2.0, 0.0, 0.5};  ///< tracker station, base frame [m]
-  double force_relative = 0.0;     ///< relative force error (1 sigma) per axis
-  double force_absolute_N = 0.0;   ///< absolute force error (1 sigma) per axis [N]
-  double joint_sigma_rad = 0.0;    ///< joint reading error (1 sigma) [rad]
-  double outlier_rate = 0.0;       ///< fraction of rows with a gross tracker error
-  double outlier_size_m = 0.0;     ///< size of a gross error (norm) [m]
+  double force_relative = 0.0;                        ///< relative force error (1 sigma) per axis
+  double force_absolute_N = 0.0;  ///< absolute force error (1 sigma) per axis [N]
+  double joint_sigma_rad = 0.0;   ///< joint reading error (1 sigma) [rad]
+  double outlier_rate = 0.0;      ///< fraction of rows with a gross tracker error
+  double outlier_size_m = 0.0;    ///< size of a gross error (norm) [m]
   uint64_t seed = 1;
   /// Per-axis tracker sigma for a point at `p` (base frame) [m].
   double tracker_sigma_at(const Eigen::Vector3d& p) const;
@@ -64,7 +65,10 @@ Dataset random_design(const RobotModel& robot, const RandomDesignOptions& option
 /// dx, dy, dz (and sigma_d) and, when the noise has force or joint errors, the recorded (noisy)
 /// forces and joint readings. Metadata records the source and the noise. Rows keep their ids.
 /// `outlier_rows` (may be null) receives the indices of rows given a gross error.
-Dataset simulate(const RobotModel& robot, const Truth& truth, const Dataset& design,
-                 const NoiseModel& noise, std::vector<int>* outlier_rows = nullptr);
+Dataset simulate(const RobotModel& robot,
+                 const Truth& truth,
+                 const Dataset& design,
+                 const NoiseModel& noise,
+                 std::vector<int>* outlier_rows = nullptr);
 
 }  // namespace stiff

@@ -35,10 +35,9 @@ std::unique_ptr<Effect> make_effect(const std::string& name, const EffectSetup& 
     auto effect = e.factory(setup);
     const unsigned req = effect->requirements();
     if ((req & kNeedsMasses) && !setup.robot->has_masses())
-      throw InvalidArgument("effect '" + name +
-                            "' needs link masses (gravity torques), but robot '" +
-                            setup.robot->name +
-                            "' has none: add 'mass' and 'com' to its joints or a 'tool' mass");
+      throw InvalidArgument(
+          "effect '" + name + "' needs link masses (gravity torques), but robot '" +
+          setup.robot->name + "' has none: add 'mass' and 'com' to its joints or a 'tool' mass");
     if ((req & kNeedsSessions) && setup.data && !setup.data->has_session)
       throw InvalidArgument("effect '" + name + "' needs a 'session' column in the data");
     return effect;

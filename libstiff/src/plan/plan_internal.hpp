@@ -90,13 +90,15 @@ class FastRng {
  public:
   explicit FastRng(uint64_t seed) {
     x_[0] = seed;
-    for (int i = 1; i < kN; ++i) x_[i] = 6364136223846793005ULL * (x_[i - 1] ^ (x_[i - 1] >> 62)) + i;
+    for (int i = 1; i < kN; ++i)
+      x_[i] = 6364136223846793005ULL * (x_[i - 1] ^ (x_[i - 1] >> 62)) + i;
     i_ = kN;
   }
 #if defined(__GNUC__)
   __attribute__((always_inline))
 #endif
-  uint64_t operator()() {
+  uint64_t
+  operator()() {
     if (i_ >= kN) twist();
     uint64_t z = x_[i_++];
     z ^= (z >> 29) & 0x5555555555555555ULL;
@@ -123,7 +125,8 @@ class FastRng {
 #if defined(__GNUC__)
   __attribute__((noinline))
 #endif
-  void twist() {
+  void
+  twist() {
     int k = 0;
     for (; k < kN - kM; ++k) {
       const uint64_t y = (x_[k] & kUpper) | (x_[k + 1] & kLower);
@@ -145,7 +148,8 @@ class FastRng {
 #if defined(__GNUC__)
 __attribute__((always_inline))
 #endif
-inline uint32_t fast_index(FastRng& rng, uint32_t n) {
+inline uint32_t
+fast_index(FastRng& rng, uint32_t n) {
   uint64_t x = rng() >> 32;
   uint64_t prod = x * n;
   uint32_t low = static_cast<uint32_t>(prod);

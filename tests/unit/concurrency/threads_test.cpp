@@ -76,8 +76,8 @@ Outcome workflow(uint64_t seed) {
     if (check(stiff_identify(&fit_ceres, robot, data, &ceres))) {
       stiff_result_parameters(nullptr, nullptr, 0, &needed, fit_ceres);
       o.parameters_ceres.resize(needed);
-      check(stiff_result_parameters(o.parameters_ceres.data(), nullptr, needed, &needed,
-                                    fit_ceres));
+      check(
+          stiff_result_parameters(o.parameters_ceres.data(), nullptr, needed, &needed, fit_ceres));
     }
   }
   stiff_model_destroy(model);

@@ -5,8 +5,8 @@
 #include <chrono>
 #include <cmath>
 
-#include "stiff/plan.hpp"
 #include "plan_test_support.hpp"
+#include "stiff/plan.hpp"
 #include "test_support.hpp"
 
 namespace stiff {

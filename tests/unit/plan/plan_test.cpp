@@ -5,10 +5,10 @@
 
 #include <cmath>
 
+#include "plan_test_support.hpp"
 #include "stiff/error.hpp"
 #include "stiff/model.hpp"
 #include "stiff/random.hpp"
-#include "plan_test_support.hpp"
 #include "test_support.hpp"
 // The optimizers' packed fast path is internal; it is tested against the generic kernels.
 #include "../../../libstiff/src/plan/plan_internal.hpp"
@@ -132,8 +132,8 @@ TEST(PlanFastPath, SameCriterionValuesAsGenericPathOnRandomSets) {
   const CandidatePool pool = build_pool(robot, paper_pool(200, 50));
   ASSERT_EQ(pool.identified_count(), 5);
   ASSERT_EQ(pool.packed_element_information.size(), 15u * pool.size());  // table stored
-  const std::vector<double> task = task_information(robot, test::paper_design_j(),
-                                                    pool.identified_joints);
+  const std::vector<double> task =
+      task_information(robot, test::paper_design_j(), pool.identified_joints);
   Rng rng(11);
   for (Crit id : {Crit::kappa_a, Crit::kappa_j, Crit::d_opt, Crit::a_opt, Crit::e_opt, Crit::o1,
                   Crit::task}) {
@@ -143,13 +143,27 @@ TEST(PlanFastPath, SameCriterionValuesAsGenericPathOnRandomSets) {
     ctx.count = 10;
     ctx.task = task.data();
     switch (id) {
-      case Crit::kappa_a: expect_same_scores<Crit::kappa_a>(pool, ctx, rng); break;
-      case Crit::kappa_j: expect_same_scores<Crit::kappa_j>(pool, ctx, rng); break;
-      case Crit::d_opt: expect_same_scores<Crit::d_opt>(pool, ctx, rng); break;
-      case Crit::a_opt: expect_same_scores<Crit::a_opt>(pool, ctx, rng); break;
-      case Crit::e_opt: expect_same_scores<Crit::e_opt>(pool, ctx, rng); break;
-      case Crit::o1: expect_same_scores<Crit::o1>(pool, ctx, rng); break;
-      case Crit::task: expect_same_scores<Crit::task>(pool, ctx, rng); break;
+      case Crit::kappa_a:
+        expect_same_scores<Crit::kappa_a>(pool, ctx, rng);
+        break;
+      case Crit::kappa_j:
+        expect_same_scores<Crit::kappa_j>(pool, ctx, rng);
+        break;
+      case Crit::d_opt:
+        expect_same_scores<Crit::d_opt>(pool, ctx, rng);
+        break;
+      case Crit::a_opt:
+        expect_same_scores<Crit::a_opt>(pool, ctx, rng);
+        break;
+      case Crit::e_opt:
+        expect_same_scores<Crit::e_opt>(pool, ctx, rng);
+        break;
+      case Crit::o1:
+        expect_same_scores<Crit::o1>(pool, ctx, rng);
+        break;
+      case Crit::task:
+        expect_same_scores<Crit::task>(pool, ctx, rng);
+        break;
     }
   }
   // Singular sets give the worst value on both paths.

@@ -65,13 +65,14 @@ std::vector<std::string> names() {
   return n;
 }
 
-INSTANTIATE_TEST_SUITE_P(AllTargets, FuzzCorpus, ::testing::ValuesIn(names()),
+INSTANTIATE_TEST_SUITE_P(AllTargets,
+                         FuzzCorpus,
+                         ::testing::ValuesIn(names()),
                          [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });
 
 // Every target built by tests/fuzz has a corpus here, and every corpus a target.
 TEST(FuzzCorpusLayout, EveryCorpusDirectoryHasATarget) {
-  for (const auto& entry :
-       fs::directory_iterator(fs::path(STIFF_SOURCE_DIR) / "tests/fuzz/corpus"))
+  for (const auto& entry : fs::directory_iterator(fs::path(STIFF_SOURCE_DIR) / "tests/fuzz/corpus"))
     EXPECT_TRUE(targets().count(entry.path().filename().string()))
         << "corpus without a replay target: " << entry.path();
 }

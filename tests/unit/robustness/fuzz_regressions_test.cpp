@@ -71,8 +71,8 @@ class Overflow : public ::testing::Test {
   }
   void TearDown() override { stiff_robot_destroy(robot); }
   stiff_status identify(double moment_x, double displacement_y, const char* model = nullptr) {
-    const double q[18] = {0.4, 0.3, 0.2, 0.1, 0.5, 0.0, 0.0, 0.0, 0.0, -0.5, -0.5, 0.5,
-                          0.1, 0.8, 0.4, -0.3, 1.0, 0.2};
+    const double q[18] = {0.4,  0.3,  0.2, 0.1, 0.5, 0.0, 0.0,  0.0, 0.0,
+                          -0.5, -0.5, 0.5, 0.1, 0.8, 0.4, -0.3, 1.0, 0.2};
     const double f[9] = {40, 50, 50, 50, 50, 50, 50, 50, 50};
     const double m[9] = {moment_x, -0.4, -0.5, 0, 5, 5, 5, 4.9, 5};
     const double d[9] = {-1.6e-5, displacement_y, 0, -1.4e-5, -9.2e-5, 1e-16, 1.3e-5, 2e-5, -3e-5};

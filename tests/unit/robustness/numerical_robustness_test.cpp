@@ -77,8 +77,9 @@ TEST(Robustness, WristSingularPosesAreFlaggedNotNaN) {
   // column: "add poses or loads that move it").
   for (int j = 0; j < 6; ++j)
     if (!fit.joint_identified()[j]) {
-      EXPECT_NE(joined(fit.warnings).find("joint " + std::to_string(j + 1) + " is not identifiable"),
-                std::string::npos)
+      EXPECT_NE(
+          joined(fit.warnings).find("joint " + std::to_string(j + 1) + " is not identifiable"),
+          std::string::npos)
           << joined(fit.warnings);
     }
 }
