@@ -30,6 +30,16 @@ stiff_status fail(const char* function, stiff_status status, const std::string& 
 
 inline stiff_status to_c(Status s) { return static_cast<stiff_status>(static_cast<int>(s)); }
 
+/// The integer a C caller passed for an enum parameter. C allows any int there; in C++ loading
+/// an enum object outside its enumerators' range is undefined, so read its bytes instead.
+template <typename Enum>
+int enum_value(const Enum& e) {
+  static_assert(sizeof(Enum) == sizeof(int), "C enums are int-sized on supported platforms");
+  int v;
+  std::memcpy(&v, &e, sizeof v);
+  return v;
+}
+
 template <typename Body>
 stiff_status guarded(const char* function, Body&& body) noexcept {
   try {

@@ -37,7 +37,7 @@ const char* stiff_version_string(void) {
 }
 
 const char* stiff_status_name(stiff_status status) {
-  switch (status) {
+  switch (enum_value(status)) {
     case STIFF_OK:
       return "STIFF_OK";
     case STIFF_E_INVALID_ARGUMENT:
@@ -235,7 +235,7 @@ stiff_status stiff_dataset_size(size_t* rows, size_t* dof, const stiff_dataset* 
 }
 
 namespace {
-bool column_present(const Dataset& d, stiff_column column) {
+bool column_present(const Dataset& d, int column) {
   switch (column) {
     case STIFF_COLUMN_Q:
     case STIFF_COLUMN_FORCE:
@@ -259,7 +259,7 @@ stiff_status stiff_dataset_has(int* present, const stiff_dataset* dataset, stiff
   return guarded(__func__, [&] {
     require(present, "present");
     require(dataset, "dataset");
-    *present = column_present(dataset->data, column) ? 1 : 0;
+    *present = column_present(dataset->data, enum_value(column)) ? 1 : 0;
     return STIFF_OK;
   });
 }
@@ -272,7 +272,8 @@ stiff_status stiff_dataset_get(double* values,
   return guarded(__func__, [&] {
     require(dataset, "dataset");
     const Dataset& d = dataset->data;
-    if (!column_present(d, column)) throw InvalidArgument("the dataset has no such column");
+    const int c = enum_value(column);
+    if (!column_present(d, c)) throw InvalidArgument("the dataset has no such column");
     std::vector<double> v;
     for (const auto& m : d.rows) {
       switch (column) {
