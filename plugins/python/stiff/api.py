@@ -248,19 +248,20 @@ class Fit(_Handle):
 
     @property
     def parameters(self) -> np.ndarray:
-        needed = C.c_size_t()
-        lib.stiff_result_parameters(None, None, 0, C.byref(needed), self)
-        v, se = np.empty(needed.value), np.empty(needed.value)
-        check(lib.stiff_result_parameters(_c.ptr(v), _c.ptr(se), needed.value, C.byref(needed), self))
-        return v
+        """Every model parameter (SI), in model order."""
+        return self._parameters_and_errors()[0]
 
     @property
     def standard_errors(self) -> np.ndarray:
+        """Standard errors of the parameters (NaN where not identified)."""
+        return self._parameters_and_errors()[1]
+
+    def _parameters_and_errors(self) -> tuple[np.ndarray, np.ndarray]:
         needed = C.c_size_t()
         lib.stiff_result_parameters(None, None, 0, C.byref(needed), self)
         v, se = np.empty(needed.value), np.empty(needed.value)
         check(lib.stiff_result_parameters(_c.ptr(v), _c.ptr(se), needed.value, C.byref(needed), self))
-        return se
+        return v, se
 
     @property
     def parameter_table(self) -> list[dict]:
