@@ -49,17 +49,19 @@ void BM_AnnealSwaps(benchmark::State& state) {
   o.count = 10;
   o.criterion = "kappa_a";  // the paper's criterion (the library default is d_opt)
   o.annealing.iterations = 100000;
-  long swaps = 0;
+  long swaps = 0, accepted = 0;
   double score = 0;
   for (auto _ : state) {
     const SetSearchResult r = anneal(robot(), pl, o);
     swaps += r.trace.evaluations;
+    accepted += r.trace.accepted;
     score = r.score;
     benchmark::DoNotOptimize(r.elements.data());
   }
   state.counters["swaps_per_s"] =
       benchmark::Counter(static_cast<double>(swaps), benchmark::Counter::kIsRate);
   state.counters["kappa_a"] = score;
+  state.counters["accepted"] = swaps > 0 ? static_cast<double>(accepted) / swaps : 0.0;
   state.counters["pool"] = static_cast<double>(pl.size());
   state.SetLabel("N=10 m=5 iterations=1e5");
 }

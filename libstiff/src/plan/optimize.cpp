@@ -115,27 +115,36 @@ struct PackedKernel {
 
 template <int MC, Crit C>
 struct Anneal {
+  static constexpr bool kClosed = uses_closed_form<MC, C>();
+
   static SetSearchResult run(const CandidatePool& pool, const PlanOptions& o, const Context& ctx) {
     const auto t0 = Clock::now();
     using K_t = PackedKernel<MC>;
     const K_t K(pool, ctx);
-    const int N = o.count, P = pool.size(), T = K.size();
+    const int N = o.count, P = pool.size(), T = K.size(), m = ctx.m;
     const AnnealingOptions& ao = o.annealing;
-    FastRng rng(o.seed);
+    Xoshiro256pp rng(o.seed);
     std::vector<uint8_t> in(P, 0);
     std::vector<int> set = random_subset(rng, P, N, in);
     // Per position of the set, its element's packed matrix (the "out" side of a swap).
     std::vector<double> gset(static_cast<size_t>(N) * T);
     for (int i = 0; i < N; ++i) K.copy_element(set[i], gset.data() + static_cast<size_t>(i) * T);
-    double X[K_t::kT], Xn[K_t::kT];
+    double X[K_t::kT], Xn[K_t::kT], D[K_t::kT];
     K.rebuild(gset, N, X);
-    double sc = score_packed<MC, C>(ctx, X);
-    double cost = cost_of(C, sc);
+    // cost of a packed matrix: the closed form when it applies, else the Cholesky path.
+    auto cost_of_matrix = [&](const double* Y) {
+      if constexpr (kClosed) {
+        double p, q;
+        if (raw_fraction<MC, C>(Y, p, q)) return cost_from_raw<C>(p / q, m);
+      }
+      return cost_of(C, score_packed<MC, C>(ctx, Y));
+    };
+    double cost = cost_of_matrix(X);
     SetSearchResult r;
     r.trace.optimizer = "annealing";
-    r.trace.start_score = sc;
+    r.trace.start_score = score_of(C, cost);
     std::vector<int> best = set;
-    double best_cost = cost, best_score = sc;
+    double best_cost = cost;
 
     int k0 = ao.initial_swap_count > 0 ? ao.initial_swap_count : std::max(1, N / 3);
     k0 = std::min({k0, N, P - N});
@@ -145,9 +154,9 @@ struct Anneal {
     std::vector<double> scratch(static_cast<size_t>(kmax) * T);
     for (int i = 0; i < N; ++i) pos[i] = i;
 
-    // One k-element swap proposal: Xn = X + sum (G_in - G_out), no rebuild of A.
+    // One k-element swap proposal: D = sum (G_in - G_out), no rebuild of A; Xn = X + D.
     auto propose = [&](int k) {
-      std::copy(X, X + T, Xn);
+      std::fill(D, D + T, 0.0);
       for (int s = 0; s < k; ++s) {
         const int j = s + static_cast<int>(fast_index(rng, static_cast<uint32_t>(N - s)));
         std::swap(pos[s], pos[j]);
@@ -159,9 +168,9 @@ struct Anneal {
         const double* gi = K.element(e, scratch.data() + static_cast<size_t>(s) * T);
         const double* go = gset.data() + static_cast<size_t>(pos[s]) * T;
         gin[s] = gi;
-        for (int q = 0; q < T; ++q) Xn[q] = (Xn[q] + gi[q]) - go[q];
+        for (int q = 0; q < T; ++q) D[q] = (D[q] + gi[q]) - go[q];
       }
-      return score_packed<MC, C>(ctx, Xn);
+      for (int q = 0; q < T; ++q) Xn[q] = X[q] + D[q];
     };
     auto reject = [&](int k) {
       for (int s = 0; s < k; ++s) in[new_e[s]] = 0;
@@ -176,7 +185,8 @@ struct Anneal {
       double sum = 0;
       int cnt = 0;
       for (int t = 0; t < 200; ++t) {
-        const double c = cost_of(C, propose(k0));
+        propose(k0);
+        const double c = cost_of_matrix(Xn);
         reject(k0);
         if (std::isfinite(c) && std::isfinite(cost) && c > cost) {
           sum += c - cost;
@@ -195,18 +205,47 @@ struct Anneal {
     pr.optimizer = "annealing";
     pr.total = iters;
     const bool progress = static_cast<bool>(o.progress);
+    // k(t) = max(1, ceil(k0 (1 - t / iterations))) is a step function: evaluated where it steps.
+    auto k_at = [&](long it) {
+      return std::max(1, static_cast<int>(std::ceil(
+                             k0 * (1.0 - static_cast<double>(it) / static_cast<double>(iters)))));
+    };
+    int k = 0;
+    long k_until = 0;                                         // k holds for it < k_until
+    double down = kClosed ? raw_threshold<C>(cost, m) : 0.0;  // raw value of the current cost
     for (long it = 0; it < iters; ++it) {
-      const double frac = static_cast<double>(it) / static_cast<double>(iters);
-      const int k = std::max(1, static_cast<int>(std::ceil(k0 * (1.0 - frac))));
-      const double temp = T0 * (1.0 - frac);
-      const double sn = propose(k);
-      const double cn = cost_of(C, sn);
+      if (it >= k_until) {
+        k = k_at(it);
+        long lo = it, hi = iters;  // first iteration with another k: in (lo, hi]
+        while (hi - lo > 1) {
+          const long mid = lo + (hi - lo) / 2;
+          (k_at(mid) == k ? lo : hi) = mid;
+        }
+        k_until = hi;
+      }
+      const double temp = T0 * (1.0 - static_cast<double>(it) / static_cast<double>(iters));
+      propose(k);
+      // Metropolis: downhill always; uphill by Delta when Delta <= dmax = -T ln u, u uniform in
+      // (0, 1], i.e. with probability P(u <= exp(-Delta / T)). u is drawn for uphill moves only.
       bool accept = false;
-      if (cn < kInf) {
-        if (cn <= cost)
-          accept = true;
-        else if (temp > 0)
-          accept = rng.uniform() < std::exp(-(cn - cost) / temp);
+      double cn = kInf;
+      bool decided = false;
+      if constexpr (kClosed) {
+        double p, q;
+        if (raw_fraction<MC, C>(Xn, p, q)) {
+          decided = true;
+          accept = within<C>(p, q, down);
+          if (!accept && temp > 0) {
+            const double dmax = -temp * std::log(rng.uniform_open());
+            accept = within<C>(p, q, raw_threshold<C>(cost + dmax, m));
+          }
+          if (accept) cn = cost_from_raw<C>(p / q, m);
+        }
+      }
+      if (!decided) {
+        cn = cost_of(C, score_packed<MC, C>(ctx, Xn));
+        accept = cn < kInf &&
+                 (cn <= cost || (temp > 0 && cn - cost <= -temp * std::log(rng.uniform_open())));
       }
       if (accept) {
         for (int s = 0; s < k; ++s) {
@@ -217,18 +256,16 @@ struct Anneal {
         }
         std::copy(Xn, Xn + T, X);
         cost = cn;
-        sc = sn;
         ++accepted;
         if (++since_refresh >= refresh) {
           // Bound the round-off of the rank-3 updates.
           K.rebuild(gset, N, X);
-          sc = score_packed<MC, C>(ctx, X);
-          cost = cost_of(C, sc);
+          cost = cost_of_matrix(X);
           since_refresh = 0;
         }
+        if constexpr (kClosed) down = raw_threshold<C>(cost, m);
         if (cost < best_cost) {
           best_cost = cost;
-          best_score = sc;
           best = set;
         }
       } else {
@@ -236,12 +273,17 @@ struct Anneal {
       }
       if (progress && (it + 1) % o.progress_interval == 0) {
         pr.iteration = it + 1;
-        pr.best_score = best_score;
-        pr.current_score = sc;
+        pr.best_score = score_of(C, best_cost);
+        pr.current_score = score_of(C, cost);
         pr.temperature = temp;
         report(o, pr);
       }
     }
+    // The reported score of the best set: summed afresh and through the Cholesky path, as
+    // set_score() computes it.
+    for (int i = 0; i < N; ++i) K.copy_element(best[i], gset.data() + static_cast<size_t>(i) * T);
+    K.rebuild(gset, N, X);
+    const double best_score = score_packed<MC, C>(ctx, X);
     r.elements = best;
     r.score = best_score;
     r.trace.best_score = best_score;

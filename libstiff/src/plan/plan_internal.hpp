@@ -13,6 +13,16 @@
 #include "stiff/plan.hpp"
 #include "stiff/random.hpp"
 
+#if defined(__GNUC__)
+#define STIFF_UNLIKELY(x) __builtin_expect(!!(x), 0)
+#define STIFF_ALWAYS_INLINE __attribute__((always_inline))
+#define STIFF_NOINLINE __attribute__((noinline))
+#else
+#define STIFF_UNLIKELY(x) (x)
+#define STIFF_ALWAYS_INLINE
+#define STIFF_NOINLINE
+#endif
+
 namespace stiff::plan_detail {
 
 constexpr int kMaxM = 16;
@@ -143,6 +153,64 @@ class FastRng {
   uint64_t x_[kN];
   int i_;
 };
+
+/// xoshiro256++ (Blackman & Vigna, "Scrambled linear pseudorandom number generators", ACM TOMS
+/// 2021), seeded by splitmix64: the annealing's engine. Four words of state and a handful of
+/// instructions per draw (std::mt19937_64 costs about 40 with its twist), which matters at
+/// 1e7 draws per second; the statistical quality is ample for Metropolis proposals.
+class Xoshiro256pp {
+ public:
+  explicit Xoshiro256pp(uint64_t seed) {
+    uint64_t z = seed;
+    for (auto& w : s_) {
+      z += 0x9E3779B97F4A7C15ULL;
+      uint64_t x = z;
+      x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+      x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+      w = x ^ (x >> 31);
+    }
+  }
+  STIFF_ALWAYS_INLINE uint64_t operator()() {
+    const uint64_t result = rotl(s_[0] + s_[3], 23) + s_[0];
+    const uint64_t t = s_[1] << 17;
+    s_[2] ^= s_[0];
+    s_[3] ^= s_[1];
+    s_[1] ^= s_[2];
+    s_[0] ^= s_[3];
+    s_[2] ^= t;
+    s_[3] = rotl(s_[3], 45);
+    return result;
+  }
+  /// Uniform in (0, 1] with 53 random bits (never 0: its logarithm is finite).
+  double uniform_open() { return static_cast<double>(((*this)() >> 11) + 1) * 0x1.0p-53; }
+  /// Uniform integer in [0, n) by rejection.
+  uint64_t index(uint64_t n) {
+    const uint64_t limit = UINT64_MAX - UINT64_MAX % n;
+    uint64_t x;
+    do x = (*this)();
+    while (x >= limit);
+    return x % n;
+  }
+
+ private:
+  static uint64_t rotl(uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
+  uint64_t s_[4];
+};
+
+// The rare rejection branch of fast_index, out of line so that its division is not hoisted.
+STIFF_NOINLINE inline uint64_t fast_index_reject(Xoshiro256pp& rng, uint32_t n, uint64_t prod) {
+  const uint32_t threshold = static_cast<uint32_t>(-n) % n;
+  while (static_cast<uint32_t>(prod) < threshold) prod = (rng() >> 32) * n;
+  return prod;
+}
+
+/// Unbiased integer in [0, n), n < 2^32, from the high half of one draw (Lemire's
+/// multiply-shift; the rejection, and its division, are taken with probability n / 2^32).
+STIFF_ALWAYS_INLINE inline uint32_t fast_index(Xoshiro256pp& rng, uint32_t n) {
+  uint64_t prod = (rng() >> 32) * n;
+  if (STIFF_UNLIKELY(static_cast<uint32_t>(prod) < n)) prod = fast_index_reject(rng, n, prod);
+  return static_cast<uint32_t>(prod >> 32);
+}
 
 /// fast_index on FastRng: the same mapping, hence the same integers for the same stream.
 #if defined(__GNUC__)
@@ -444,6 +512,209 @@ inline double score_packed(const Context& c, const double* X) {
 inline double cost_of(Crit id, double s) {
   if (id == Crit::kappa_a || id == Crit::kappa_j) return s > 0 ? 1.0 / s : kInf;
   return std::isfinite(s) ? -s : kInf;
+}
+
+// ------------------------------------------------------------------------------------------
+// Closed form for the annealing's serial loop. Each Metropolis decision depends on the
+// previous one, so the annealing is bound by the latency of one evaluation as much as by its
+// instruction count, and the Cholesky above is a chain of m square roots and m divisions. For
+// m <= 6 the closed form below splits M = [A B; B^T D] with blocks of at most 3 x 3 and uses
+// the Schur complement S = D - B^T A^-1 B (block inversion; Golub & Van Loan, Matrix
+// Computations, 4th ed., section 3.2.11; Horn & Johnson, Matrix Analysis, 0.8.5):
+//   det M = det A det S,   tr M^-1 = tr A^-1 + tr S^-1 + tr(Q S^-1 Q^T),   Q = A^-1 B.
+// With a = det A, Q' = adj(A) B and the scaled complement S' = a S = a D - B^T Q' (ns x ns):
+//   det M = det S' / a^(ns - 1),
+//   tr M^-1 = (tr adj(A) det S' + a^2 tr adj(S') + sum_ij (Q'^T Q')_ij adj(S')_ij) / (a det S')
+// so both come as fractions with positive denominators and the Metropolis test compares
+// products: no division, square root or logarithm on the serial path. Adjugates lose accuracy
+// as a block nears singularity, so the closed form declines (returns false) when
+// det / prod(diag) of a block is below kClosedFormHadamard or a value overflows; the caller then
+// uses the Cholesky path, which also decides singularity exactly as before.
+// ------------------------------------------------------------------------------------------
+
+constexpr double kClosedFormHadamard = 1e-9;
+
+template <int MC>
+constexpr bool has_closed_form() {
+  return MC >= 1 && MC <= 6;
+}
+
+// adj(a) of a symmetric n x n block (n <= 3; lower triangle of a read, adj filled in full);
+// returns det(a).
+template <int N>
+STIFF_ALWAYS_INLINE inline double adjugate_sym(const double (&a)[3][3], double (&adj)[3][3]) {
+  if constexpr (N == 1) {
+    adj[0][0] = 1.0;
+    return a[0][0];
+  } else if constexpr (N == 2) {
+    adj[0][0] = a[1][1];
+    adj[1][1] = a[0][0];
+    adj[1][0] = adj[0][1] = -a[1][0];
+    return a[0][0] * a[1][1] - a[1][0] * a[1][0];
+  } else {
+    adj[0][0] = a[1][1] * a[2][2] - a[2][1] * a[2][1];
+    adj[1][1] = a[0][0] * a[2][2] - a[2][0] * a[2][0];
+    adj[2][2] = a[0][0] * a[1][1] - a[1][0] * a[1][0];
+    adj[1][0] = adj[0][1] = a[2][0] * a[2][1] - a[1][0] * a[2][2];
+    adj[2][0] = adj[0][2] = a[1][0] * a[2][1] - a[2][0] * a[1][1];
+    adj[2][1] = adj[1][2] = a[2][0] * a[1][0] - a[0][0] * a[2][1];
+    return a[0][0] * adj[0][0] + a[1][0] * adj[1][0] + a[2][0] * adj[2][0];
+  }
+}
+
+template <int N>
+STIFF_ALWAYS_INLINE inline double diagonal_product(const double (&a)[3][3]) {
+  double prod = a[0][0];
+  for (int i = 1; i < N; ++i) prod *= a[i][i];
+  return prod;
+}
+
+/// The closed form of a packed symmetric positive definite m x m matrix (m <= 6) as fractions:
+/// tr M, tr M^-1 = num / den, det M = det_num / det_den (denominators > 0). False when a block
+/// is too close to singular or a value overflows (use the Cholesky path).
+struct ClosedForm {
+  double tr, num, den, det_num, det_den;
+};
+
+template <int MC>
+STIFF_ALWAYS_INLINE inline bool closed_form(const double* X, ClosedForm& f) {
+  static_assert(has_closed_form<MC>(), "closed form for m = 1..6 only");
+  constexpr int na = MC <= 3 ? MC : MC / 2, ns = MC - na;
+  // Entry (r, c), r >= c, of the packed lower triangle.
+  auto at = [X](int r, int c) { return X[r * (r + 1) / 2 + c]; };
+  double a[3][3], adja[3][3];
+  f.tr = 0.0;
+#pragma GCC unroll 8
+  for (int i = 0; i < MC; ++i) f.tr += at(i, i);
+#pragma GCC unroll 8
+  for (int i = 0; i < na; ++i)
+#pragma GCC unroll 8
+    for (int j = 0; j <= i; ++j) a[i][j] = at(i, j);
+  const double deta = adjugate_sym<na>(a, adja);
+  double tra = adja[0][0];
+#pragma GCC unroll 8
+  for (int i = 1; i < na; ++i) tra += adja[i][i];
+  const bool a_regular = deta > kClosedFormHadamard * diagonal_product<na>(a);
+  if constexpr (ns == 0) {
+    f.num = tra;
+    f.den = deta;
+    f.det_num = deta;
+    f.det_den = 1.0;
+    return a_regular && deta < kInf;
+  } else {
+    double b[3][3], q[3][3], s[3][3], adjs[3][3];
+#pragma GCC unroll 8
+    for (int i = 0; i < na; ++i)
+#pragma GCC unroll 8
+      for (int j = 0; j < ns; ++j) b[i][j] = at(na + j, i);
+#pragma GCC unroll 8
+    for (int i = 0; i < na; ++i)
+#pragma GCC unroll 8
+      for (int j = 0; j < ns; ++j) {
+        double v = adja[i][0] * b[0][j];
+#pragma GCC unroll 8
+        for (int k = 1; k < na; ++k) v += adja[i][k] * b[k][j];
+        q[i][j] = v;
+      }
+      // S' = a D - B^T Q' (lower triangle)
+#pragma GCC unroll 8
+    for (int i = 0; i < ns; ++i)
+#pragma GCC unroll 8
+      for (int j = 0; j <= i; ++j) {
+        double v = b[0][i] * q[0][j];
+#pragma GCC unroll 8
+        for (int k = 1; k < na; ++k) v += b[k][i] * q[k][j];
+        s[i][j] = deta * at(na + i, na + j) - v;
+      }
+    const double dets = adjugate_sym<ns>(s, adjs);
+    // sum_ij (Q'^T Q')_ij adj(S')_ij over the lower triangle, off-diagonal terms twice.
+    double diag = 0.0, off = 0.0, trs = 0.0;
+#pragma GCC unroll 8
+    for (int i = 0; i < ns; ++i) {
+      trs += adjs[i][i];
+#pragma GCC unroll 8
+      for (int j = 0; j <= i; ++j) {
+        double v = q[0][i] * q[0][j];
+#pragma GCC unroll 8
+        for (int k = 1; k < na; ++k) v += q[k][i] * q[k][j];
+        if (i == j)
+          diag += v * adjs[i][i];
+        else
+          off += v * adjs[i][j];
+      }
+    }
+    f.num = (tra * dets + deta * deta * trs) + (diag + 2.0 * off);
+    f.den = deta * dets;
+    f.det_num = dets;  // det S' = a^ns det S
+    f.det_den = ns == 1 ? 1.0 : (ns == 2 ? deta : deta * deta);
+    const bool s_regular = dets > kClosedFormHadamard * diagonal_product<ns>(s);
+    return a_regular && s_regular && f.den < kInf && f.num < kInf;
+  }
+}
+
+/// The criteria whose annealing decisions use the closed form. Their raw value v = p / q
+/// (q > 0) is tr M tr M^-1 for kappa_a and kappa_j (cost = kappa_F = sqrt(v) / m), tr M^-1
+/// for a_opt (cost = v) and det M for d_opt (cost = -log v).
+template <int MC, Crit C>
+constexpr bool uses_closed_form() {
+  return has_closed_form<MC>() &&
+         (C == Crit::kappa_a || C == Crit::kappa_j || C == Crit::a_opt || C == Crit::d_opt);
+}
+
+template <int MC, Crit C>
+STIFF_ALWAYS_INLINE inline bool raw_fraction(const double* X, double& p, double& q) {
+  ClosedForm f;
+  if (!closed_form<MC>(X, f)) return false;
+  if constexpr (C == Crit::d_opt) {
+    p = f.det_num;
+    q = f.det_den;
+  } else if constexpr (C == Crit::a_opt) {
+    p = f.num;
+    q = f.den;
+  } else {
+    p = f.tr * f.num;
+    q = f.den;
+  }
+  return p < kInf;
+}
+
+template <Crit C>
+inline double cost_from_raw(double v, int m) {
+  if constexpr (C == Crit::d_opt)
+    return -std::log(v);
+  else if constexpr (C == Crit::a_opt)
+    return v;
+  else
+    return std::sqrt(v) / m;
+}
+
+/// Score (larger is better) from the annealing cost (inverse of cost_of).
+inline double score_of(Crit id, double cost) {
+  if (id == Crit::kappa_a || id == Crit::kappa_j) return cost < kInf ? 1.0 / cost : 0.0;
+  return -cost;
+}
+
+/// Metropolis test on the fraction: raw_threshold(c) is the raw value whose cost is c, and
+/// within(p, q, t) says whether cost(p / q) <= c (the cost falls with v for d_opt and rises
+/// with it for the others).
+template <Crit C>
+inline double raw_threshold(double cost, int m) {
+  if constexpr (C == Crit::d_opt) {
+    return std::exp(-cost);
+  } else if constexpr (C == Crit::a_opt) {
+    return cost;
+  } else {
+    const double c = m * cost;
+    return c * c;
+  }
+}
+
+template <Crit C>
+STIFF_ALWAYS_INLINE inline bool within(double p, double q, double threshold) {
+  if constexpr (C == Crit::d_opt)
+    return p >= threshold * q;
+  else
+    return p <= threshold * q;
 }
 
 /// Task information S = mean_t B_t^T B_t in the identified columns (row-major m x m).

@@ -211,6 +211,99 @@ TEST(PlanFastPath, AnnealingWithAndWithoutElementTableAndFastRng) {
   }
 }
 
+// The annealing's closed form (Schur complement, adjugates) against Eigen's LLT for m = 1..6,
+// on weighted information matrices of the size the pools produce (entries ~1e13) with column
+// scales over four decades (condition numbers up to ~1e9); rank-deficient ones are declined.
+template <int M>
+void expect_closed_form_matches_cholesky(Rng& rng) {
+  using namespace plan_detail;
+  for (int trial = 0; trial < 200; ++trial) {
+    Eigen::MatrixXd a(3 * M + 3, M);
+    for (int i = 0; i < a.rows(); ++i)
+      for (int j = 0; j < M; ++j) a(i, j) = rng.normal();
+    for (int j = 0; j < M; ++j) a.col(j) *= std::pow(10.0, 2.0 * rng.uniform());
+    const Eigen::MatrixXd info = 1e10 * (a.transpose() * a);
+    double packed[21];
+    for (int i = 0, idx = 0; i < M; ++i)
+      for (int j = 0; j <= i; ++j) packed[idx++] = info(i, j);
+    ClosedForm f;
+    ASSERT_TRUE(closed_form<M>(packed, f)) << "m = " << M;
+    const Eigen::LLT<Eigen::MatrixXd> llt(info);
+    const double trinv = llt.solve(Eigen::MatrixXd::Identity(M, M)).trace();
+    const double logdet = 2.0 * llt.matrixLLT().diagonal().array().log().sum();
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(info);
+    const double cond = svd.singularValues()(0) / svd.singularValues()(M - 1);
+    // Adjugate products lose about cond * eps.
+    const double tol = 64 * std::numeric_limits<double>::epsilon() * std::max(1.0, cond);
+    EXPECT_NEAR(f.num / f.den, trinv, tol * trinv) << "m = " << M << " cond " << cond;
+    EXPECT_NEAR(std::log(f.det_num / f.det_den), logdet, tol * std::abs(logdet) + tol)
+        << "m = " << M;
+    EXPECT_NEAR(f.tr, info.trace(), 1e-15 * info.trace());
+  }
+  if constexpr (M > 1) {
+    // Rank M - 1: declined, the caller falls back to the Cholesky path.
+    Eigen::MatrixXd a(3 * M, M);
+    for (int i = 0; i < a.rows(); ++i)
+      for (int j = 0; j < M; ++j) a(i, j) = rng.normal();
+    a.col(M - 1) = a.col(0) - 0.5 * a.col(M - 2);
+    const Eigen::MatrixXd info = 1e10 * (a.transpose() * a);
+    double packed[21];
+    for (int i = 0, idx = 0; i < M; ++i)
+      for (int j = 0; j <= i; ++j) packed[idx++] = info(i, j);
+    ClosedForm f;
+    EXPECT_FALSE(closed_form<M>(packed, f)) << "m = " << M;
+  }
+}
+
+TEST(PlanFastPath, ClosedFormEqualsCholeskyForEveryM) {
+  Rng rng(11);
+  expect_closed_form_matches_cholesky<1>(rng);
+  expect_closed_form_matches_cholesky<2>(rng);
+  expect_closed_form_matches_cholesky<3>(rng);
+  expect_closed_form_matches_cholesky<4>(rng);
+  expect_closed_form_matches_cholesky<5>(rng);
+  expect_closed_form_matches_cholesky<6>(rng);
+}
+
+// The annealing's engine (xoshiro256++): integers uniform over [0, n) by a chi-square test
+// (bound at about 6 standard deviations of the statistic), uniforms in (0, 1] with the right
+// mean, seeds giving different streams.
+TEST(PlanFastPath, AnnealingEngineDrawsUniformly) {
+  using namespace plan_detail;
+  for (uint32_t n : {7u, 1000u, 10007u}) {
+    Xoshiro256pp rng(n);
+    const long draws = 200L * n;
+    std::vector<long> count(n, 0);
+    for (long i = 0; i < draws; ++i) {
+      const uint32_t k = fast_index(rng, n);
+      ASSERT_LT(k, n);
+      ++count[k];
+    }
+    const double expect = static_cast<double>(draws) / n;
+    double chi2 = 0;
+    for (long c : count) chi2 += (c - expect) * (c - expect) / expect;
+    const double dof = n - 1.0;
+    EXPECT_LT(chi2, dof + 6.0 * std::sqrt(2.0 * dof) + 10.0) << "n = " << n;
+    EXPECT_GT(chi2, dof - 6.0 * std::sqrt(2.0 * dof) - 10.0) << "n = " << n;
+  }
+  Xoshiro256pp rng(3);
+  const int n = 1000000;
+  double sum = 0, lo = 1, hi = 0;
+  for (int i = 0; i < n; ++i) {
+    const double u = rng.uniform_open();
+    sum += u;
+    lo = std::min(lo, u);
+    hi = std::max(hi, u);
+  }
+  EXPECT_GT(lo, 0.0);
+  EXPECT_LE(hi, 1.0);
+  EXPECT_NEAR(sum / n, 0.5, 5.0 * std::sqrt(1.0 / 12.0 / n));
+  Xoshiro256pp a(1), b(2);
+  int same = 0;
+  for (int i = 0; i < 1000; ++i) same += a() == b();
+  EXPECT_EQ(same, 0);
+}
+
 TEST(PlanCriteria, RegistryAndEvaluateAgreeWithPoolKernel) {
   const RobotModel robot = test::rokae();
   const Dataset design = test::paper_design_a();
