@@ -156,7 +156,6 @@ struct Anneal {
 
     // One k-element swap proposal: D = sum (G_in - G_out), no rebuild of A; Xn = X + D.
     auto propose = [&](int k) {
-      std::fill(D, D + T, 0.0);
       for (int s = 0; s < k; ++s) {
         const int j = s + static_cast<int>(fast_index(rng, static_cast<uint32_t>(N - s)));
         std::swap(pos[s], pos[j]);
@@ -168,7 +167,10 @@ struct Anneal {
         const double* gi = K.element(e, scratch.data() + static_cast<size_t>(s) * T);
         const double* go = gset.data() + static_cast<size_t>(pos[s]) * T;
         gin[s] = gi;
-        for (int q = 0; q < T; ++q) D[q] = (D[q] + gi[q]) - go[q];
+        if (s == 0)
+          for (int q = 0; q < T; ++q) D[q] = gi[q] - go[q];
+        else
+          for (int q = 0; q < T; ++q) D[q] = (D[q] + gi[q]) - go[q];
       }
       for (int q = 0; q < T; ++q) Xn[q] = X[q] + D[q];
     };
@@ -211,7 +213,8 @@ struct Anneal {
                              k0 * (1.0 - static_cast<double>(it) / static_cast<double>(iters)))));
     };
     int k = 0;
-    long k_until = 0;                                         // k holds for it < k_until
+    long k_until = 0;  // k holds for it < k_until
+    const double inv_iters = iters > 0 ? 1.0 / static_cast<double>(iters) : 0.0;
     double down = kClosed ? raw_threshold<C>(cost, m) : 0.0;  // raw value of the current cost
     for (long it = 0; it < iters; ++it) {
       if (it >= k_until) {
@@ -223,7 +226,7 @@ struct Anneal {
         }
         k_until = hi;
       }
-      const double temp = T0 * (1.0 - static_cast<double>(it) / static_cast<double>(iters));
+      const double temp = T0 * (1.0 - static_cast<double>(it) * inv_iters);
       propose(k);
       // Metropolis: downhill always; uphill by Delta when Delta <= dmax = -T ln u, u uniform in
       // (0, 1], i.e. with probability P(u <= exp(-Delta / T)). u is drawn for uphill moves only.
