@@ -48,8 +48,9 @@ test-python:
 bench: build
 	@bash bench/run
 
-# Long libFuzzer runs (FUZZ_SECONDS_PER_TARGET, default 600 s each); CI runs scripts/ci-fuzz.sh
-# for about a minute. Sanitizers: bash scripts/ci-sanitize.sh (TESTING.md).
+# Long libFuzzer runs (FUZZ_SECONDS_PER_TARGET, default 600 s each; new inputs in
+# build-fuzz/corpus, `bash scripts/ci-fuzz.sh --merge` keeps those that add coverage). CI runs
+# scripts/ci-fuzz.sh: fixed executions and seed, about a minute. Sanitizers: TESTING.md.
 fuzz:
 	@bash scripts/ci-fuzz.sh --long
 

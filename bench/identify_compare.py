@@ -13,7 +13,13 @@ import sys
 import tempfile
 import time
 
-import numpy as np
+# The peer's BLAS on one thread (set before numpy loads it): on the 2-core benchmark machine,
+# shared with other jobs, OpenBLAS's thread pool made the scipy fits 2-8x slower than on one
+# thread (least_squares factorises a tall Jacobian every iteration). libstiff is single-threaded.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "bench", "peers"))

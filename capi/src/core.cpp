@@ -102,10 +102,8 @@ stiff_status stiff_robot_limits(
   return guarded(__func__, [&] {
     require(robot, "robot");
     const size_t n = robot->model.dof();
-    if (needed) *needed = n;
-    if (capacity < n || !lower || !upper)
-      throw Error(Status::buffer_too_small, "buffers hold " + std::to_string(capacity) +
-                                                " values, " + std::to_string(n) + " needed");
+    require_capacity(n, lower, capacity, needed);
+    require_capacity(n, upper, capacity, needed);
     for (size_t j = 0; j < n; ++j) {
       lower[j] = robot->model.joints[j].lower;
       upper[j] = robot->model.joints[j].upper;

@@ -134,10 +134,7 @@ stiff_status stiff_result_parameters(double* values,
   return guarded(__func__, [&] {
     const FitResult& f = fit_of(result);
     const size_t p = f.parameters.size();
-    if (needed) *needed = p;
-    if (capacity < p || !values)
-      throw Error(Status::buffer_too_small, "buffer holds " + std::to_string(capacity) +
-                                                " values, " + std::to_string(p) + " needed");
+    require_capacity(p, values, capacity, needed);
     for (size_t k = 0; k < p; ++k) {
       values[k] = f.parameters[k].value;
       if (standard_errors) standard_errors[k] = f.parameters[k].standard_error;
@@ -273,10 +270,7 @@ stiff_status stiff_predict_batch(double* deflection,
     require(model, "model");
     require(q, "q");
     require(wrench, "wrench");
-    if (needed) *needed = 6 * rows;
-    if (capacity < 6 * rows || !deflection)
-      throw Error(Status::buffer_too_small, "buffer holds " + std::to_string(capacity) +
-                                                " values, " + std::to_string(6 * rows) + " needed");
+    require_capacity(6 * rows, deflection, capacity, needed);
     for (size_t r = 0; r < rows; ++r) {
       try {
         predict_one(model, q + r * n, n, wrench + 6 * r, deflection + 6 * r);

@@ -2,17 +2,26 @@
 // check, covariance and outliers (identify.hpp).
 #include <ceres/ceres.h>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <functional>
+#include <memory>
 #include <sstream>
 
+#include "ceres_quiet.hpp"
 #include "stiff/error.hpp"
 #include "stiff/identify.hpp"
 
 namespace stiff {
+namespace detail {
+// validate_dataset(data, dof, true) without strings per row (identify_linear.cpp).
+void validate_identification_data(const Dataset& data, int dof);
+}  // namespace detail
 namespace {
 
 const std::vector<std::string>& known_losses() {
@@ -35,6 +44,50 @@ std::string num(double v, int precision = 3) {
   return b;
 }
 
+struct Setup;
+void displacement_and_jacobian(const Setup& s,
+                               int row,
+                               const double* theta,
+                               const std::vector<int>& cols,
+                               const double* scale,
+                               Eigen::Vector3d& d,
+                               double* out);
+
+/// Model evaluations per measurement, cached: the trust-region minimizer evaluates the
+/// Jacobian at a trial point in its line search and again when it accepts it, the cost there
+/// in between, and the identifiability check and the statistics want the Jacobian at the
+/// solution, where the minimizer last evaluated it. Each row keeps its last two evaluations
+/// (theta, d and, when asked for, dd/dtheta for every parameter or for one column set). A model
+/// made only of linear effects (Effect::linear) predicts d affine in theta: after one Jacobian
+/// evaluation per row, d and its derivatives follow without the model.
+class Evaluations {
+ public:
+  void init(const Setup* s, int rows, int p, bool linear);
+  /// d and, with `cols` (a list owned by the caller and stable while cached), the derivatives
+  /// dd/dtheta(k) (3 per column, column-major) of row `row` at theta. `*jcols` says which
+  /// columns `*jac` holds: `cols` itself or all() (every parameter).
+  void get(int row,
+           const double* theta,
+           const std::vector<int>* cols,
+           const double** d,
+           const double** jac,
+           const std::vector<int>** jcols);
+  const std::vector<int>& all() const { return all_; }
+
+ private:
+  int find(int row, const double* theta, const std::vector<int>* cols) const;
+  double* theta_at(int slot, int row) { return theta_.data() + (2 * row + slot) * p_; }
+  const Setup* s_ = nullptr;
+  int p_ = 0;
+  bool linear_ = false;
+  std::vector<int> all_;
+  std::vector<double> ones_, theta_, d_, jac_;
+  std::vector<const std::vector<int>*> cols_;  ///< per slot: nullptr (value only), &all_, list
+  std::vector<char> used_;                     ///< per slot: 0 empty, else recency 1 or 2
+  std::vector<char> ref_;                      ///< per row: linear model's reference present
+  std::vector<double> ref_theta_, ref_d_, ref_jac_;
+};
+
 /// Everything the residuals need, fixed for one call.
 struct Setup {
   const DeflectionModel* model = nullptr;
@@ -44,9 +97,10 @@ struct Setup {
   Eigen::VectorXd typical;     ///< parameter scaling: theta_k = typical_k * z_k
   /// Scratch of the evaluations (Ceres runs single-threaded here: num_threads = 1).
   mutable EvalState<Jet> scratch;
+  mutable EvalState<double> dscratch;
   mutable std::vector<Jet> theta_jet;
   mutable std::vector<double> theta_double;
-  mutable std::vector<double> jac_scratch;
+  mutable Evaluations eval;
 };
 
 /// Derivatives of the predicted displacement of measurement `row` with respect to
@@ -86,25 +140,127 @@ void displacement_and_jacobian(const Setup& s,
   }
 }
 
-/// Residual of one measurement, (measured - predicted) / sigma, over the free parameters in
-/// scaled form; the held parameters come from `held`. Derivatives by
-/// displacement_and_jacobian (one model pass per kJetStride free parameters).
+void Evaluations::init(const Setup* s, int rows, int p, bool linear) {
+  s_ = s;
+  p_ = p;
+  linear_ = linear;
+  all_.resize(p);
+  for (int k = 0; k < p; ++k) all_[k] = k;
+  ones_.assign(p, 1.0);
+  theta_.assign(2 * static_cast<size_t>(rows) * p, 0.0);
+  d_.assign(6 * static_cast<size_t>(rows), 0.0);
+  jac_.assign(6 * static_cast<size_t>(rows) * p, 0.0);
+  cols_.assign(2 * static_cast<size_t>(rows), nullptr);
+  used_.assign(2 * static_cast<size_t>(rows), 0);
+  if (linear) {
+    ref_.assign(rows, 0);
+    ref_theta_.assign(static_cast<size_t>(rows) * p, 0.0);
+    ref_d_.assign(3 * static_cast<size_t>(rows), 0.0);
+    ref_jac_.assign(3 * static_cast<size_t>(rows) * p, 0.0);
+  }
+}
+
+int Evaluations::find(int row, const double* theta, const std::vector<int>* cols) const {
+  for (int slot = 0; slot < 2; ++slot) {
+    const size_t i = 2 * static_cast<size_t>(row) + slot;
+    if (!used_[i] || std::memcmp(theta, theta_.data() + i * p_, p_ * sizeof(double)) != 0) continue;
+    if (!cols || cols_[i] == &all_ || cols_[i] == cols) return slot;
+  }
+  return -1;
+}
+
+void Evaluations::get(int row,
+                      const double* theta,
+                      const std::vector<int>* cols,
+                      const double** d,
+                      const double** jac,
+                      const std::vector<int>** jcols) {
+  const size_t r2 = 2 * static_cast<size_t>(row);
+  int slot = find(row, theta, cols);
+  if (slot < 0) {
+    // Replace the entry at this theta (it lacks the columns) or else the older one.
+    slot = -1;
+    for (int k = 0; k < 2 && slot < 0; ++k)
+      if (used_[r2 + k] &&
+          std::memcmp(theta, theta_.data() + (r2 + k) * p_, p_ * sizeof(double)) == 0)
+        slot = k;
+    if (slot < 0) slot = used_[r2] <= used_[r2 + 1] ? 0 : 1;
+    const size_t i = r2 + slot;
+    double* dd = d_.data() + 3 * i;
+    double* jj = jac_.data() + 3 * i * p_;
+    Eigen::Vector3d dv;
+    if (linear_ && ref_[row]) {
+      // d = d0 + J (theta - theta0), exact for a model affine in theta.
+      const double* t0 = ref_theta_.data() + static_cast<size_t>(row) * p_;
+      const double* j0 = ref_jac_.data() + 3 * static_cast<size_t>(row) * p_;
+      dv = Eigen::Map<const Eigen::Vector3d>(ref_d_.data() + 3 * static_cast<size_t>(row));
+      for (int k = 0; k < p_; ++k)
+        if (theta[k] != t0[k])
+          dv += Eigen::Map<const Eigen::Vector3d>(j0 + 3 * k) * (theta[k] - t0[k]);
+      std::copy(j0, j0 + 3 * p_, jj);
+      cols_[i] = &all_;
+    } else if (cols || linear_) {
+      // Every column when that takes no more passes of the model than the ones asked for.
+      const int want = cols ? static_cast<int>(cols->size()) : 0;
+      const bool every =
+          linear_ || (p_ + kJetStride - 1) / kJetStride <= (want + kJetStride - 1) / kJetStride;
+      const std::vector<int>& c = every ? all_ : *cols;
+      displacement_and_jacobian(*s_, row, theta, c, ones_.data(), dv, jj);
+      cols_[i] = every ? &all_ : cols;
+      if (linear_) {
+        ref_[row] = 1;
+        std::copy(theta, theta + p_, ref_theta_.data() + static_cast<size_t>(row) * p_);
+        std::copy(dv.data(), dv.data() + 3, ref_d_.data() + 3 * static_cast<size_t>(row));
+        std::copy(jj, jj + 3 * p_, ref_jac_.data() + 3 * static_cast<size_t>(row) * p_);
+      }
+    } else {
+      Vector3<double> v;
+      s_->model->evaluate_double(theta, s_->data->rows[row], s_->ctx[row], s_->dscratch, &v);
+      dv = v;
+      cols_[i] = nullptr;
+    }
+    std::copy(dv.data(), dv.data() + 3, dd);
+    std::copy(theta, theta + p_, theta_.data() + i * p_);
+  }
+  const size_t i = r2 + slot;
+  used_[i] = 2;
+  used_[r2 + (1 - slot)] = used_[r2 + (1 - slot)] ? 1 : 0;
+  *d = d_.data() + 3 * i;
+  if (jac) *jac = jac_.data() + 3 * i * p_;
+  if (jcols) *jcols = cols_[i];
+}
+
+/// Residuals of a chunk of measurements over the free parameters in scaled form (the held
+/// parameters come from `held`): e_r = (measured - predicted) / sigma for each measurement r
+/// and, with a robust loss rho on |e_r|^2 = s, the scaled residual sqrt(rho(s) / s) e_r, so
+/// that the chunk's 1/2 |residuals|^2 is its robust cost 1/2 sum_r rho(s_r) with the exact
+/// derivative (Gauss-Newton on the scaled residuals instead of Ceres's per-block Triggs
+/// correction; the cost and hence the minimum are the same). Chunks of many measurements
+/// spare Ceres's per-residual-block work, which outweighs the model on small models. Model
+/// values and derivatives from the cached Evaluations.
 class Residual final : public ceres::CostFunction {
  public:
   Residual(const Setup* setup,
-           int row,
+           int first,
+           int count,
            const std::vector<int>* free,
            const Eigen::VectorXd* held,
-           const std::vector<double>* free_typical)
-      : setup_(setup), row_(row), free_(free), held_(held), free_typical_(free_typical) {
-    set_num_residuals(3);
+           const std::vector<double>* free_typical,
+           const std::vector<std::unique_ptr<ceres::LossFunction>>* losses)
+      : setup_(setup),
+        first_(first),
+        count_(count),
+        free_(free),
+        held_(held),
+        free_typical_(free_typical),
+        losses_(losses) {
+    set_num_residuals(3 * count);
     mutable_parameter_block_sizes()->push_back(static_cast<int>(free->size()));
   }
 
   bool Evaluate(double const* const* z, double* r, double** jacobians) const override {
     const Setup& s = *setup_;
-    const DeflectionModel& model = *s.model;
-    const int p = model.parameter_count();
+    const int p = s.model->parameter_count();
     const int nf = static_cast<int>(free_->size());
     auto& theta = s.theta_double;
     theta.assign(held_->data(), held_->data() + p);
@@ -112,45 +268,68 @@ class Residual final : public ceres::CostFunction {
       const int k = (*free_)[f];
       theta[k] = z[0][f] * s.typical(k);
     }
-    const Measurement& m = s.data->rows[row_];
-    const double w = s.row_weight(row_);
     const bool want_jacobian = jacobians && jacobians[0];
-    // The trust-region minimizer evaluates the Jacobian at a trial point in its line search
-    // and again when it accepts that point: the second is a copy of the first.
-    if (cached_ && std::equal(z[0], z[0] + nf, cache_z_.begin())) {
-      for (int k = 0; k < 3; ++k) r[k] = cache_r_[k];
-      if (want_jacobian) std::copy(cache_j_.begin(), cache_j_.end(), jacobians[0]);
-      return true;
+    for (int i = 0; i < count_; ++i) {
+      const int row = first_ + i;
+      const Measurement& m = s.data->rows[row];
+      const double w = s.row_weight(row);
+      const double *d = nullptr, *jac = nullptr;
+      const std::vector<int>* jcols = nullptr;
+      s.eval.get(row, theta.data(), want_jacobian ? free_ : nullptr, &d, &jac, &jcols);
+      double* ri = r + 3 * i;
+      for (int k = 0; k < 3; ++k) ri[k] = (m.displacement(k) - d[k]) * w;
+      const double sq = ri[0] * ri[0] + ri[1] * ri[1] + ri[2] * ri[2];
+      // Non-finite values make Ceres log to stderr; returning false rejects the point quietly.
+      if (!std::isfinite(sq)) return false;
+      // Robust scaling a = sqrt(rho(s) / s) and da/ds (limits at s = 0).
+      double a = 1.0, da = 0.0;
+      const ceres::LossFunction* loss = (*losses_)[row].get();
+      if (loss) {
+        double rho[3];
+        loss->Evaluate(sq, rho);
+        if (sq > 0) {
+          a = std::sqrt(rho[0] / sq);
+          da = a > 0 ? (rho[1] * sq - rho[0]) / (2.0 * sq * sq * a) : 0.0;
+        } else {
+          a = std::sqrt(rho[1]);
+          da = a > 0 ? 0.25 * rho[2] / a : 0.0;
+        }
+      }
+      double* ji = want_jacobian ? jacobians[0] + 3 * i * nf : nullptr;
+      if (ji) {
+        const bool every = jcols == &s.eval.all();
+        for (int f = 0; f < nf; ++f) {
+          const double* col = jac + 3 * (every ? (*free_)[f] : f);
+          const double scale = -w * (*free_typical_)[f];
+          for (int k = 0; k < 3; ++k) ji[k * nf + f] = col[k] * scale;
+        }
+        if (a != 1.0 || da != 0.0) {
+          // d(a e) = a de + e (da/ds) 2 e^T de
+          for (int f = 0; f < nf; ++f) {
+            const double g =
+                2.0 * da * (ri[0] * ji[f] + ri[1] * ji[nf + f] + ri[2] * ji[2 * nf + f]);
+            for (int k = 0; k < 3; ++k) ji[k * nf + f] = a * ji[k * nf + f] + ri[k] * g;
+          }
+        }
+        double nan_if_not_finite = 0.0;  // 0 * x is NaN for an infinite or NaN x
+        for (int k = 0; k < 3 * nf; ++k) nan_if_not_finite += 0.0 * ji[k];
+        if (nan_if_not_finite != 0.0) return false;
+      }
+      if (loss) {
+        for (int k = 0; k < 3; ++k) ri[k] *= a;
+        if (!std::isfinite(ri[0] * ri[0] + ri[1] * ri[1] + ri[2] * ri[2])) return false;
+      }
     }
-    if (!want_jacobian) {
-      Vector3<double> d;
-      model.evaluate<double>(theta.data(), m, s.ctx[row_], &d, nullptr);
-      for (int k = 0; k < 3; ++k) r[k] = (m.displacement(k) - d(k)) * w;
-      return true;
-    }
-    Eigen::Vector3d d;
-    auto& jac = s.jac_scratch;
-    jac.resize(3 * nf);
-    displacement_and_jacobian(s, row_, theta.data(), *free_, free_typical_->data(), d, jac.data());
-    for (int k = 0; k < 3; ++k) {
-      r[k] = (m.displacement(k) - d(k)) * w;
-      for (int f = 0; f < nf; ++f) jacobians[0][k * nf + f] = -jac[3 * f + k] * w;
-    }
-    cache_z_.assign(z[0], z[0] + nf);
-    cache_r_.assign(r, r + 3);
-    cache_j_.assign(jacobians[0], jacobians[0] + 3 * nf);
-    cached_ = true;
     return true;
   }
 
  private:
   const Setup* setup_;
-  int row_;
+  int first_, count_;
   const std::vector<int>* free_;
   const Eigen::VectorXd* held_;
   const std::vector<double>* free_typical_;
-  mutable bool cached_ = false;
-  mutable std::vector<double> cache_z_, cache_r_, cache_j_;
+  const std::vector<std::unique_ptr<ceres::LossFunction>>* losses_;
 };
 
 /// Weighted residuals e (3N, sigma units) at theta.
@@ -158,9 +337,10 @@ Eigen::VectorXd weighted_residuals(const Setup& s, const Eigen::VectorXd& theta)
   const int n = static_cast<int>(s.data->rows.size());
   Eigen::VectorXd e(3 * n);
   for (int r = 0; r < n; ++r) {
-    const auto& m = s.data->rows[r];
+    const double* d = nullptr;
+    s.eval.get(r, theta.data(), nullptr, &d, nullptr, nullptr);
     e.segment<3>(3 * r) =
-        (m.displacement - s.model->predict(theta, m, s.ctx[r]).head<3>()) * s.row_weight(r);
+        (s.data->rows[r].displacement - Eigen::Map<const Eigen::Vector3d>(d)) * s.row_weight(r);
   }
   return e;
 }
@@ -170,16 +350,32 @@ Eigen::MatrixXd weighted_jacobian(const Setup& s, const Eigen::VectorXd& theta) 
   const int n = static_cast<int>(s.data->rows.size());
   const int p = s.model->parameter_count();
   Eigen::MatrixXd j(3 * n, p);
-  std::vector<int> all(p);
-  for (int k = 0; k < p; ++k) all[k] = k;
-  const std::vector<double> ones(p, 1.0);
-  Eigen::Matrix<double, 3, Eigen::Dynamic> blk(3, p);
-  Eigen::Vector3d d;
   for (int r = 0; r < n; ++r) {
-    displacement_and_jacobian(s, r, theta.data(), all, ones.data(), d, blk.data());
-    j.middleRows(3 * r, 3) = blk * s.row_weight(r);
+    const double *d = nullptr, *jac = nullptr;
+    s.eval.get(r, theta.data(), &s.eval.all(), &d, &jac, nullptr);
+    j.middleRows(3 * r, 3) =
+        Eigen::Map<const Eigen::Matrix<double, 3, Eigen::Dynamic>>(jac, 3, p) * s.row_weight(r);
   }
   return j;
+}
+
+/// Whether any parameter marked in `held` moves the weighted predictions at theta (column
+/// norm times its typical magnitude above 1e-9, the identifiability check's first test).
+bool held_has_effect(const Setup& s, const Eigen::VectorXd& theta, const std::vector<bool>& held) {
+  const int p = s.model->parameter_count();
+  Eigen::VectorXd sq = Eigen::VectorXd::Zero(p);
+  for (int r = 0; r < static_cast<int>(s.data->rows.size()); ++r) {
+    const double *d = nullptr, *jac = nullptr;
+    s.eval.get(r, theta.data(), &s.eval.all(), &d, &jac, nullptr);
+    const double w2 = s.row_weight(r) * s.row_weight(r);
+    for (int k = 0; k < p; ++k)
+      if (held[k])
+        sq(k) += w2 * (jac[3 * k] * jac[3 * k] + jac[3 * k + 1] * jac[3 * k + 1] +
+                       jac[3 * k + 2] * jac[3 * k + 2]);
+  }
+  for (int k = 0; k < p; ++k)
+    if (held[k] && std::sqrt(sq(k)) * s.typical(k) > 1e-9) return true;
+  return false;
 }
 
 std::string qualified(const DeflectionModel& model, int k) {
@@ -216,6 +412,44 @@ Identifiability check_identifiability(const DeflectionModel& model,
     for (int k = 0; k < model.effects()[je]->size(); ++k) order.push_back(model.offset(je) + k);
   for (int k = 0; k < p; ++k)
     if (std::find(order.begin(), order.end(), k) == order.end()) order.push_back(k);
+
+  // The same decisions on the p x p Gram matrix J^T J (Cholesky of the normalised columns in
+  // this order: the squared orthogonal rest is 1 - |L^-1 c|^2), which costs a third of the
+  // Gram-Schmidt below on tall J; taken only when every column is clearly accepted (its
+  // rest^2 is resolved to ~1e-15), else the exact path decides.
+  {
+    Eigen::MatrixXd g = Eigen::MatrixXd::Zero(p, p);
+    g.selfadjointView<Eigen::Lower>().rankUpdate(j.transpose());
+    Eigen::MatrixXd l = Eigen::MatrixXd::Zero(p, p);  // rows: accepted columns' factor
+    std::vector<int> acc;
+    Identifiability fast = out;
+    bool clear = true;
+    for (int k : order) {
+      const double norm = std::sqrt(g(k, k));
+      if (!(norm * typical(k) > 1e-9)) {
+        fast.fixed[k] = true;
+        fast.reason[k] = "it has no effect on any of these measurements";
+        continue;
+      }
+      const int a = static_cast<int>(acc.size());
+      Eigen::VectorXd y(a);
+      for (int i = 0; i < a; ++i) {
+        const int c = acc[i];
+        double v = (c > k ? g(c, k) : g(k, c)) / (std::sqrt(g(c, c)) * norm);
+        for (int m = 0; m < i; ++m) v -= l(i, m) * y(m);
+        y(i) = v / l(i, i);
+      }
+      const double rest2 = 1.0 - y.squaredNorm();
+      if (!(rest2 > 100.0 * tolerance * tolerance)) {
+        clear = false;
+        break;
+      }
+      l.row(a).head(a) = y.transpose();
+      l(a, a) = std::sqrt(rest2);
+      acc.push_back(k);
+    }
+    if (clear) return fast;
+  }
 
   std::vector<Eigen::VectorXd> basis;
   std::vector<int> accepted;
@@ -282,41 +516,117 @@ class Progress : public ceres::IterationCallback {
 struct SolveOutcome {
   int iterations = 0;
   bool converged = true;
+  bool restart = false;  ///< stopped because a held parameter became identifiable
   std::string message;
 };
 
-/// Minimise over the free parameters; theta (full) is updated in place.
-SolveOutcome solve(const Setup& s,
-                   const std::vector<int>& free,
-                   Eigen::VectorXd& theta,
-                   const IdentifyOptions& opt,
-                   const Eigen::VectorXd& loss_scale) {
+/// Stops the minimizer when free parameters have sat on a bound for kPinAfter successful
+/// iterations: projected Levenberg-Marquardt then converges only linearly (a step computed as
+/// if the parameter could cross the bound is clipped every iteration), so the caller holds
+/// them at the bound and solves for the rest (an active set, checked at the end).
+class BoundWatch : public ceres::IterationCallback {
+ public:
+  static constexpr int kPinAfter = 3;
+  BoundWatch(const double* z, const std::vector<double>& lower, const std::vector<double>& upper)
+      : z_(z), lower_(lower), upper_(upper), count_(lower.size(), 0) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& it) override {
+    if (!it.step_is_successful || it.iteration == 0) return ceres::SOLVER_CONTINUE;
+    for (size_t f = 0; f < count_.size(); ++f) {
+      count_[f] = (z_[f] == lower_[f] || z_[f] == upper_[f]) ? count_[f] + 1 : 0;
+      if (count_[f] >= kPinAfter) pinned.push_back(static_cast<int>(f));
+    }
+    return pinned.empty() ? ceres::SOLVER_CONTINUE : ceres::SOLVER_TERMINATE_SUCCESSFULLY;
+  }
+  std::vector<int> pinned;  ///< indices into the solve's parameters
+
+ private:
+  const double* z_;
+  const std::vector<double>& lower_;
+  const std::vector<double>& upper_;
+  std::vector<int> count_;
+};
+
+/// True when a parameter held as unidentifiable has become identifiable at theta.
+using Visible = std::function<bool(const Eigen::VectorXd& theta)>;
+
+/// Stops the minimizer as soon as a held parameter becomes identifiable at an accepted
+/// iterate (point_offset makes c6 visible once the offsets move): the caller re-solves with
+/// it free from there instead of first converging without it.
+class VisibleWatch : public ceres::IterationCallback {
+ public:
+  VisibleWatch(const Setup& s,
+               const double* z,
+               const std::vector<int>& free,
+               const Eigen::VectorXd& held,
+               const Visible& visible)
+      : s_(s), z_(z), free_(free), theta_(held), visible_(visible) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& it) override {
+    if (!it.step_is_successful || it.iteration == 0) return ceres::SOLVER_CONTINUE;
+    for (size_t f = 0; f < free_.size(); ++f) theta_(free_[f]) = z_[f] * s_.typical(free_[f]);
+    try {
+      fired = visible_(theta_);
+    } catch (...) {
+      fired = false;  // decided at the solution instead
+    }
+    return fired ? ceres::SOLVER_TERMINATE_SUCCESSFULLY : ceres::SOLVER_CONTINUE;
+  }
+  bool fired = false;
+
+ private:
+  const Setup& s_;
+  const double* z_;
+  const std::vector<int>& free_;
+  Eigen::VectorXd theta_;
+  const Visible& visible_;
+};
+
+/// One Ceres solve over `free` (the rest of theta held); theta is updated in place. With
+/// `pinned`, parameters found sitting on a bound stop the solve and are returned there; with
+/// `visible`, a held parameter becoming identifiable stops it (out.restart).
+SolveOutcome solve_once(const Setup& s,
+                        const std::vector<int>& free,
+                        Eigen::VectorXd& theta,
+                        const IdentifyOptions& opt,
+                        const Eigen::VectorXd& loss_scale,
+                        std::vector<int>* pinned,
+                        const Visible* visible) {
   SolveOutcome out;
   const int nf = static_cast<int>(free.size());
   if (nf == 0) return out;
   const DeflectionModel& model = *s.model;
-  std::vector<double> z(nf);
+  std::vector<double> z(nf), lower(nf, -INFINITY), upper(nf, INFINITY);
   for (int f = 0; f < nf; ++f) {
     const auto& spec = model.spec(free[f]);
     const double t = std::min(std::max(theta(free[f]), spec.lower), spec.upper);
     z[f] = t / s.typical(free[f]);
+    theta(free[f]) = z[f] * s.typical(free[f]);  // the point the residuals see (cache key)
   }
   std::vector<double> free_typical(nf);
   for (int f = 0; f < nf; ++f) free_typical[f] = s.typical(free[f]);
   ceres::Problem problem;
   const int n = static_cast<int>(s.data->rows.size());
-  for (int r = 0; r < n; ++r)
-    problem.AddResidualBlock(new Residual(&s, r, &free, &theta, &free_typical),
-                             make_loss(opt.loss, loss_scale(r)), z.data());
+  std::vector<std::unique_ptr<ceres::LossFunction>> losses(n);
+  for (int r = 0; r < n; ++r) losses[r].reset(make_loss(opt.loss, loss_scale(r)));
+  constexpr int kChunk = 64;  // measurements per residual block
+  for (int r = 0; r < n; r += kChunk)
+    problem.AddResidualBlock(
+        new Residual(&s, r, std::min(kChunk, n - r), &free, &theta, &free_typical, &losses),
+        nullptr, z.data());
   for (int f = 0; f < nf; ++f) {
     const auto& spec = model.spec(free[f]);
-    if (spec.lower > -1e299)
-      problem.SetParameterLowerBound(z.data(), f, spec.lower / s.typical(free[f]));
-    if (spec.upper < 1e299)
-      problem.SetParameterUpperBound(z.data(), f, spec.upper / s.typical(free[f]));
+    if (spec.lower > -1e299) {
+      lower[f] = spec.lower / s.typical(free[f]);
+      problem.SetParameterLowerBound(z.data(), f, lower[f]);
+    }
+    if (spec.upper < 1e299) {
+      upper[f] = spec.upper / s.typical(free[f]);
+      problem.SetParameterUpperBound(z.data(), f, upper[f]);
+    }
   }
   ceres::Solver::Options so;
-  so.linear_solver_type = ceres::DENSE_QR;
+  // Normal equations for tall problems (J^T J costs a quarter of a QR of J; the
+  // Jacobi-scaled, Levenberg-Marquardt-regularised system is well conditioned), QR otherwise.
+  so.linear_solver_type = 3 * n >= 10 * nf ? ceres::DENSE_NORMAL_CHOLESKY : ceres::DENSE_QR;
   so.max_num_iterations = opt.max_iterations;
   so.logging_type = ceres::SILENT;
   so.minimizer_progress_to_stdout = false;
@@ -324,22 +634,124 @@ SolveOutcome solve(const Setup& s,
   so.function_tolerance = 1e-12;
   so.gradient_tolerance = 1e-14;
   so.parameter_tolerance = 1e-12;
+  // The projected line search of a bounded problem: backtracking by bisection needs no
+  // Jacobian at the trial point (cubic interpolation evaluates one, wasted whenever the step
+  // is rejected or ends the solve).
+  so.line_search_interpolation_type = ceres::BISECTION;
   Progress progress(opt.progress);
-  if (opt.progress) {
-    so.callbacks.push_back(&progress);
-    so.update_state_every_iteration = false;
+  if (opt.progress) so.callbacks.push_back(&progress);
+  BoundWatch watch(z.data(), lower, upper);
+  if (pinned) {
+    so.callbacks.push_back(&watch);
+    so.update_state_every_iteration = true;  // the watch reads z
+  }
+  std::unique_ptr<VisibleWatch> seen;
+  if (visible && *visible) {
+    seen = std::make_unique<VisibleWatch>(s, z.data(), free, theta, *visible);
+    so.callbacks.push_back(seen.get());
+    so.update_state_every_iteration = true;
   }
   ceres::Solver::Summary summary;
   std::string why;
   if (!so.IsValid(&why)) throw InvalidArgument("identify: invalid solver options: " + why);
+  double start_cost = 0;
+  if (!problem.Evaluate(ceres::Problem::EvaluateOptions(), &start_cost, nullptr, nullptr,
+                        nullptr) ||
+      !std::isfinite(start_cost))
+    throw NumericalError(
+        "identify: the residuals overflow: check the units and sizes of the loads and "
+        "displacements (N, N*m, m)");
+  ceres_quiet::InvalidStepGuard guard;  // Ceres must not print (ceres_quiet.hpp)
+  ceres_quiet::install(so, guard);
   ceres::Solve(so, &problem, &summary);
   if (progress.cancelled) throw Cancelled("identify: cancelled by the progress callback");
+  ceres_quiet::check(guard, "identify");
   if (!summary.IsSolutionUsable())
     throw NumericalError("identify: the solver failed: " + summary.message);
   for (int f = 0; f < nf; ++f) theta(free[f]) = z[f] * s.typical(free[f]);
+  if (pinned)
+    for (int f : watch.pinned) pinned->push_back(free[f]);
+  out.restart = seen && seen->fired;
   out.iterations = static_cast<int>(summary.iterations.size());
   out.converged = summary.termination_type == ceres::CONVERGENCE;
   out.message = summary.message;
+  return out;
+}
+
+/// Derivative of the cost 1/2 sum_r rho(|e_r|^2) with respect to theta(k) * typical(k) for
+/// k in `cols` (at most kJetStride), at theta.
+Eigen::VectorXd cost_gradient(const Setup& s,
+                              const Eigen::VectorXd& theta,
+                              const std::vector<int>& cols,
+                              const IdentifyOptions& opt,
+                              const Eigen::VectorXd& loss_scale) {
+  const int nc = static_cast<int>(cols.size());
+  std::vector<double> scale(nc);
+  for (int i = 0; i < nc; ++i) scale[i] = s.typical(cols[i]);
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(nc);
+  Eigen::Matrix<double, 3, Eigen::Dynamic> blk(3, nc);
+  Eigen::Vector3d d;
+  for (int r = 0; r < static_cast<int>(s.data->rows.size()); ++r) {
+    displacement_and_jacobian(s, r, theta.data(), cols, scale.data(), d, blk.data());
+    const double w = s.row_weight(r);
+    const Eigen::Vector3d e = (s.data->rows[r].displacement - d) * w;
+    double rho[3] = {0, 1, 0};
+    std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
+    if (loss) loss->Evaluate(e.squaredNorm(), rho);
+    g -= rho[1] * w * (blk.transpose() * e);
+  }
+  return g;
+}
+
+/// Minimise over the free parameters within their bounds; theta (full) is updated in place.
+/// Parameters that settle on a bound are held there and the rest solved again; at the end a
+/// held parameter whose cost derivative points into the feasible range is released (KKT), and
+/// after a few rounds the plain bounded solve over every free parameter is the fallback.
+SolveOutcome solve(const Setup& s,
+                   const std::vector<int>& free,
+                   Eigen::VectorXd& theta,
+                   const IdentifyOptions& opt,
+                   const Eigen::VectorXd& loss_scale,
+                   const Visible* visible) {
+  constexpr int kRounds = 4;
+  SolveOutcome out;
+  std::vector<int> pinned;
+  for (int round = 0;; ++round) {
+    const bool last = round == kRounds;
+    if (last) pinned.clear();
+    std::vector<int> active;
+    for (int k : free)
+      if (std::find(pinned.begin(), pinned.end(), k) == pinned.end()) active.push_back(k);
+    std::vector<int> fresh;
+    const SolveOutcome o =
+        solve_once(s, active, theta, opt, loss_scale, last ? nullptr : &fresh, visible);
+    out.iterations += o.iterations;
+    out.converged = o.converged;
+    out.message = o.message;
+    if (o.restart) {
+      out.restart = true;
+      break;
+    }
+    if (!fresh.empty()) {
+      pinned.insert(pinned.end(), fresh.begin(), fresh.end());
+      continue;
+    }
+    if (pinned.empty() || last) break;
+    std::vector<int> release;
+    for (size_t first = 0; first < pinned.size(); first += kJetStride) {
+      const std::vector<int> cols(pinned.begin() + first,
+                                  pinned.begin() + std::min(pinned.size(), first + kJetStride));
+      const Eigen::VectorXd g = cost_gradient(s, theta, cols, opt, loss_scale);
+      for (size_t i = 0; i < cols.size(); ++i) {
+        // Into the range is up from a lower bound, down from an upper one.
+        const bool at_lower = theta(cols[i]) <= s.model->spec(cols[i]).lower;
+        if ((at_lower ? -g(i) : g(i)) > 1e-9 * (1.0 + g.cwiseAbs().maxCoeff()))
+          release.push_back(cols[i]);
+      }
+    }
+    if (release.empty()) break;
+    for (int k : release) pinned.erase(std::find(pinned.begin(), pinned.end(), k));
+  }
   return out;
 }
 
@@ -371,7 +783,7 @@ FitResult identify(const RobotModel& robot,
     throw InvalidArgument("identify: outlier_weight must be in (0, 1]");
   if (!(opt.rank_tolerance > 0 && opt.rank_tolerance < 0.1))
     throw InvalidArgument("identify: rank_tolerance must be in (0, 0.1)");
-  validate_dataset(data, robot.dof(), true);
+  detail::validate_identification_data(data, robot.dof());
   const DeflectionModel model(robot, effects, &data);  // unknown effects, missing masses
   const int n = static_cast<int>(data.rows.size());
   const int p = model.parameter_count();
@@ -401,6 +813,7 @@ FitResult identify(const RobotModel& robot,
     const double t = std::abs(model.spec(k).typical);
     s.typical(k) = t > 0 && std::isfinite(t) ? t : 1.0;
   }
+  s.eval.init(&s, n, p, model.linear());
 
   // ---- start: linear least squares for the joint compliances, spec start for the rest.
   Eigen::VectorXd theta = model.start_parameters();
@@ -410,9 +823,15 @@ FitResult identify(const RobotModel& robot,
       LinearOptions lo;
       lo.use_sigma = opt.use_sigma;
       const FitResult lin = identify_joint_linear(robot, data, lo);
-      for (int j = 0; j < robot.dof(); ++j)
+      for (int j = 0; j < robot.dof(); ++j) {
+        const int k = model.offset(je) + j;
         if (lin.parameters[j].identified && lin.parameters[j].value > 0)
-          theta(model.offset(je) + j) = lin.parameters[j].value;
+          theta(k) = lin.parameters[j].value;
+        else if (!lin.parameters[j].identified)
+          // Where the check below will most likely hold it: its Jacobian is then the solver's
+          // first (a joint that other effects make visible is freed from there as usual).
+          theta(k) = model.spec(k).null_value;
+      }
     } catch (const NumericalError&) {
       f.warnings.push_back(
           "the linear start of the joint compliances failed; started from the "
@@ -426,9 +845,11 @@ FitResult identify(const RobotModel& robot,
   const double stated = stated_noise_m(data);
   s.row_weight.resize(n);
   Eigen::VectorXd raw(3 * n);
-  for (int r = 0; r < n; ++r)
-    raw.segment<3>(3 * r) =
-        data.rows[r].displacement - model.predict(theta, data.rows[r], s.ctx[r]).head<3>();
+  for (int r = 0; r < n; ++r) {
+    const double* d = nullptr;
+    s.eval.get(r, theta.data(), nullptr, &d, nullptr, nullptr);
+    raw.segment<3>(3 * r) = data.rows[r].displacement - Eigen::Map<const Eigen::Vector3d>(d);
+  }
   double robust_sigma = 0;
   {
     std::vector<double> a(raw.data(), raw.data() + raw.size());
@@ -453,6 +874,9 @@ FitResult identify(const RobotModel& robot,
   Eigen::MatrixXd last_jacobian;
   Eigen::VectorXd last_jacobian_theta;
   auto fit_passes = [&]() {
+    // theta as the solver will see it, (theta / typical) * typical, so that the Jacobian of
+    // this check is the one of the solver's first iteration (Evaluations cache).
+    for (int k = 0; k < p; ++k) theta(k) = theta(k) / s.typical(k) * s.typical(k);
     idf = check_identifiability(model, weighted_jacobian(s, theta), s.typical, opt.rank_tolerance);
     for (int pass = 0;; ++pass) {
       free.clear();
@@ -471,7 +895,20 @@ FitResult identify(const RobotModel& robot,
                               std::to_string(3 * n) + " equations for " +
                               std::to_string(free.size()) + " parameters; at least " +
                               std::to_string(free.size() / 3 + 1) + " measurements are needed");
-      last = solve(s, free, theta, opt, loss_scale);
+      // Watch for a held parameter becoming identifiable while solving (not in the last pass,
+      // which must converge); cheap when the cached Jacobians hold every column.
+      const Visible visible = [&](const Eigen::VectorXd& t) {
+        if (model.linear() || (p + kJetStride - 1) / kJetStride >
+                                  (static_cast<int>(free.size()) + kJetStride - 1) / kJetStride)
+          return false;  // a constant Jacobian, or columns the cache does not hold
+        if (!held_has_effect(s, t, idf.fixed)) return false;
+        const Identifiability a =
+            check_identifiability(model, weighted_jacobian(s, t), s.typical, opt.rank_tolerance);
+        for (int k = 0; k < p; ++k)
+          if (idf.fixed[k] && !a.fixed[k]) return true;
+        return false;
+      };
+      last = solve(s, free, theta, opt, loss_scale, pass < 2 ? &visible : nullptr);
       iterations += last.iterations;
       last_jacobian = weighted_jacobian(s, theta);
       last_jacobian_theta = theta;
@@ -537,22 +974,39 @@ FitResult identify(const RobotModel& robot,
   for (int i = 0; i < nf; ++i)
     if (!(norms(i) > 0)) norms(i) = 1.0;
   const Eigen::MatrixXd js = jf * norms.cwiseInverse().asDiagonal();
-  // Singular values and V of the tall js from its QR: js = Q R, R = U S V^T.
-  Eigen::MatrixXd rs = Eigen::MatrixXd::Zero(nf, nf);
-  if (js.rows() >= nf) {
-    Eigen::HouseholderQR<Eigen::MatrixXd> qr(js);
-    rs = qr.matrixQR().topRows(nf).triangularView<Eigen::Upper>();
-  } else {
-    rs = js;
+  // Singular values and V of the tall js: from the eigen-decomposition of js^T js when it is
+  // well conditioned (cond(js) < 1e5, far from the rank threshold below and within the
+  // normal equations' accuracy), else from its QR: js = Q R, R = U S V^T.
+  Eigen::VectorXd sv;
+  Eigen::MatrixXd v;
+  {
+    Eigen::MatrixXd gs = Eigen::MatrixXd::Zero(nf, nf);
+    gs.selfadjointView<Eigen::Lower>().rankUpdate(js.transpose());
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(gs, Eigen::ComputeEigenvectors);
+    const Eigen::VectorXd lam = es.eigenvalues();  // ascending
+    if (nf > 0 && js.rows() >= nf && lam(0) > 1e-10 * lam(nf - 1)) {
+      sv = lam.reverse().cwiseSqrt();
+      v = es.eigenvectors().rowwise().reverse();
+    }
   }
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(rs, Eigen::ComputeThinV);
-  const Eigen::VectorXd sv = svd.singularValues();
+  if (sv.size() == 0) {
+    Eigen::MatrixXd rs = Eigen::MatrixXd::Zero(nf, nf);
+    if (js.rows() >= nf) {
+      Eigen::HouseholderQR<Eigen::MatrixXd> qr(js);
+      rs = qr.matrixQR().topRows(nf).triangularView<Eigen::Upper>();
+    } else {
+      rs = js;
+    }
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(rs, Eigen::ComputeThinV);
+    sv = svd.singularValues();
+    v = svd.matrixV();
+  }
   int rank = 0;
   for (int i = 0; i < sv.size(); ++i)
     if (sv(i) > 1e-12 * sv(0)) ++rank;
   Eigen::VectorXd inv_sv2 = Eigen::VectorXd::Zero(sv.size());
   for (int i = 0; i < rank; ++i) inv_sv2(i) = 1.0 / (sv(i) * sv(i));
-  const Eigen::MatrixXd cov_s = svd.matrixV() * inv_sv2.asDiagonal() * svd.matrixV().transpose();
+  const Eigen::MatrixXd cov_s = v * inv_sv2.asDiagonal() * v.transpose();
 
   f.robot_name = robot.name;
   f.robot_path = robot.source_path;

@@ -1,8 +1,10 @@
 // Linear least-squares identification of joint compliances, method.md eqs. 4-5.
 //
 // Performance notes (issue 4): the observation matrix A (3N x n) is built in one pass with a
-// forward kinematics specialised once per robot (no 4x4 products, no allocations per row),
-// and the normal matrix A^T W^2 A and A^T W^2 x are accumulated on the way. The rank decision,
+// forward kinematics specialised once per robot (fast_chain.hpp: no 4x4 products, no
+// allocations per row; for modified-DH chains eight measurements at a time in vectorised loops
+// with a branch-free polynomial sincos), and the normal matrix A^T W^2 A and A^T W^2 x are
+// accumulated on the way. The rank decision,
 // the solution, the conditioning and the covariance then come from the small n x n problem:
 // a pivoted Cholesky of the column-scaled normal matrix takes the same pivots as the
 // column-pivoted QR of the scaled A (its pivots are the squared QR diagonal), and when every
@@ -17,10 +19,10 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
-#include <functional>
-#include <string_view>
+#include <cstdint>
 #include <vector>
 
+#include "fast_chain.hpp"
 #include "stiff/error.hpp"
 #include "stiff/identify.hpp"
 
@@ -33,11 +35,15 @@ namespace detail {
 void validate_identification_data(const Dataset& data, int dof) {
   if (data.rows.empty() || !data.has_displacement) validate_dataset(data, dof, true);
   const size_t n = data.rows.size();
-  // Duplicate ids: open addressing on the ids' hashes (no allocation per row).
+  // Duplicate ids: open addressing on the ids' hashes (FNV-1a, inline: ids are short), the
+  // full hash kept beside the row so that only equal hashes compare the strings.
   size_t cap = 16;
   while (cap < 2 * n) cap *= 2;
-  std::vector<int> table(cap, -1);
-  const std::hash<std::string_view> hash;
+  struct Slot {
+    std::uint64_t hash;
+    int row;
+  };
+  std::vector<Slot> table(cap, Slot{0, -1});
   bool bad = false;
   for (size_t r = 0; r < n && !bad; ++r) {
     const auto& m = data.rows[r];
@@ -48,12 +54,14 @@ void validate_identification_data(const Dataset& data, int dof) {
       break;
     }
     if (m.id.empty()) continue;
-    for (size_t h = hash(m.id) & (cap - 1);; h = (h + 1) & (cap - 1)) {
-      if (table[h] < 0) {
-        table[h] = static_cast<int>(r);
+    std::uint64_t hv = 1469598103934665603ull;
+    for (const char ch : m.id) hv = (hv ^ static_cast<unsigned char>(ch)) * 1099511628211ull;
+    for (size_t h = (hv ^ (hv >> 29)) & (cap - 1);; h = (h + 1) & (cap - 1)) {
+      if (table[h].row < 0) {
+        table[h] = Slot{hv, static_cast<int>(r)};
         break;
       }
-      if (data.rows[table[h]].id == m.id) {
+      if (table[h].hash == hv && data.rows[table[h].row].id == m.id) {
         bad = true;
         break;
       }
@@ -61,131 +69,6 @@ void validate_identification_data(const Dataset& data, int dof) {
   }
   if (bad) validate_dataset(data, dof, true);  // throws the exact message
 }
-
-/// Forward kinematics of a RobotModel specialised once: the joints' constant transforms as
-/// rotation + translation with identity / zero parts skipped and unit joint axes applied as
-/// plane rotations. Gives the joint axes, the points on them and the flange pose, equal to
-/// RobotModel::chain up to round-off.
-class FastChain {
- public:
-  explicit FastChain(const RobotModel& robot) {
-    for (const auto& j : robot.joints) {
-      Step s;
-      s.pre = rigid(j.pre);
-      s.post = rigid(j.post);
-      s.axis = j.axis;
-      s.unit = -1;
-      for (int k = 0; k < 3; ++k) {
-        Eigen::Vector3d e = Eigen::Vector3d::Zero();
-        e(k) = 1.0;
-        if (j.axis == e) s.unit = k, s.sign = 1.0;
-        if (j.axis == -e) s.unit = k, s.sign = -1.0;
-      }
-      // A modified-DH joint (Craig: RotX(alpha) TransX(a) TransZ(d) RotZ(offset + q)) is applied
-      // as two plane rotations and one translation; cos/sin of alpha snapped to 0 / +-1 when
-      // they are round-off of a multiple of 90 degrees.
-      const Joint dh = modified_dh_joint(j.dh[0], j.dh[1], j.dh[2], j.dh[3]);
-      if (j.axis == Eigen::Vector3d::UnitZ() && s.post.r_identity && s.post.p_zero &&
-          dh.pre == j.pre) {
-        s.dh = true;
-        s.ca = std::cos(j.dh[0]);
-        s.sa = std::sin(j.dh[0]);
-        if (std::abs(s.ca) < 1e-15) s.ca = 0.0, s.sa = s.sa > 0 ? 1.0 : -1.0;
-        if (std::abs(s.sa) < 1e-15) s.sa = 0.0, s.ca = s.ca > 0 ? 1.0 : -1.0;
-        s.a = j.dh[1];
-        s.d = j.dh[2];
-        s.offset = j.dh[3];
-      }
-      steps_.push_back(s);
-    }
-  }
-
-  /// z (3 x n) axes, o (3 x n) points on them, flange rotation and position.
-  void operator()(const Eigen::VectorXd& q,
-                  Eigen::Matrix3Xd& z,
-                  Eigen::Matrix3Xd& o,
-                  Eigen::Matrix3d& r,
-                  Eigen::Vector3d& p) const {
-    r.setIdentity();
-    p.setZero();
-    for (size_t i = 0; i < steps_.size(); ++i) {
-      const Step& s = steps_[i];
-      if (s.dh) {
-        // r <- r RotX(alpha)
-        if (s.sa != 0.0 || s.ca != 1.0) {
-          const Eigen::Vector3d c1 = r.col(1), c2 = r.col(2);
-          if (s.ca == 0.0) {
-            r.col(1) = c2 * s.sa;
-            r.col(2) = c1 * -s.sa;
-          } else {
-            r.col(1) = c1 * s.ca + c2 * s.sa;
-            r.col(2) = c2 * s.ca - c1 * s.sa;
-          }
-        }
-        if (s.a != 0.0) p += r.col(0) * s.a;
-        if (s.d != 0.0) p += r.col(2) * s.d;
-        o.col(i) = p;
-        z.col(i) = r.col(2);
-        rotate(r, 2, s.offset == 0.0 ? q(i) : q(i) + s.offset, 1.0);
-        continue;
-      }
-      apply(s.pre, r, p);
-      o.col(i) = p;
-      if (s.unit >= 0) {
-        z.col(i) = s.sign * r.col(s.unit);
-        rotate(r, s.unit, q(i), s.sign);
-      } else {
-        z.col(i) = r * s.axis;
-        const Eigen::Matrix3d rot = Eigen::AngleAxisd(q(i), s.axis).toRotationMatrix();
-        r = (r * rot).eval();
-      }
-      apply(s.post, r, p);
-    }
-  }
-
- private:
-  struct Rigid {
-    Eigen::Matrix3d r;
-    Eigen::Vector3d p;
-    bool r_identity;
-    bool p_zero;
-  };
-  struct Step {
-    Rigid pre, post;
-    Eigen::Vector3d axis;
-    int unit;  ///< axis = sign * e_unit, or -1 for a general axis
-    double sign = 1.0;
-    bool dh = false;  ///< modified DH joint: the fields below
-    double ca = 1, sa = 0, a = 0, d = 0, offset = 0;
-  };
-  /// r <- r Rot(sign e_unit, angle)
-  static void rotate(Eigen::Matrix3d& r, int unit, double angle, double sign) {
-    const double c = std::cos(angle), sn = sign * std::sin(angle);
-    const int a = (unit + 1) % 3, b = (unit + 2) % 3;
-    const Eigen::Vector3d ca = r.col(a), cb = r.col(b);
-    r.col(a) = ca * c + cb * sn;
-    r.col(b) = cb * c - ca * sn;
-  }
-  static Rigid rigid(const Eigen::Matrix4d& t) {
-    Rigid g;
-    g.r = t.block<3, 3>(0, 0);
-    g.p = t.block<3, 1>(0, 3);
-    g.r_identity = g.r == Eigen::Matrix3d::Identity();
-    g.p_zero = g.p.isZero(0.0);
-    return g;
-  }
-  /// (r, p) <- (r, p) * g
-  static void apply(const Rigid& g, Eigen::Matrix3d& r, Eigen::Vector3d& p) {
-    if (!g.p_zero) {
-      Eigen::Vector3d dp = Eigen::Vector3d::Zero();
-      for (int k = 0; k < 3; ++k)
-        if (g.p(k) != 0.0) dp += r.col(k) * g.p(k);
-      p += dp;
-    }
-    if (!g.r_identity) r = (r * g.r).eval();
-  }
-  std::vector<Step> steps_;
-};
 
 }  // namespace detail
 
@@ -201,6 +84,124 @@ struct Observations {
   Eigen::VectorXd b;
 };
 
+// Compiled twice, AVX2 chosen at load time where the processor has it (the lanes' arithmetic
+// is the same, in the same order, so are the results).
+// (Not under ThreadSanitizer: the ifunc resolver runs before its runtime is initialised.)
+#if defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define STIFF_NO_IFUNC 1
+#endif
+#endif
+#if defined(__SANITIZE_THREAD__)
+#define STIFF_NO_IFUNC 1
+#endif
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(STIFF_NO_IFUNC)
+#define STIFF_AVX2_CLONE __attribute__((target_clones("avx2", "default")))
+#else
+#define STIFF_AVX2_CLONE
+#endif
+
+/// observe() for an all-DH chain: FastChain::kLanes measurements at a time, one per lane of
+/// structure-of-arrays loops that the compiler vectorises; the normal equations are summed per
+/// lane and the lanes added at the end.
+STIFF_AVX2_CLONE bool observe_batched(const RobotModel& robot,
+                                      const Dataset& data,
+                                      bool weighted,
+                                      const detail::FastChain& fk,
+                                      Observations& ob) {
+  constexpr int L = detail::FastChain::kLanes;
+  constexpr int kMaxJ = 12;
+  const int n = robot.dof();
+  if (!fk.all_dh() || n > kMaxJ) return false;
+  const int N = static_cast<int>(data.rows.size());
+  double c[kMaxJ][L], sn[kMaxJ][L], z[kMaxJ][3][L], o[kMaxJ][3][L], rf[3][3][L], pf[3][L];
+  double col[kMaxJ][3][L], pm[3][L], pl[3][L], f[3][L], mo[3][L], x[3][L], w2[L];
+  double gacc[kMaxJ][kMaxJ][L] = {}, bacc[kMaxJ][L] = {};
+  const Eigen::Vector3d rp = robot.measured_point, rl = robot.load_point;
+  const bool same_point = rp == rl;
+  double* a = ob.a.data();
+  const size_t rows = 3 * static_cast<size_t>(N);
+  double angle[kMaxJ][L];
+  for (int r0 = 0; r0 < N; r0 += L) {
+    const int nb = std::min(L, N - r0);
+    bool small = true;
+    for (int l = 0; l < L; ++l) {
+      const Measurement* m = l < nb ? &data.rows[r0 + l] : nullptr;
+      for (int j = 0; j < n; ++j) {
+        const double off = fk.offset(j);
+        const double q = m ? m->q(j) : 0.0;
+        angle[j][l] = off == 0.0 ? q : q + off;
+        small = small && std::abs(angle[j][l]) < 1e5;
+      }
+      for (int k = 0; k < 3; ++k) {
+        f[k][l] = m ? m->force(k) : 0.0;
+        mo[k][l] = m ? m->moment(k) : 0.0;
+        x[k][l] = m ? m->displacement(k) : 0.0;
+      }
+      const double w = m && weighted ? 1.0 / m->sigma_d : 1.0;
+      w2[l] = m ? w * w : 0.0;
+      if (m) ob.w(r0 + l) = w;
+    }
+    for (int j = 0; j < n; ++j) {
+      if (small)
+        detail::sincos_lanes(angle[j], sn[j], c[j], L);
+      else
+        for (int l = 0; l < L; ++l) detail::sincos_fast(angle[j][l], &sn[j][l], &c[j][l]);
+    }
+    fk.batch(c, sn, z, o, rf, pf);
+    for (int k = 0; k < 3; ++k)
+      for (int l = 0; l < L; ++l) {
+        pm[k][l] = rf[k][0][l] * rp(0) + rf[k][1][l] * rp(1) + rf[k][2][l] * rp(2) + pf[k][l];
+        pl[k][l] = rf[k][0][l] * rl(0) + rf[k][1][l] * rl(1) + rf[k][2][l] * rl(2) + pf[k][l];
+      }
+    for (int j = 0; j < n; ++j) {
+      const double(*zj)[L] = z[j];
+      const double(*oj)[L] = o[j];
+      for (int l = 0; l < L; ++l) {
+        // lever arm at L: z x (L - o), torque tau = lever . F + z . M
+        const double lx = pl[0][l] - oj[0][l], ly = pl[1][l] - oj[1][l], lz = pl[2][l] - oj[2][l];
+        const double wl0 = zj[1][l] * lz - zj[2][l] * ly, wl1 = zj[2][l] * lx - zj[0][l] * lz,
+                     wl2 = zj[0][l] * ly - zj[1][l] * lx;
+        const double tau = wl0 * f[0][l] + wl1 * f[1][l] + wl2 * f[2][l] +
+                           (zj[0][l] * mo[0][l] + zj[1][l] * mo[1][l] + zj[2][l] * mo[2][l]);
+        if (same_point) {
+          col[j][0][l] = wl0 * tau, col[j][1][l] = wl1 * tau, col[j][2][l] = wl2 * tau;
+        } else {
+          const double px = pm[0][l] - oj[0][l], py = pm[1][l] - oj[1][l], pz = pm[2][l] - oj[2][l];
+          col[j][0][l] = (zj[1][l] * pz - zj[2][l] * py) * tau;
+          col[j][1][l] = (zj[2][l] * px - zj[0][l] * pz) * tau;
+          col[j][2][l] = (zj[0][l] * py - zj[1][l] * px) * tau;
+        }
+      }
+    }
+    for (int j = 0; j < n; ++j)
+      for (int l = 0; l < L; ++l) {
+        const double c0 = col[j][0][l] * w2[l], c1 = col[j][1][l] * w2[l],
+                     c2 = col[j][2][l] * w2[l];
+        for (int k = 0; k <= j; ++k)
+          gacc[j][k][l] += c0 * col[k][0][l] + c1 * col[k][1][l] + c2 * col[k][2][l];
+        bacc[j][l] += c0 * x[0][l] + c1 * x[1][l] + c2 * x[2][l];
+      }
+    for (int l = 0; l < nb; ++l) {
+      const size_t row = 3 * static_cast<size_t>(r0 + l);
+      for (int j = 0; j < n; ++j)
+        for (int k = 0; k < 3; ++k) a[j * rows + row + k] = col[j][k][l];
+      for (int k = 0; k < 3; ++k) ob.x(row + k) = x[k][l];
+    }
+  }
+  for (int j = 0; j < n; ++j) {
+    for (int k = 0; k <= j; ++k) {
+      double sum = 0.0;
+      for (int l = 0; l < L; ++l) sum += gacc[j][k][l];
+      ob.g(j, k) = ob.g(k, j) = sum;
+    }
+    double sum = 0.0;
+    for (int l = 0; l < L; ++l) sum += bacc[j][l];
+    ob.b(j) = sum;
+  }
+  return true;
+}
+
 Observations observe(const RobotModel& robot, const Dataset& data, bool weighted) {
   const int n = robot.dof();
   const int N = static_cast<int>(data.rows.size());
@@ -211,6 +212,7 @@ Observations observe(const RobotModel& robot, const Dataset& data, bool weighted
   ob.g = Eigen::MatrixXd::Zero(n, n);
   ob.b = Eigen::VectorXd::Zero(n);
   const detail::FastChain fk(robot);
+  if (observe_batched(robot, data, weighted, fk, ob)) return ob;
   Eigen::Matrix3Xd z(3, n), o(3, n), blk(3, n);
   Eigen::Matrix3d rf;
   Eigen::Vector3d pf;

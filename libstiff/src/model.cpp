@@ -1,7 +1,10 @@
 #include "stiff/model.hpp"
 
+#include <cstdint>
+#include <cstring>
 #include <set>
 
+#include "fast_chain.hpp"
 #include "stiff/error.hpp"
 
 namespace stiff {
@@ -49,6 +52,8 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
     if (!seen.insert(name).second)
       throw InvalidArgument("model: effect '" + name + "' given twice");
     auto e = make_effect(name, setup);
+    jet_jacobians_ = jet_jacobians_ || e->reads_jacobians();
+    linear_ = linear_ && e->linear();
     offsets_.push_back(count_);
     count_ += e->size();
     effects_.push_back(std::move(e));
@@ -113,11 +118,29 @@ MeasurementContext DeflectionModel::context(const Measurement& m, int row) const
 }
 
 std::vector<MeasurementContext> DeflectionModel::contexts(const Dataset& data) const {
-  std::vector<MeasurementContext> out;
-  out.reserve(data.rows.size());
+  // context() of every row, the kinematics by a chain specialised once (equal to
+  // RobotModel::chain up to round-off).
+  const int n = robot_.dof();
+  const detail::FastChain fk(robot_);
+  std::vector<Eigen::Matrix4d> links(n);
+  Eigen::Matrix3d rf;
+  Eigen::Vector3d pf;
+  std::vector<MeasurementContext> out(data.rows.size());
   for (size_t r = 0; r < data.rows.size(); ++r) {
-    out.push_back(context(data.rows[r], static_cast<int>(r)));
-    if (!data.has_time) out.back().time = static_cast<double>(r);
+    const Measurement& m = data.rows[r];
+    if (m.q.size() != n || !m.q.allFinite())
+      check_joint_vector(robot_, m.q, "measurement '" + m.id + "'");  // throws
+    MeasurementContext& c = out[r];
+    c.chain.axis.resize(3, n);
+    c.chain.origin.resize(3, n);
+    fk(m.q, c.chain.axis, c.chain.origin, rf, pf, links.data());
+    c.chain.link = links;
+    c.chain.flange.setIdentity();
+    c.chain.flange.topLeftCorner<3, 3>() = rf;
+    c.chain.flange.topRightCorner<3, 1>() = pf;
+    c.tau_gravity = gravity_torques(robot_, c.chain);
+    c.session = session_index(m.session);
+    c.time = data.has_time && m.time != 0.0 ? m.time : static_cast<double>(r);
   }
   return out;
 }
@@ -128,8 +151,79 @@ void DeflectionModel::evaluate(const T* theta,
                                const MeasurementContext& c,
                                Vector3<T>* d,
                                Vector3<T>* rot) const {
-  const int n = robot_.dof();
   EvalState<T> s;
+  evaluate_into(theta, m, c, s);
+  *d = s.d;
+  if (rot) *rot = s.rot;
+}
+
+void DeflectionModel::evaluate_double(const double* theta,
+                                      const Measurement& m,
+                                      const MeasurementContext& c,
+                                      EvalState<double>& s,
+                                      Vector3<double>* d) const {
+  constexpr int kMax = 32;
+  const int n = robot_.dof();
+  if (n > kMax || jet_jacobians_) {
+    evaluate_into(theta, m, c, s);
+    *d = s.d;
+    return;
+  }
+  // evaluate_into without the 6 x n Jacobians that no effect of this model reads.
+  s.robot = &robot_;
+  s.measurement = &m;
+  s.context = &c;
+  s.force = m.force;
+  s.moment = m.moment;
+  s.r_meas = robot_.measured_point;
+  s.r_load = robot_.load_point;
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->wrench(theta + offsets_[e], s);
+  const Eigen::Matrix4d& fl = c.chain.flange;
+  for (int k = 0; k < 3; ++k) {
+    s.p_meas(k) =
+        fl(k, 0) * s.r_meas(0) + fl(k, 1) * s.r_meas(1) + fl(k, 2) * s.r_meas(2) + fl(k, 3);
+    s.p_load(k) =
+        fl(k, 0) * s.r_load(0) + fl(k, 1) * s.r_load(1) + fl(k, 2) * s.r_load(2) + fl(k, 3);
+  }
+  s.jac_meas.resize(6, 0);
+  s.jac_load.resize(6, 0);
+  s.tau.resize(n);
+  double jm[kMax][3];
+  for (int j = 0; j < n; ++j) {
+    const double* z = c.chain.axis.data() + 3 * j;
+    const double* o = c.chain.origin.data() + 3 * j;
+    const double am[3] = {s.p_meas(0) - o[0], s.p_meas(1) - o[1], s.p_meas(2) - o[2]};
+    const double al[3] = {s.p_load(0) - o[0], s.p_load(1) - o[1], s.p_load(2) - o[2]};
+    jm[j][0] = z[1] * am[2] - z[2] * am[1];
+    jm[j][1] = z[2] * am[0] - z[0] * am[2];
+    jm[j][2] = z[0] * am[1] - z[1] * am[0];
+    const double wl[3] = {z[1] * al[2] - z[2] * al[1], z[2] * al[0] - z[0] * al[2],
+                          z[0] * al[1] - z[1] * al[0]};
+    s.tau(j) = (wl[0] * s.force(0) + wl[1] * s.force(1) + wl[2] * s.force(2)) +
+               (z[0] * s.moment(0) + z[1] * s.moment(1) + z[2] * s.moment(2));
+  }
+  s.dtheta.setZero(n);
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->joint(theta + offsets_[e], s);
+  s.d.setZero();
+  s.rot.setZero();
+  for (int j = 0; j < n; ++j) {
+    const double* z = c.chain.axis.data() + 3 * j;
+    for (int k = 0; k < 3; ++k) {
+      s.d(k) += jm[j][k] * s.dtheta(j);
+      s.rot(k) += z[k] * s.dtheta(j);
+    }
+  }
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->cartesian(theta + offsets_[e], s);
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
+  *d = s.d;
+}
+
+template <typename T>
+void DeflectionModel::evaluate_into(const T* theta,
+                                    const Measurement& m,
+                                    const MeasurementContext& c,
+                                    EvalState<T>& s) const {
+  const int n = robot_.dof();
   s.robot = &robot_;
   s.measurement = &m;
   s.context = &c;
@@ -162,8 +256,6 @@ void DeflectionModel::evaluate(const T* theta,
   s.rot = s.jac_meas.template bottomRows<3>() * s.dtheta;
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->cartesian(theta + offsets_[e], s);
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
-  *d = s.d;
-  if (rot) *rot = s.rot;
 }
 
 template void DeflectionModel::evaluate<double>(const double*,
@@ -179,8 +271,9 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
                                    const MeasurementContext& c,
                                    EvalState<Jet>& s,
                                    Vector3<Jet>* d) const {
-  using Block = Eigen::Matrix<double, 3, kJetStride>;
+  constexpr int S = kJetStride;
   constexpr int kMax = 32;  // joints held in fixed-capacity buffers (no allocation)
+  using Vec = Eigen::Matrix<double, S, 1>;
   const int n = robot_.dof();
   if (n > kMax) {
     evaluate<Jet>(theta, m, c, d, nullptr);
@@ -197,94 +290,120 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
   }
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->wrench(theta + offsets_[e], s);
 
-  // Stage 1 geometry in double; derivative parts as 3 x kJetStride blocks.
-  Eigen::Vector3d rm, rl, f, mo;
-  Block rmv, rlv, fv, mv;
+  // Stage 1 geometry in double, derivative parts as [3][S] arrays (plain loops over S that
+  // vectorise); the derivative work only when the wrench stage moved the points or the wrench.
+  double rm[3], rl[3], f[3], mo[3];
+  double rmv[3][S], rlv[3][S], fv[3][S], mv[3][S];
+  std::uint64_t points_nz = 0, wrench_nz = 0;  // OR of the bits without the sign: 0 iff all zero
   for (int k = 0; k < 3; ++k) {
-    rm(k) = s.r_meas(k).a;
-    rl(k) = s.r_load(k).a;
-    f(k) = s.force(k).a;
-    mo(k) = s.moment(k).a;
-    rmv.row(k) = s.r_meas(k).v.transpose();
-    rlv.row(k) = s.r_load(k).v.transpose();
-    fv.row(k) = s.force(k).v.transpose();
-    mv.row(k) = s.moment(k).v.transpose();
+    rm[k] = s.r_meas(k).a;
+    rl[k] = s.r_load(k).a;
+    f[k] = s.force(k).a;
+    mo[k] = s.moment(k).a;
+    std::memcpy(rmv[k], s.r_meas(k).v.data(), sizeof rmv[k]);
+    std::memcpy(rlv[k], s.r_load(k).v.data(), sizeof rlv[k]);
+    std::memcpy(fv[k], s.force(k).v.data(), sizeof fv[k]);
+    std::memcpy(mv[k], s.moment(k).v.data(), sizeof mv[k]);
   }
-  const bool moved = !rmv.isZero(0.0) || !rlv.isZero(0.0);
-  const bool wrench_moved = !fv.isZero(0.0) || !mv.isZero(0.0);
-  const Eigen::Matrix3d rf = c.chain.flange.block<3, 3>(0, 0);
-  const Eigen::Vector3d pf = c.chain.flange.block<3, 1>(0, 3);
-  const Eigen::Vector3d pm = rf * rm + pf, pl = rf * rl + pf;
-  Block pmv, plv;
-  if (moved) {
-    pmv.noalias() = rf * rmv;
-    plv.noalias() = rf * rlv;
+  {
+    std::uint64_t b[4][3 * S];
+    std::memcpy(b[0], rmv, sizeof b[0]);
+    std::memcpy(b[1], rlv, sizeof b[1]);
+    std::memcpy(b[2], fv, sizeof b[2]);
+    std::memcpy(b[3], mv, sizeof b[3]);
+    for (int i = 0; i < 3 * S; ++i) {
+      points_nz |= (b[0][i] | b[1][i]) << 1;
+      wrench_nz |= (b[2][i] | b[3][i]) << 1;
+    }
+  }
+  const bool moved = points_nz != 0, wrench_moved = wrench_nz != 0;
+  const Eigen::Matrix4d& fl = c.chain.flange;
+  double pm[3], pl[3], pmv[3][S], plv[3][S];
+  for (int k = 0; k < 3; ++k) {
+    pm[k] = fl(k, 0) * rm[0] + fl(k, 1) * rm[1] + fl(k, 2) * rm[2] + fl(k, 3);
+    pl[k] = fl(k, 0) * rl[0] + fl(k, 1) * rl[1] + fl(k, 2) * rl[2] + fl(k, 3);
+    for (int i = 0; i < S; ++i) {
+      pmv[k][i] = moved ? fl(k, 0) * rmv[0][i] + fl(k, 1) * rmv[1][i] + fl(k, 2) * rmv[2][i] : 0.0;
+      plv[k][i] = moved ? fl(k, 0) * rlv[0][i] + fl(k, 1) * rlv[1][i] + fl(k, 2) * rlv[2][i] : 0.0;
+    }
+    s.p_meas(k) = Jet(pm[k], Eigen::Map<const Vec>(pmv[k]));
+    s.p_load(k) = Jet(pl[k], Eigen::Map<const Vec>(plv[k]));
+  }
+  // The Jacobians at P and L as Jets only for effects that read them (complementary).
+  if (jet_jacobians_) {
+    s.jac_meas.resize(6, n);
+    s.jac_load.resize(6, n);
   } else {
-    pmv.setZero();
-    plv.setZero();
+    s.jac_meas.resize(6, 0);
+    s.jac_load.resize(6, 0);
   }
-  for (int k = 0; k < 3; ++k) {
-    s.p_meas(k) = Jet(pm(k), pmv.row(k).transpose());
-    s.p_load(k) = Jet(pl(k), plv.row(k).transpose());
-  }
-  s.jac_meas.resize(6, n);
-  s.jac_load.resize(6, n);
   s.tau.resize(n);
-  auto cross_block = [](const Eigen::Vector3d& z, const Block& v) {
-    Block out;
-    out.row(0) = z(1) * v.row(2) - z(2) * v.row(1);
-    out.row(1) = z(2) * v.row(0) - z(0) * v.row(2);
-    out.row(2) = z(0) * v.row(1) - z(1) * v.row(0);
-    return out;
-  };
-  Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMax> jm(3, n);
+  double jm[kMax][3];      // J_p(P) translational columns
+  double wmv[kMax][3][S];  // their derivative parts when the points moved
   for (int j = 0; j < n; ++j) {
-    const Eigen::Vector3d z = c.chain.axis.col(j);
-    const Eigen::Vector3d o = c.chain.origin.col(j);
-    const Eigen::Vector3d wm = z.cross(pm - o), wl = z.cross(pl - o);
-    jm.col(j) = wm;
-    const double tau = wl.dot(f) + z.dot(mo);
-    Eigen::Matrix<double, kJetStride, 1> tv = Eigen::Matrix<double, kJetStride, 1>::Zero();
+    const double* z = c.chain.axis.data() + 3 * j;
+    const double* o = c.chain.origin.data() + 3 * j;
+    const double am[3] = {pm[0] - o[0], pm[1] - o[1], pm[2] - o[2]};
+    const double al[3] = {pl[0] - o[0], pl[1] - o[1], pl[2] - o[2]};
+    const double wm[3] = {z[1] * am[2] - z[2] * am[1], z[2] * am[0] - z[0] * am[2],
+                          z[0] * am[1] - z[1] * am[0]};
+    const double wl[3] = {z[1] * al[2] - z[2] * al[1], z[2] * al[0] - z[0] * al[2],
+                          z[0] * al[1] - z[1] * al[0]};
+    for (int k = 0; k < 3; ++k) jm[j][k] = wm[k];
+    const double tau =
+        (wl[0] * f[0] + wl[1] * f[1] + wl[2] * f[2]) + (z[0] * mo[0] + z[1] * mo[1] + z[2] * mo[2]);
+    double tv[S], wlv[3][S];
+    for (int i = 0; i < S; ++i) tv[i] = 0.0;
     if (moved) {
-      const Block wmv = cross_block(z, pmv), wlv = cross_block(z, plv);
-      for (int k = 0; k < 3; ++k) {
-        s.jac_meas(k, j) = Jet(wm(k), wmv.row(k).transpose());
-        s.jac_load(k, j) = Jet(wl(k), wlv.row(k).transpose());
-      }
-      tv.noalias() += wlv.transpose() * f;
-    } else {
-      for (int k = 0; k < 3; ++k) {
-        s.jac_meas(k, j) = Jet(wm(k));
-        s.jac_load(k, j) = Jet(wl(k));
+      for (int i = 0; i < S; ++i) {
+        wmv[j][0][i] = z[1] * pmv[2][i] - z[2] * pmv[1][i];
+        wmv[j][1][i] = z[2] * pmv[0][i] - z[0] * pmv[2][i];
+        wmv[j][2][i] = z[0] * pmv[1][i] - z[1] * pmv[0][i];
+        wlv[0][i] = z[1] * plv[2][i] - z[2] * plv[1][i];
+        wlv[1][i] = z[2] * plv[0][i] - z[0] * plv[2][i];
+        wlv[2][i] = z[0] * plv[1][i] - z[1] * plv[0][i];
+        tv[i] += wlv[0][i] * f[0] + wlv[1][i] * f[1] + wlv[2][i] * f[2];
       }
     }
-    if (wrench_moved) tv.noalias() += fv.transpose() * wl + mv.transpose() * z;
-    for (int k = 0; k < 3; ++k) {
-      s.jac_meas(3 + k, j) = Jet(z(k));
-      s.jac_load(3 + k, j) = Jet(z(k));
+    if (wrench_moved)
+      for (int i = 0; i < S; ++i)
+        tv[i] += (fv[0][i] * wl[0] + fv[1][i] * wl[1] + fv[2][i] * wl[2]) +
+                 (mv[0][i] * z[0] + mv[1][i] * z[1] + mv[2][i] * z[2]);
+    if (jet_jacobians_) {
+      for (int k = 0; k < 3; ++k) {
+        s.jac_meas(k, j) = moved ? Jet(wm[k], Eigen::Map<const Vec>(wmv[j][k])) : Jet(wm[k]);
+        s.jac_load(k, j) = moved ? Jet(wl[k], Eigen::Map<const Vec>(wlv[k])) : Jet(wl[k]);
+        s.jac_meas(3 + k, j) = Jet(z[k]);
+        s.jac_load(3 + k, j) = Jet(z[k]);
+      }
     }
-    s.tau(j) = Jet(tau, tv);
+    s.tau(j) = Jet(tau, Eigen::Map<const Vec>(tv));
   }
   s.dtheta.resize(n);
   for (int j = 0; j < n; ++j) s.dtheta(j) = Jet(0.0);
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->joint(theta + offsets_[e], s);
   // d = J_p dtheta, rot = J_r dtheta as small products of the values and derivative parts.
-  Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMax, 1> dt(n);
-  Eigen::Matrix<double, Eigen::Dynamic, kJetStride, 0, kMax, kJetStride> dtv(n, kJetStride);
+  double da[3] = {0, 0, 0}, ra[3] = {0, 0, 0}, dv[3][S], rv[3][S];
+  for (int k = 0; k < 3; ++k)
+    for (int i = 0; i < S; ++i) dv[k][i] = rv[k][i] = 0.0;
   for (int j = 0; j < n; ++j) {
-    dt(j) = s.dtheta(j).a;
-    dtv.row(j) = s.dtheta(j).v.transpose();
+    const double dt = s.dtheta(j).a;
+    const double* dtv = s.dtheta(j).v.data();
+    const double* z = c.chain.axis.data() + 3 * j;
+    for (int k = 0; k < 3; ++k) {
+      da[k] += jm[j][k] * dt;
+      ra[k] += z[k] * dt;
+      for (int i = 0; i < S; ++i) {
+        dv[k][i] += jm[j][k] * dtv[i];
+        rv[k][i] += z[k] * dtv[i];
+      }
+      if (moved)
+        for (int i = 0; i < S; ++i) dv[k][i] += dt * wmv[j][k][i];
+    }
   }
-  const Eigen::Vector3d da = jm * dt;
-  Block dv = jm * dtv;
-  if (moved)
-    for (int j = 0; j < n; ++j)
-      for (int k = 0; k < 3; ++k) dv.row(k) += dt(j) * s.jac_meas(k, j).v.transpose();
-  const Eigen::Vector3d ra = c.chain.axis * dt;
-  const Block rv = c.chain.axis * dtv;
   for (int k = 0; k < 3; ++k) {
-    s.d(k) = Jet(da(k), dv.row(k).transpose());
-    s.rot(k) = Jet(ra(k), rv.row(k).transpose());
+    s.d(k) = Jet(da[k], Eigen::Map<const Vec>(dv[k]));
+    s.rot(k) = Jet(ra[k], Eigen::Map<const Vec>(rv[k]));
   }
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->cartesian(theta + offsets_[e], s);
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);

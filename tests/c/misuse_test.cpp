@@ -287,6 +287,39 @@ TEST(CApiMisuse, EveryFunctionReturnsItsStatusAndNamesItself) {
   stiff_diagnosis_destroy(nullptr);
 }
 
+// One buffer convention (boundary.hpp require_capacity): a NULL buffer is capacity 0, so
+// (NULL, 0, &needed) is the size query, and NULL is accepted when nothing is to be written.
+TEST(CApiMisuse, BufferConventionIsTheSameEverywhere) {
+  Fixture f;
+  const double q[6] = {0.1, 1.2, 0.5, -1.0, 1.3, 0.0};
+  const double w[6] = {20, -30, 25, 0, 0, 0};
+  double lo[6], hi[6], out[64];
+  size_t needed = 0;
+
+  EXPECT_EQ(stiff_robot_limits(nullptr, nullptr, 0, &needed, f.robot), STIFF_E_BUFFER_TOO_SMALL);
+  EXPECT_EQ(needed, 6u);
+  EXPECT_EQ(stiff_robot_limits(lo, nullptr, 6, &needed, f.robot), STIFF_E_BUFFER_TOO_SMALL);
+  EXPECT_EQ(stiff_robot_limits(nullptr, hi, 6, &needed, f.robot), STIFF_E_BUFFER_TOO_SMALL);
+  EXPECT_EQ(stiff_robot_limits(lo, hi, needed, &needed, f.robot), STIFF_OK);
+
+  needed = 0;
+  EXPECT_EQ(stiff_result_parameters(nullptr, nullptr, 0, &needed, f.fit), STIFF_E_BUFFER_TOO_SMALL);
+  EXPECT_EQ(needed, 6u);
+  EXPECT_EQ(stiff_result_parameters(nullptr, nullptr, 64, &needed, f.fit),
+            STIFF_E_BUFFER_TOO_SMALL);
+  EXPECT_EQ(stiff_result_parameters(out, nullptr, needed, &needed, f.fit), STIFF_OK);
+
+  needed = 99;
+  EXPECT_EQ(stiff_predict_batch(nullptr, 0, &needed, f.model, q, w, 1, 6),
+            STIFF_E_BUFFER_TOO_SMALL);
+  EXPECT_EQ(needed, 6u);
+  // Nothing to write: a NULL buffer is fine, as for copy_out-based functions.
+  EXPECT_EQ(stiff_predict_batch(nullptr, 0, &needed, f.model, q, w, 0, 6), STIFF_OK);
+  EXPECT_EQ(needed, 0u);
+  EXPECT_EQ(stiff_tool_pose_batch(nullptr, 0, &needed, f.robot, q, 0), STIFF_OK);
+  EXPECT_EQ(needed, 0u);
+}
+
 TEST(CApiMisuse, LastErrorIsPerThread) {
   stiff_robot* r = nullptr;
   ASSERT_EQ(stiff_robot_load(&r, "/nonexistent-main.yaml"), STIFF_E_IO);

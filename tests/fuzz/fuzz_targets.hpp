@@ -24,6 +24,10 @@
 #include "stiff/robot_io.hpp"
 #include "stiff/simulate.hpp"
 #include "stiff/stiff.h"
+#if __has_include(<glog/logging.h>)
+#include <glog/logging.h>  // Ceres logs through glog: a log line is a finding (never print)
+#define STIFF_FUZZ_HAVE_GLOG 1
+#endif
 #if __has_include("stiff/path_io.hpp")
 #include "stiff/path_io.hpp"
 #define STIFF_FUZZ_HAVE_PATH_IO 1
@@ -184,6 +188,47 @@ inline void gcode(const uint8_t* data, size_t size) {
 
 // ------------------------------------------------------------------ C ABI with fuzzed arrays
 
+#ifdef STIFF_FUZZ_HAVE_GLOG
+/// Sees every glog line (Ceres's "Terminating: ..."); glog also writes it to stderr, where a
+/// host application would see it.
+class GlogWatch : public google::LogSink {
+ public:
+  GlogWatch() { google::AddLogSink(this); }
+  using google::LogSink::send;
+  void send(google::LogSeverity,
+            const char*,
+            const char* base_filename,
+            int line,
+            const google::LogMessageTime&,
+            const char* message,
+            size_t message_len) override {
+    if (first.empty())
+      first = std::string(base_filename) + ":" + std::to_string(line) + ": " +
+              std::string(message, message_len);
+  }
+  std::string first;
+};
+
+/// Installed once and never removed (glog may be torn down before static destructors run).
+inline GlogWatch& glog_watch() {
+  static GlogWatch* watch = new GlogWatch;
+  return *watch;
+}
+#endif
+
+/// Fails if a dependency logged (glog) while `body` ran: the library never prints.
+template <typename Body>
+void must_not_log(const char* target, Body&& body) {
+#ifdef STIFF_FUZZ_HAVE_GLOG
+  GlogWatch& watch = glog_watch();
+  watch.first.clear();
+  body();
+  if (!watch.first.empty()) finding(target, "a dependency printed: " + watch.first);
+#else
+  body();
+#endif
+}
+
 /// Check a C ABI status: OK, or a documented negative code with a message.
 inline bool capi_ok(stiff_status s, const char* call) {
   if (s == STIFF_OK) return true;
@@ -278,7 +323,9 @@ inline void capi_arrays(const uint8_t* data, size_t size) {
   o.max_iterations = 5;
   o.method = (flags & 0x20) ? STIFF_METHOD_LINEAR : STIFF_METHOD_AUTO;
   stiff_result* fit = nullptr;
-  if (capi_ok(stiff_identify(&fit, robot.robot, ds, &o), "stiff_identify")) {
+  stiff_status is = STIFF_OK;
+  must_not_log("capi", [&] { is = stiff_identify(&fit, robot.robot, ds, &o); });
+  if (capi_ok(is, "stiff_identify")) {
     size_t needed = 0;
     stiff_result_parameters(nullptr, nullptr, 0, &needed, fit);
     std::vector<double> theta(needed), se(needed);

@@ -12,7 +12,8 @@
  *  - Matrices are row-major contiguous double arrays with their dimensions given.
  *  - Buffers: (values, capacity, needed). If capacity is too small nothing is written,
  *    *needed (when needed != NULL) holds the required count and STIFF_E_BUFFER_TOO_SMALL is
- *    returned; call again with a larger buffer.
+ *    returned; call again with a larger buffer. A NULL buffer counts as capacity 0 (the
+ *    size query); it is accepted when there is nothing to write.
  *  - Option structs start with struct_size = sizeof(struct) as the caller compiled it; zero
  *    fields mean "library default"; fields are only ever appended. NULL options: defaults.
  *  - Threading: a handle is used by one thread at a time; distinct handles are independent;

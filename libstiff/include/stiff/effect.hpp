@@ -90,6 +90,14 @@ class Effect {
   /// The model and its literature reference (docs).
   virtual std::string reference() const = 0;
   virtual unsigned requirements() const { return kNeedsNothing; }
+  /// True when a stage reads EvalState::jac_meas or jac_load (DeflectionModel::evaluate_jet
+  /// fills them only then).
+  virtual bool reads_jacobians() const { return false; }
+  /// True when the effect's contribution is linear in its parameters with coefficients that
+  /// no parameter changes as long as every effect of the model is linear (it only adds to
+  /// dtheta, d or rot, and moves neither the points nor the wrench). A model of linear effects
+  /// predicts d affine in theta (identify() then needs one Jacobian per measurement).
+  virtual bool linear() const { return false; }
   /// Parameters, in the order of the parameter block.
   virtual const std::vector<ParameterSpec>& parameters() const = 0;
   int size() const { return static_cast<int>(parameters().size()); }

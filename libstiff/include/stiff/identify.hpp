@@ -56,9 +56,9 @@ struct IdentifyOptions {
 std::vector<std::string> loss_names();
 
 /// Nonlinear identification of the effect model `effects` (e.g. {"joint", "force_frame"}) by
-/// Ceres: one residual block per measurement (3 rows weighted by 1/sigma_d), automatic
-/// derivatives, bounds from each ParameterSpec, the joint compliances started from the linear
-/// least-squares solution and every other parameter from its spec start. Parameters (or
+/// Ceres: 3 residuals per measurement weighted by 1/sigma_d (docs/effects.md, solver details),
+/// automatic derivatives, bounds from each ParameterSpec, the joint compliances started from the
+/// linear least-squares solution and every other parameter from its spec start. Parameters (or
 /// combinations) the data cannot separate are found on the column-scaled Jacobian, held at
 /// their null value, marked unidentified and named in `warnings`; the check is repeated at
 /// the solution (a parameter such as c6 can become visible once offsets are known).

@@ -30,6 +30,8 @@ class DeflectionModel {
   std::vector<std::string> effect_names() const;
   std::string model_string() const;  ///< "joint+link"
   int parameter_count() const { return count_; }
+  /// Every effect is linear (Effect::linear): d is affine in theta.
+  bool linear() const { return linear_; }
   /// Offset of effect e's block in theta.
   int offset(int e) const { return offsets_[e]; }
   /// Index of an effect by name, -1 if absent.
@@ -55,14 +57,22 @@ class DeflectionModel {
   /// evaluate<Jet> for repeated derivative evaluations (identification): the same stages,
   /// values and derivatives equal up to round-off, but the geometry stage (lever arms and
   /// external joint torques) is computed in double with the derivative parts as 3 x
-  /// kJetStride blocks, skipped when no effect moved the points or the wrench in its wrench
-  /// stage, and `scratch` (reused between calls with this model, one per thread) avoids
-  /// allocations. Only the displacement d is produced.
+  /// kJetStride arrays, skipped when no effect moved the points or the wrench in its wrench
+  /// stage, EvalState::jac_meas / jac_load filled only for effects that read them, and
+  /// `scratch` (reused between calls with this model, one per thread) avoids allocations.
+  /// Only the displacement d is produced.
   void evaluate_jet(const Jet* theta,
                     const Measurement& m,
                     const MeasurementContext& c,
                     EvalState<Jet>& scratch,
                     Vector3<Jet>* d) const;
+  /// evaluate<double> of d reusing `scratch` (no allocation after the first call; one per
+  /// thread).
+  void evaluate_double(const double* theta,
+                       const Measurement& m,
+                       const MeasurementContext& c,
+                       EvalState<double>& scratch,
+                       Vector3<double>* d) const;
   /// Same in double: (dx, dy, dz, rx, ry, rz).
   Eigen::Matrix<double, 6, 1> predict(const Eigen::VectorXd& theta,
                                       const Measurement& m,
@@ -77,10 +87,17 @@ class DeflectionModel {
   int session_index(const std::string& label) const;
 
  private:
+  template <typename T>
+  void evaluate_into(const T* theta,
+                     const Measurement& m,
+                     const MeasurementContext& c,
+                     EvalState<T>& s) const;
   RobotModel robot_;
   std::vector<std::unique_ptr<Effect>> effects_;
   std::vector<int> offsets_;
   int count_ = 0;
+  bool jet_jacobians_ = false;  ///< an effect reads EvalState::jac_meas / jac_load
+  bool linear_ = true;
   std::map<std::string, int> sessions_;
 };
 

@@ -31,6 +31,7 @@ class Backlash : public EffectT<Backlash> {
   }
   unsigned requirements() const override { return kNeedsMasses; }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  bool linear() const override { return true; }
 
   static constexpr double kEps = 0.05;  ///< N*m
 

@@ -29,6 +29,7 @@ class Complementary : public EffectT<Complementary> {
            "transformation); Alici & Shirinzadeh, IEEE T-RO 21(4), 2005";
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  bool reads_jacobians() const override { return true; }
 
   template <typename T>
   void cartesian_t(const T* p, EvalState<T>& s) const {

@@ -30,6 +30,7 @@ class Coupling : public EffectT<Coupling> {
            "Abele et al., CIRP Annals 56(1), 2007";
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  bool linear() const override { return true; }
 
   template <typename T>
   void joint_t(const T* p, EvalState<T>& s) const {

@@ -67,6 +67,7 @@ class Drift : public EffectT<Drift> {
   }
   unsigned requirements() const override { return kNeedsTime; }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  bool linear() const override { return true; }
 
   template <typename T>
   void measurement_t(const T* p, EvalState<T>& s) const {

@@ -30,6 +30,7 @@ class GravityCompensator : public EffectT<GravityCompensator> {
            "with gravity compensators";
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  bool linear() const override { return true; }
 
   template <typename T>
   void joint_t(const T* p, EvalState<T>& s) const {

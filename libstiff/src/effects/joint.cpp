@@ -29,6 +29,7 @@ class JointCompliance : public EffectT<JointCompliance> {
     return "Salisbury (1980); Jiang & Fang, Trans. CSAM 54(1), 2023, eqs. 1-5";
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  bool linear() const override { return true; }
 
   template <typename T>
   void joint_t(const T* c, EvalState<T>& s) const {

@@ -50,17 +50,44 @@ class LinkCompliance : public EffectT<LinkCompliance> {
            "Robotics Comput.-Integr. Manuf. 2014 (model reduction)";
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  bool linear() const override { return true; }
 
   template <typename T>
   void cartesian_t(const T* p, EvalState<T>& s) const {
     const auto& chain = s.context->chain;
+    // Points and wrench without derivatives (a pass that differentiates other parameters):
+    // torques and lever arms are plain numbers.
+    const bool wrench_fixed = effects::constant(s.force) && effects::constant(s.moment);
+    const bool fixed = wrench_fixed && effects::constant(s.p_load) && effects::constant(s.p_meas);
     for (size_t k = 0; k < springs_.size(); ++k) {
       const int i = springs_[k].link;
       // The spring axis and origin do not depend on the parameters: keep them in double so
       // that automatic differentiation only carries derivatives where they can be non-zero.
       const Eigen::Vector3d u = chain.link[i].template block<3, 3>(0, 0) * springs_[k].axis;
       const Eigen::Vector3d o = chain.origin.col(i);
-      const T torque = cross(u, s.p_load, o).dot(s.force) + s.moment.dot(u.cast<T>());
+      if (fixed) {
+        const Eigen::Vector3d f = effects::value(s.force), m = effects::value(s.moment);
+        const double torque = cross(u, effects::value(s.p_load), o).dot(f) +
+                              (m(0) * u(0) + m(1) * u(1) + m(2) * u(2));
+        const T angle = p[k] * torque;
+        const Eigen::Vector3d lever = cross(u, effects::value(s.p_meas), o);
+        for (int r = 0; r < 3; ++r) {
+          s.d(r) += angle * lever(r);
+          s.rot(r) += angle * u(r);
+        }
+        continue;
+      }
+      T torque;
+      if (wrench_fixed) {
+        // (u x (L - o)) . F = (L - o) . (F x u): derivatives only through L.
+        const Eigen::Vector3d f = effects::value(s.force), m = effects::value(s.moment);
+        const Eigen::Vector3d a = f.cross(u);
+        torque = (s.p_load(0) - o(0)) * a(0) + (s.p_load(1) - o(1)) * a(1) +
+                 (s.p_load(2) - o(2)) * a(2) + (m(0) * u(0) + m(1) * u(1) + m(2) * u(2));
+      } else {
+        torque = cross(u, s.p_load, o).dot(s.force) +
+                 (s.moment(0) * u(0) + s.moment(1) * u(1) + s.moment(2) * u(2));
+      }
       const T angle = p[k] * torque;
       s.d += angle * cross(u, s.p_meas, o);
       for (int r = 0; r < 3; ++r) s.rot(r) += angle * u(r);

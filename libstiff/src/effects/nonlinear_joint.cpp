@@ -35,6 +35,7 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
   }
   unsigned requirements() const override { return kNeedsMasses; }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  bool linear() const override { return true; }
 
   template <typename T>
   void joint_t(const T* p, EvalState<T>& s) const {

@@ -29,6 +29,7 @@ class ToolCompliance : public EffectT<ToolCompliance> {
     return "OnRobot HEX-E datasheet (deflection at nominal load); effects-and-diagnosis.md 1.7";
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  bool linear() const override { return true; }
 
   template <typename T>
   void cartesian_t(const T* p, EvalState<T>& s) const {

@@ -14,15 +14,17 @@ _HERE = Path(__file__).resolve().parent
 
 
 def _find_library() -> Path:
+    # Explicit choices first (STIFF_LIBRARY, then STIFF_BUILD_DIR: tests and benchmarks name the
+    # build they mean), then the library bundled with the package.
     env = os.environ.get("STIFF_LIBRARY")
     if env:
         return Path(env)
-    bundled = _HERE / "_lib" / "libstiff_c.so"
-    if bundled.exists():
-        return bundled
     build = os.environ.get("STIFF_BUILD_DIR")
     if build and (Path(build) / "capi" / "libstiff_c.so").exists():
         return Path(build) / "capi" / "libstiff_c.so"
+    bundled = _HERE / "_lib" / "libstiff_c.so"
+    if bundled.exists():
+        return bundled
     raise ImportError(
         "libstiff_c.so not found: install the package with its bundled library (make build), "
         "or set STIFF_LIBRARY to its path"

@@ -294,5 +294,70 @@ TEST(IdentifyCeres, FastJetEvaluationEqualsTheGenericOne) {
   }
 }
 
+// Models made only of linear effects (Effect::linear) predict d affine in theta, so that
+// identify() needs one Jacobian per measurement; effects that move the points or the wrench,
+// rotate the measurement or multiply the compliances are not linear.
+TEST(IdentifyCeres, LinearEffectsGiveAnAffineModel) {
+  const RobotModel robot = test::rokae();
+  const Dataset data = test::design60(5, 8);
+  for (const std::vector<std::string>& effects :
+       {std::vector<std::string>{"joint"},
+        std::vector<std::string>{"joint", "link", "coupling", "gravity_compensator",
+                                 "tool_compliance", "drift"},
+        std::vector<std::string>{"joint", "nonlinear_joint", "backlash"}}) {
+    const DeflectionModel model(robot, effects, &data);
+    ASSERT_TRUE(model.linear()) << model.model_string();
+    const int p = model.parameter_count();
+    Eigen::VectorXd t0 = model.start_parameters(), t1 = t0;
+    for (int k = 0; k < p; ++k) {
+      t0(k) += 0.3 * std::abs(model.spec(k).typical) * (k % 3 - 1);
+      t1(k) += 0.7 * std::abs(model.spec(k).typical) * (k % 2 ? 1 : -0.5);
+    }
+    const auto ctx = model.contexts(data);
+    for (size_t r = 0; r < data.rows.size(); ++r) {
+      const auto j0 = model.displacement_jacobian(t0, data.rows[r], ctx[r]);
+      const auto j1 = model.displacement_jacobian(t1, data.rows[r], ctx[r]);
+      const double scale = j0.cwiseAbs().maxCoeff();
+      EXPECT_LE((j1 - j0).cwiseAbs().maxCoeff(), 1e-12 * scale) << model.model_string();
+      const Eigen::Vector3d d0 = model.predict(t0, data.rows[r], ctx[r]).head<3>();
+      const Eigen::Vector3d d1 = model.predict(t1, data.rows[r], ctx[r]).head<3>();
+      EXPECT_LE((d1 - d0 - j0 * (t1 - t0)).cwiseAbs().maxCoeff(), 1e-12 * d1.cwiseAbs().maxCoeff())
+          << model.model_string();
+    }
+  }
+  for (const char* other : {"point_offset", "tracker_frame", "force_frame", "complementary"})
+    EXPECT_FALSE(DeflectionModel(robot, {"joint", other}, &data).linear()) << other;
+}
+
+// A parameter whose unconstrained optimum lies beyond its bound ends exactly on the bound
+// (held there by the active set rather than approached by clipped steps) and the solution
+// satisfies the bound's optimality condition: moving the parameter into the feasible range
+// raises the cost.
+TEST(IdentifyCeres, ParameterOnItsBoundIsOptimal) {
+  Truth truth = joint_truth(test::paper_stiffness());
+  const Dataset data = simulated(truth, 21, 0.0, nullptr, 10);
+  const FitResult f = identify(test::rokae(), data, {"joint", "link", "point_offset"});
+  int at_bound = -1;
+  for (size_t k = 0; k < f.parameters.size(); ++k)
+    if (f.parameters[k].identified && f.parameters[k].effect == "link" &&
+        f.parameters[k].value == 0.0)
+      at_bound = static_cast<int>(k);
+  ASSERT_GE(at_bound, 0) << "no link spring ended on its bound with this seed";
+  const DeflectionModel model(test::rokae(), f.model, &data);
+  Eigen::VectorXd theta(f.parameters.size());
+  for (size_t k = 0; k < f.parameters.size(); ++k) theta(k) = f.parameters[k].value;
+  const auto ctx = model.contexts(data);
+  auto rss = [&](const Eigen::VectorXd& t) {
+    double ss = 0;
+    for (size_t r = 0; r < data.rows.size(); ++r)
+      ss += (data.rows[r].displacement - model.predict(t, data.rows[r], ctx[r]).head<3>())
+                .squaredNorm();
+    return ss;
+  };
+  Eigen::VectorXd up = theta;
+  up(at_bound) += 0.01 * std::abs(model.spec(at_bound).typical);
+  EXPECT_GT(rss(up), rss(theta));
+}
+
 }  // namespace
 }  // namespace stiff

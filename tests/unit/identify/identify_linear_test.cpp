@@ -1,7 +1,10 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
+#include "../../../libstiff/src/fast_chain.hpp"
 #include "stiff/error.hpp"
 #include "stiff/identify.hpp"
 #include "stiff/simulate.hpp"
@@ -96,6 +99,42 @@ TEST(FitJson, RoundTripKeepsEveryParameter) {
   }
   EXPECT_THROW(fit_from_json("{\"format\": \"other\"}", "x.json"), ParseError);
   EXPECT_THROW(fit_from_json("{not json", "x.json"), ParseError);
+}
+
+// The identification's kinematics (libstiff/src/fast_chain.hpp): the polynomial sincos within
+// 2 ulp-ish of libm, and the specialised chain equal to RobotModel::chain to round-off for
+// modified-DH (ROKAE, PUMA 560) and URDF (UR5) joints.
+TEST(IdentifyLinear, FastKinematicsEqualTheReference) {
+  double worst = 0;
+  for (int i = -200000; i <= 200000; ++i) {
+    const double x = i * 1.7e-4 + (i % 7) * 1e-9;
+    double s, c;
+    detail::sincos_fast(x, &s, &c);
+    worst = std::max({worst, std::abs(s - std::sin(x)), std::abs(c - std::cos(x))});
+  }
+  EXPECT_LT(worst, 4.5e-16);
+  for (const char* file :
+       {"examples/robots/rokae.yaml", "examples/robots/puma560.yaml", "examples/robots/ur5.urdf"}) {
+    const RobotModel robot = load_robot(test::source_path(file));
+    const detail::FastChain fk(robot);
+    const int n = robot.dof();
+    Eigen::Matrix3Xd z(3, n), o(3, n);
+    Eigen::Matrix3d r;
+    Eigen::Vector3d p;
+    std::vector<Eigen::Matrix4d> links(n);
+    for (int trial = 0; trial < 20; ++trial) {
+      Eigen::VectorXd q(n);
+      for (int j = 0; j < n; ++j) q(j) = std::sin(1.3 * trial + 0.7 * j) * 2.5;
+      const ChainState ref = robot.chain(q);
+      fk(q, z, o, r, p, links.data());
+      EXPECT_LT((z - ref.axis).cwiseAbs().maxCoeff(), 1e-14) << file;
+      EXPECT_LT((o - ref.origin).cwiseAbs().maxCoeff(), 1e-14) << file;
+      EXPECT_LT((r - ref.flange.topLeftCorner<3, 3>()).cwiseAbs().maxCoeff(), 1e-14) << file;
+      EXPECT_LT((p - ref.flange.topRightCorner<3, 1>()).cwiseAbs().maxCoeff(), 1e-14) << file;
+      for (int j = 0; j < n; ++j)
+        EXPECT_LT((links[j] - ref.link[j]).cwiseAbs().maxCoeff(), 1e-14) << file << " link " << j;
+    }
+  }
 }
 
 }  // namespace

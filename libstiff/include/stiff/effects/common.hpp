@@ -37,6 +37,16 @@ inline ParameterSpec parameter(std::string name,
   return p;
 }
 
+/// True when v carries no derivative (always for double): a pass of automatic
+/// differentiation that does not move it.
+inline bool constant(const Vector3<double>&) { return true; }
+inline bool constant(const Vector3<Jet>& v) {
+  return v(0).v.isZero(0.0) && v(1).v.isZero(0.0) && v(2).v.isZero(0.0);
+}
+/// The values of v.
+inline Eigen::Vector3d value(const Vector3<double>& v) { return v; }
+inline Eigen::Vector3d value(const Vector3<Jet>& v) { return {v(0).a, v(1).a, v(2).a}; }
+
 /// Flange rotation R_06 (flange frame -> base frame) of the measurement's configuration.
 template <typename T>
 Matrix3<T> flange_rotation(const EvalState<T>& s) {
