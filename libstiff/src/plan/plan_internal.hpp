@@ -75,6 +75,16 @@ inline void add_jacobian(const CandidatePool& p, int e, double sign, double* MJ)
     for (int l = 0; l <= k; ++l) MJ[k * m + l] += sign * g[k * m + l];
 }
 
+/// Uniform integer in [0, n) from a 64-bit engine by rejection (as Rng::index).
+template <class Engine>
+inline uint64_t rejection_index(Engine& engine, uint64_t n) {
+  const uint64_t limit = UINT64_MAX - UINT64_MAX % n;
+  uint64_t x;
+  do x = engine();
+  while (x >= limit);
+  return x % n;
+}
+
 /// Unbiased integer in [0, n), n < 2^32, from the Rng's engine (Lemire's multiply-shift with
 /// rejection): exact and platform independent like Rng::index, without a 64-bit division.
 inline uint32_t fast_index(Rng& rng, uint32_t n) {
@@ -120,13 +130,7 @@ class FastRng {
   /// Uniform in [0, 1) with 53 random bits (as Rng::uniform).
   double uniform() { return static_cast<double>((*this)() >> 11) * 0x1.0p-53; }
   /// Uniform integer in [0, n) by rejection (as Rng::index).
-  uint64_t index(uint64_t n) {
-    const uint64_t limit = UINT64_MAX - UINT64_MAX % n;
-    uint64_t x;
-    do x = (*this)();
-    while (x >= limit);
-    return x % n;
-  }
+  uint64_t index(uint64_t n) { return rejection_index(*this, n); }
 
  private:
   static constexpr int kN = 312, kM = 156;
@@ -184,13 +188,7 @@ class Xoshiro256pp {
   /// Uniform in (0, 1] with 53 random bits (never 0: its logarithm is finite).
   double uniform_open() { return static_cast<double>(((*this)() >> 11) + 1) * 0x1.0p-53; }
   /// Uniform integer in [0, n) by rejection.
-  uint64_t index(uint64_t n) {
-    const uint64_t limit = UINT64_MAX - UINT64_MAX % n;
-    uint64_t x;
-    do x = (*this)();
-    while (x >= limit);
-    return x % n;
-  }
+  uint64_t index(uint64_t n) { return rejection_index(*this, n); }
 
  private:
   static uint64_t rotl(uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
