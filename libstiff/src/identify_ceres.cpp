@@ -45,13 +45,6 @@ std::string num(double v, int precision = 3) {
 }
 
 struct Setup;
-void displacement_and_jacobian(const Setup& s,
-                               int row,
-                               const double* theta,
-                               const std::vector<int>& cols,
-                               const double* scale,
-                               Eigen::Vector3d& d,
-                               double* out);
 
 /// Model evaluations per measurement, cached: the trust-region minimizer evaluates the
 /// Jacobian at a trial point in its line search and again when it accepts it, the cost there

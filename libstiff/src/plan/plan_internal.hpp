@@ -85,27 +85,10 @@ inline uint64_t rejection_index(Engine& engine, uint64_t n) {
   return x % n;
 }
 
-/// Unbiased integer in [0, n), n < 2^32, from the Rng's engine (Lemire's multiply-shift with
-/// rejection): exact and platform independent like Rng::index, without a 64-bit division.
-inline uint32_t fast_index(Rng& rng, uint32_t n) {
-  uint64_t x = rng.engine()() >> 32;
-  uint64_t prod = x * n;
-  uint32_t low = static_cast<uint32_t>(prod);
-  if (low < n) {
-    const uint32_t threshold = static_cast<uint32_t>(-n) % n;
-    while (low < threshold) {
-      x = rng.engine()() >> 32;
-      prod = x * n;
-      low = static_cast<uint32_t>(prod);
-    }
-  }
-  return static_cast<uint32_t>(prod >> 32);
-}
-
-/// std::mt19937_64 re-implemented header-only so that the annealing's draws inline (the
+/// std::mt19937_64 re-implemented header-only so that the exchange's draws inline (the
 /// standard engine's operator() is an out-of-line call): the same algorithm, seeding and
-/// tempering, hence exactly the same stream as Rng(seed).engine() (tested). index(), uniform()
-/// and fast_index() map it exactly as Rng does.
+/// tempering, hence exactly the same stream as Rng(seed).engine() (tested). index() maps it
+/// exactly as Rng does.
 class FastRng {
  public:
   explicit FastRng(uint64_t seed) {
@@ -127,8 +110,6 @@ class FastRng {
     z ^= z >> 43;
     return z;
   }
-  /// Uniform in [0, 1) with 53 random bits (as Rng::uniform).
-  double uniform() { return static_cast<double>((*this)() >> 11) * 0x1.0p-53; }
   /// Uniform integer in [0, n) by rejection (as Rng::index).
   uint64_t index(uint64_t n) { return rejection_index(*this, n); }
 
@@ -207,26 +188,6 @@ STIFF_NOINLINE inline uint64_t fast_index_reject(Xoshiro256pp& rng, uint32_t n, 
 STIFF_ALWAYS_INLINE inline uint32_t fast_index(Xoshiro256pp& rng, uint32_t n) {
   uint64_t prod = (rng() >> 32) * n;
   if (STIFF_UNLIKELY(static_cast<uint32_t>(prod) < n)) prod = fast_index_reject(rng, n, prod);
-  return static_cast<uint32_t>(prod >> 32);
-}
-
-/// fast_index on FastRng: the same mapping, hence the same integers for the same stream.
-#if defined(__GNUC__)
-__attribute__((always_inline))
-#endif
-inline uint32_t
-fast_index(FastRng& rng, uint32_t n) {
-  uint64_t x = rng() >> 32;
-  uint64_t prod = x * n;
-  uint32_t low = static_cast<uint32_t>(prod);
-  if (low < n) {
-    const uint32_t threshold = static_cast<uint32_t>(-n) % n;
-    while (low < threshold) {
-      x = rng() >> 32;
-      prod = x * n;
-      low = static_cast<uint32_t>(prod);
-    }
-  }
   return static_cast<uint32_t>(prod >> 32);
 }
 

@@ -265,7 +265,7 @@ namespace {
 TEST(IdentifyCeres, FastJetEvaluationEqualsTheGenericOne) {
   const RobotModel robot = test::rokae();
   const Dataset data = test::design60(3, 12);
-  for (const std::vector<std::string> effects :
+  for (const std::vector<std::string>& effects :
        {std::vector<std::string>{"joint"},
         std::vector<std::string>{"joint", "link", "point_offset"},
         std::vector<std::string>{"joint", "point_offset", "tracker_frame"}}) {

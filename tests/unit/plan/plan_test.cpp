@@ -184,11 +184,7 @@ TEST(PlanFastPath, AnnealingWithAndWithoutElementTableAndFastRng) {
     Rng a(seed), b(seed);
     FastRng f(seed), g(seed);
     for (int i = 0; i < 2000; ++i) ASSERT_EQ(f(), a.engine()());
-    for (int i = 0; i < 2000; ++i) {
-      ASSERT_EQ(fast_index(g, 1000u + i), fast_index(b, 1000u + i));
-      ASSERT_EQ(g.index(7 + i), b.index(7 + i));
-      ASSERT_EQ(g.uniform(), b.uniform());
-    }
+    for (int i = 0; i < 2000; ++i) ASSERT_EQ(g.index(7 + i), b.index(7 + i));
   }
   // A pool above the table budget computes the elements on the fly: same plan.
   const RobotModel robot = test::rokae();
@@ -217,6 +213,10 @@ TEST(PlanFastPath, AnnealingWithAndWithoutElementTableAndFastRng) {
 template <int M>
 void expect_closed_form_matches_cholesky(Rng& rng) {
   using namespace plan_detail;
+  auto pack = [](const Eigen::MatrixXd& info, double* packed) {
+    for (int i = 0, idx = 0; i < M; ++i)
+      for (int j = 0; j <= i; ++j) packed[idx++] = info(i, j);
+  };
   for (int trial = 0; trial < 200; ++trial) {
     Eigen::MatrixXd a(3 * M + 3, M);
     for (int i = 0; i < a.rows(); ++i)
@@ -224,8 +224,7 @@ void expect_closed_form_matches_cholesky(Rng& rng) {
     for (int j = 0; j < M; ++j) a.col(j) *= std::pow(10.0, 2.0 * rng.uniform());
     const Eigen::MatrixXd info = 1e10 * (a.transpose() * a);
     double packed[21];
-    for (int i = 0, idx = 0; i < M; ++i)
-      for (int j = 0; j <= i; ++j) packed[idx++] = info(i, j);
+    pack(info, packed);
     ClosedForm f;
     ASSERT_TRUE(closed_form<M>(packed, f)) << "m = " << M;
     const Eigen::LLT<Eigen::MatrixXd> llt(info);
@@ -248,8 +247,7 @@ void expect_closed_form_matches_cholesky(Rng& rng) {
     a.col(M - 1) = a.col(0) - 0.5 * a.col(M - 2);
     const Eigen::MatrixXd info = 1e10 * (a.transpose() * a);
     double packed[21];
-    for (int i = 0, idx = 0; i < M; ++i)
-      for (int j = 0; j <= i; ++j) packed[idx++] = info(i, j);
+    pack(info, packed);
     ClosedForm f;
     EXPECT_FALSE(closed_form<M>(packed, f)) << "m = " << M;
   }
