@@ -98,6 +98,18 @@ struct PackedKernel {
       element_information<MC>(pool, e, scratch);
     return scratch;
   }
+  // Start loading element e's table row (it may span three cache lines).
+  void prefetch(int e) const {
+#if defined(__GNUC__)
+    if (!table) return;
+    const char* row = reinterpret_cast<const char*>(table + static_cast<size_t>(e) * size());
+    __builtin_prefetch(row);
+    __builtin_prefetch(row + 64);
+    __builtin_prefetch(row + size() * sizeof(double) - 1);
+#else
+    (void)e;
+#endif
+  }
   void copy_element(int e, double* out) const {
     const double* g = element(e, out);
     if (g != out) std::copy(g, g + size(), out);
@@ -154,13 +166,33 @@ struct Anneal {
     std::vector<double> scratch(static_cast<size_t>(kmax) * T);
     for (int i = 0; i < N; ++i) pos[i] = i;
 
+    // Candidate elements are drawn kAhead draws before they are used and their table rows
+    // prefetched meanwhile: on pools whose table exceeds the cache (1e5 elements: 12 MB for
+    // m = 5) the row arrives while earlier steps run. A candidate is uniform over the pool and
+    // independent of the state, and one already in the set is skipped when used, so the
+    // proposals are distributed exactly as with drawing at the time of use.
+    constexpr int kAhead = 8;
+    uint32_t ahead[kAhead];
+    int ahead_at = 0;
+    for (uint32_t& a : ahead) {
+      a = fast_index(rng, static_cast<uint32_t>(P));
+      K.prefetch(static_cast<int>(a));
+    }
+    auto next_candidate = [&]() {
+      const int e = static_cast<int>(ahead[ahead_at]);
+      ahead[ahead_at] = fast_index(rng, static_cast<uint32_t>(P));
+      K.prefetch(static_cast<int>(ahead[ahead_at]));
+      ahead_at = (ahead_at + 1) & (kAhead - 1);
+      return e;
+    };
+
     // One k-element swap proposal: D = sum (G_in - G_out), no rebuild of A; Xn = X + D.
     auto propose = [&](int k) {
       for (int s = 0; s < k; ++s) {
         const int j = s + static_cast<int>(fast_index(rng, static_cast<uint32_t>(N - s)));
         std::swap(pos[s], pos[j]);
         int e;
-        do e = static_cast<int>(fast_index(rng, static_cast<uint32_t>(P)));
+        do e = next_candidate();
         while (in[e]);
         in[e] = 2;
         new_e[s] = e;
@@ -228,8 +260,8 @@ struct Anneal {
       }
       const double temp = T0 * (1.0 - static_cast<double>(it) * inv_iters);
       propose(k);
-      // Metropolis: downhill always; uphill by Delta when Delta <= dmax = -T ln u, u uniform in
-      // (0, 1], i.e. with probability P(u <= exp(-Delta / T)). u is drawn for uphill moves only.
+      // Metropolis: downhill always; uphill by Delta when Delta <= dmax = T E, E ~ Exp(1) (E =
+      // -ln u, u uniform in (0, 1]), i.e. with probability exp(-Delta / T). E is drawn uphill only.
       bool accept = false;
       double cn = kInf;
       bool decided = false;
@@ -239,7 +271,7 @@ struct Anneal {
           decided = true;
           accept = within<C>(p, q, down);
           if (!accept && temp > 0) {
-            const double dmax = -temp * std::log(rng.uniform_open());
+            const double dmax = temp * standard_exponential(rng);
             accept = within<C>(p, q, raw_threshold<C>(cost + dmax, m));
           }
           if (accept) cn = cost_from_raw<C>(p / q, m);
@@ -248,16 +280,17 @@ struct Anneal {
       if (!decided) {
         cn = cost_of(C, score_packed<MC, C>(ctx, Xn));
         accept = cn < kInf &&
-                 (cn <= cost || (temp > 0 && cn - cost <= -temp * std::log(rng.uniform_open())));
+                 (cn <= cost || (temp > 0 && cn - cost <= temp * standard_exponential(rng)));
       }
       if (accept) {
         for (int s = 0; s < k; ++s) {
           in[set[pos[s]]] = 0;
           set[pos[s]] = new_e[s];
           in[new_e[s]] = 1;
-          std::copy(gin[s], gin[s] + T, gset.data() + static_cast<size_t>(pos[s]) * T);
+          double* out = gset.data() + static_cast<size_t>(pos[s]) * T;
+          for (int q = 0; q < T; ++q) out[q] = gin[s][q];  // fixed size: no memmove call
         }
-        std::copy(Xn, Xn + T, X);
+        for (int q = 0; q < T; ++q) X[q] = Xn[q];
         cost = cn;
         ++accepted;
         if (++since_refresh >= refresh) {
