@@ -223,106 +223,173 @@ void Evaluations::get(int row,
   if (jcols) *jcols = cols_[i];
 }
 
-/// Residuals of a chunk of measurements over the free parameters in scaled form (the held
-/// parameters come from `held`): e_r = (measured - predicted) / sigma for each measurement r
-/// and, with a robust loss rho on |e_r|^2 = s, the scaled residual sqrt(rho(s) / s) e_r, so
-/// that the chunk's 1/2 |residuals|^2 is its robust cost 1/2 sum_r rho(s_r) with the exact
-/// derivative (Gauss-Newton on the scaled residuals instead of Ceres's per-block Triggs
-/// correction; the cost and hence the minimum are the same). Chunks of many measurements
-/// spare Ceres's per-residual-block work, which outweighs the model on small models. Model
-/// values and derivatives from the cached Evaluations.
+/// What the residual blocks of one solve share: the free parameters (the held ones come from
+/// `held`), their typical magnitudes and each row's robust loss.
+struct ResidualSetup {
+  const Setup* setup;
+  const std::vector<int>* free;
+  const Eigen::VectorXd* held;
+  const std::vector<double>* free_typical;
+  const std::vector<std::unique_ptr<ceres::LossFunction>>* losses;
+};
+
+/// Residuals of measurements first .. first + count - 1 over the free parameters in scaled
+/// form: e_r = (measured - predicted) / sigma for each measurement r and, with a robust loss
+/// rho on |e_r|^2 = s, the scaled residual sqrt(rho(s) / s) e_r, so that 1/2 |residuals|^2 is
+/// the robust cost 1/2 sum_r rho(s_r) with the exact derivative (Gauss-Newton on the scaled
+/// residuals instead of Ceres's per-block Triggs correction; the cost and hence the minimum
+/// are the same). Writes r (3 count) and, when `jac` is not null, their derivatives (3 count x
+/// free, row-major). Model values and derivatives from the cached Evaluations. False when a
+/// value is not finite.
+bool chunk_residuals(
+    const ResidualSetup& rs, int first, int count, const double* z, double* r, double* jac) {
+  const Setup& s = *rs.setup;
+  const std::vector<int>& free = *rs.free;
+  const int p = s.model->parameter_count();
+  const int nf = static_cast<int>(free.size());
+  auto& theta = s.theta_double;
+  theta.assign(rs.held->data(), rs.held->data() + p);
+  for (int f = 0; f < nf; ++f) theta[free[f]] = z[f] * s.typical(free[f]);
+  for (int i = 0; i < count; ++i) {
+    const int row = first + i;
+    const Measurement& m = s.data->rows[row];
+    const double w = s.row_weight(row);
+    const double *d = nullptr, *jrow = nullptr;
+    const std::vector<int>* jcols = nullptr;
+    s.eval.get(row, theta.data(), jac ? &free : nullptr, &d, &jrow, &jcols);
+    double* ri = r + 3 * i;
+    for (int k = 0; k < 3; ++k) ri[k] = (m.displacement(k) - d[k]) * w;
+    const double sq = ri[0] * ri[0] + ri[1] * ri[1] + ri[2] * ri[2];
+    // Non-finite values make Ceres log to stderr; returning false rejects the point quietly.
+    if (!std::isfinite(sq)) return false;
+    // Robust scaling a = sqrt(rho(s) / s) and da/ds (limits at s = 0).
+    double a = 1.0, da = 0.0;
+    const ceres::LossFunction* loss = (*rs.losses)[row].get();
+    if (loss) {
+      double rho[3];
+      loss->Evaluate(sq, rho);
+      if (sq > 0) {
+        a = std::sqrt(rho[0] / sq);
+        da = a > 0 ? (rho[1] * sq - rho[0]) / (2.0 * sq * sq * a) : 0.0;
+      } else {
+        a = std::sqrt(rho[1]);
+        da = a > 0 ? 0.25 * rho[2] / a : 0.0;
+      }
+    }
+    double* ji = jac ? jac + 3 * i * nf : nullptr;
+    if (ji) {
+      const bool every = jcols == &s.eval.all();
+      for (int f = 0; f < nf; ++f) {
+        const double* col = jrow + 3 * (every ? free[f] : f);
+        const double scale = -w * (*rs.free_typical)[f];
+        for (int k = 0; k < 3; ++k) ji[k * nf + f] = col[k] * scale;
+      }
+      if (a != 1.0 || da != 0.0) {
+        // d(a e) = a de + e (da/ds) 2 e^T de
+        for (int f = 0; f < nf; ++f) {
+          const double g = 2.0 * da * (ri[0] * ji[f] + ri[1] * ji[nf + f] + ri[2] * ji[2 * nf + f]);
+          for (int k = 0; k < 3; ++k) ji[k * nf + f] = a * ji[k * nf + f] + ri[k] * g;
+        }
+      }
+      double nan_if_not_finite = 0.0;  // 0 * x is NaN for an infinite or NaN x
+      for (int k = 0; k < 3 * nf; ++k) nan_if_not_finite += 0.0 * ji[k];
+      if (nan_if_not_finite != 0.0) return false;
+    }
+    if (loss) {
+      for (int k = 0; k < 3; ++k) ri[k] *= a;
+      if (!std::isfinite(ri[0] * ri[0] + ri[1] * ri[1] + ri[2] * ri[2])) return false;
+    }
+  }
+  return true;
+}
+
+/// The residuals of a chunk of measurements as one residual block: chunks of many
+/// measurements spare Ceres's per-residual-block work, which outweighs the model on small
+/// models.
 class Residual final : public ceres::CostFunction {
  public:
-  Residual(const Setup* setup,
-           int first,
-           int count,
-           const std::vector<int>* free,
-           const Eigen::VectorXd* held,
-           const std::vector<double>* free_typical,
-           const std::vector<std::unique_ptr<ceres::LossFunction>>* losses)
-      : setup_(setup),
-        first_(first),
-        count_(count),
-        free_(free),
-        held_(held),
-        free_typical_(free_typical),
-        losses_(losses) {
+  Residual(const ResidualSetup& rs, int first, int count) : rs_(rs), first_(first), count_(count) {
     set_num_residuals(3 * count);
-    mutable_parameter_block_sizes()->push_back(static_cast<int>(free->size()));
+    mutable_parameter_block_sizes()->push_back(static_cast<int>(rs.free->size()));
   }
-
   bool Evaluate(double const* const* z, double* r, double** jacobians) const override {
-    const Setup& s = *setup_;
-    const int p = s.model->parameter_count();
-    const int nf = static_cast<int>(free_->size());
-    auto& theta = s.theta_double;
-    theta.assign(held_->data(), held_->data() + p);
-    for (int f = 0; f < nf; ++f) {
-      const int k = (*free_)[f];
-      theta[k] = z[0][f] * s.typical(k);
-    }
-    const bool want_jacobian = jacobians && jacobians[0];
-    for (int i = 0; i < count_; ++i) {
-      const int row = first_ + i;
-      const Measurement& m = s.data->rows[row];
-      const double w = s.row_weight(row);
-      const double *d = nullptr, *jac = nullptr;
-      const std::vector<int>* jcols = nullptr;
-      s.eval.get(row, theta.data(), want_jacobian ? free_ : nullptr, &d, &jac, &jcols);
-      double* ri = r + 3 * i;
-      for (int k = 0; k < 3; ++k) ri[k] = (m.displacement(k) - d[k]) * w;
-      const double sq = ri[0] * ri[0] + ri[1] * ri[1] + ri[2] * ri[2];
-      // Non-finite values make Ceres log to stderr; returning false rejects the point quietly.
-      if (!std::isfinite(sq)) return false;
-      // Robust scaling a = sqrt(rho(s) / s) and da/ds (limits at s = 0).
-      double a = 1.0, da = 0.0;
-      const ceres::LossFunction* loss = (*losses_)[row].get();
-      if (loss) {
-        double rho[3];
-        loss->Evaluate(sq, rho);
-        if (sq > 0) {
-          a = std::sqrt(rho[0] / sq);
-          da = a > 0 ? (rho[1] * sq - rho[0]) / (2.0 * sq * sq * a) : 0.0;
-        } else {
-          a = std::sqrt(rho[1]);
-          da = a > 0 ? 0.25 * rho[2] / a : 0.0;
-        }
-      }
-      double* ji = want_jacobian ? jacobians[0] + 3 * i * nf : nullptr;
-      if (ji) {
-        const bool every = jcols == &s.eval.all();
-        for (int f = 0; f < nf; ++f) {
-          const double* col = jac + 3 * (every ? (*free_)[f] : f);
-          const double scale = -w * (*free_typical_)[f];
-          for (int k = 0; k < 3; ++k) ji[k * nf + f] = col[k] * scale;
-        }
-        if (a != 1.0 || da != 0.0) {
-          // d(a e) = a de + e (da/ds) 2 e^T de
-          for (int f = 0; f < nf; ++f) {
-            const double g =
-                2.0 * da * (ri[0] * ji[f] + ri[1] * ji[nf + f] + ri[2] * ji[2 * nf + f]);
-            for (int k = 0; k < 3; ++k) ji[k * nf + f] = a * ji[k * nf + f] + ri[k] * g;
-          }
-        }
-        double nan_if_not_finite = 0.0;  // 0 * x is NaN for an infinite or NaN x
-        for (int k = 0; k < 3 * nf; ++k) nan_if_not_finite += 0.0 * ji[k];
-        if (nan_if_not_finite != 0.0) return false;
-      }
-      if (loss) {
-        for (int k = 0; k < 3; ++k) ri[k] *= a;
-        if (!std::isfinite(ri[0] * ri[0] + ri[1] * ri[1] + ri[2] * ri[2])) return false;
-      }
-    }
-    return true;
+    return chunk_residuals(rs_, first_, count_, z[0], r,
+                           jacobians && jacobians[0] ? jacobians[0] : nullptr);
   }
 
  private:
-  const Setup* setup_;
+  ResidualSetup rs_;
   int first_, count_;
-  const std::vector<int>* free_;
-  const Eigen::VectorXd* held_;
-  const std::vector<double>* free_typical_;
-  const std::vector<std::unique_ptr<ceres::LossFunction>>* losses_;
+};
+
+/// Every measurement as one block of nf + 1 residuals r' with Jacobian J' (nf + 1 x nf) such
+/// that J'^T J' = J^T J, J'^T r' = J^T r and |r'|^2 = |r|^2 for the 3N residuals r and their
+/// Jacobian J of chunk_residuals: the cost, its gradient and the Gauss-Newton model of every
+/// Levenberg-Marquardt step are those of the full problem, so the iterates are the same, but
+/// Ceres's passes over the tall Jacobian (copies, validity checks, column scaling, products)
+/// become passes over nf + 1 rows. From the eigen-decomposition J^T J = V L V^T: J' = [L^1/2
+/// V^T; 0], r' = [L^-1/2 V^T J^T r; sqrt(|r|^2 - |that|^2)] (directions of eigenvalue below
+/// 1e-13 of the largest, round-off of J^T J, are left out of r'). Without the Jacobian, r' =
+/// (0, .., 0, |r|). For tall problems only, where Ceres would form J^T J anyway.
+class CompressedResidual final : public ceres::CostFunction {
+ public:
+  static constexpr int kChunk = 256;  ///< measurements per pass of chunk_residuals
+  CompressedResidual(const ResidualSetup& rs, int rows) : rs_(rs), rows_(rows) {
+    const int nf = static_cast<int>(rs.free->size());
+    set_num_residuals(nf + 1);
+    mutable_parameter_block_sizes()->push_back(nf);
+    r_.resize(3 * kChunk);
+    j_.resize(3 * kChunk, nf);
+  }
+  bool Evaluate(double const* const* z, double* r, double** jacobians) const override {
+    const int nf = static_cast<int>(rs_.free->size());
+    double* jac = jacobians && jacobians[0] ? jacobians[0] : nullptr;
+    Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(nf, nf);
+    Eigen::VectorXd grad = Eigen::VectorXd::Zero(nf);
+    double sq = 0.0;
+    for (int first = 0; first < rows_; first += kChunk) {
+      const int count = std::min(kChunk, rows_ - first);
+      if (!chunk_residuals(rs_, first, count, z[0], r_.data(), jac ? j_.data() : nullptr))
+        return false;
+      const auto rc = r_.head(3 * count);
+      sq += rc.squaredNorm();
+      if (!jac) continue;
+      const auto jc = j_.topRows(3 * count);
+      gram.selfadjointView<Eigen::Lower>().rankUpdate(jc.transpose());
+      grad.noalias() += jc.transpose() * rc;
+    }
+    Eigen::Map<Eigen::VectorXd> out(r, nf + 1);
+    out.setZero();
+    if (!jac) {
+      out(nf) = std::sqrt(sq);
+      return std::isfinite(out(nf));
+    }
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(gram);
+    if (es.info() != Eigen::Success) return false;
+    const Eigen::VectorXd& lam = es.eigenvalues();  // ascending
+    const Eigen::MatrixXd& v = es.eigenvectors();
+    Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> jout(
+        jac, nf + 1, nf);
+    jout.setZero();
+    double top = 0.0;
+    for (int i = 0; i < nf; ++i) {
+      if (!(lam(i) > 1e-13 * lam(nf - 1))) continue;
+      const double root = std::sqrt(lam(i));
+      jout.row(i) = root * v.col(i).transpose();
+      out(i) = v.col(i).dot(grad) / root;
+      top += out(i) * out(i);
+    }
+    // |r'|^2 = |r|^2 also when round-off puts the projection above the norm.
+    if (top > sq) out.head(nf) *= std::sqrt(sq / top);
+    out(nf) = std::sqrt(std::max(0.0, sq - top));
+    return std::isfinite(top) && std::isfinite(sq);
+  }
+
+ private:
+  ResidualSetup rs_;
+  int rows_;
+  mutable Eigen::VectorXd r_;
+  mutable Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> j_;
 };
 
 /// Weighted residuals e (3N, sigma units) at theta.
@@ -355,6 +422,7 @@ Eigen::MatrixXd weighted_jacobian(const Setup& s, const Eigen::VectorXd& theta) 
 /// Whether any parameter marked in `held` moves the weighted predictions at theta (column
 /// norm times its typical magnitude above 1e-9, the identifiability check's first test).
 bool held_has_effect(const Setup& s, const Eigen::VectorXd& theta, const std::vector<bool>& held) {
+  if (std::find(held.begin(), held.end(), true) == held.end()) return false;
   const int p = s.model->parameter_count();
   Eigen::VectorXd sq = Eigen::VectorXd::Zero(p);
   for (int r = 0; r < static_cast<int>(s.data->rows.size()); ++r) {
@@ -600,11 +668,17 @@ SolveOutcome solve_once(const Setup& s,
   const int n = static_cast<int>(s.data->rows.size());
   std::vector<std::unique_ptr<ceres::LossFunction>> losses(n);
   for (int r = 0; r < n; ++r) losses[r].reset(make_loss(opt.loss, loss_scale(r)));
-  constexpr int kChunk = 64;  // measurements per residual block
-  for (int r = 0; r < n; r += kChunk)
-    problem.AddResidualBlock(
-        new Residual(&s, r, std::min(kChunk, n - r), &free, &theta, &free_typical, &losses),
-        nullptr, z.data());
+  const ResidualSetup rs{&s, &free, &theta, &free_typical, &losses};
+  // Tall problems as one compressed block (Ceres would take the normal equations anyway);
+  // else chunks of 64 measurements, solved by QR.
+  const bool tall = 3 * n >= 10 * nf;
+  if (tall) {
+    problem.AddResidualBlock(new CompressedResidual(rs, n), nullptr, z.data());
+  } else {
+    constexpr int kChunk = 64;  // measurements per residual block
+    for (int r = 0; r < n; r += kChunk)
+      problem.AddResidualBlock(new Residual(rs, r, std::min(kChunk, n - r)), nullptr, z.data());
+  }
   for (int f = 0; f < nf; ++f) {
     const auto& spec = model.spec(free[f]);
     if (spec.lower > -1e299) {
@@ -617,9 +691,9 @@ SolveOutcome solve_once(const Setup& s,
     }
   }
   ceres::Solver::Options so;
-  // Normal equations for tall problems (J^T J costs a quarter of a QR of J; the
-  // Jacobi-scaled, Levenberg-Marquardt-regularised system is well conditioned), QR otherwise.
-  so.linear_solver_type = 3 * n >= 10 * nf ? ceres::DENSE_NORMAL_CHOLESKY : ceres::DENSE_QR;
+  // QR: of the nf + 1 compressed rows of a tall problem (whose J^T J is formed once per
+  // Jacobian, as the normal equations would), of the chunks' rows otherwise.
+  so.linear_solver_type = ceres::DENSE_QR;
   so.max_num_iterations = opt.max_iterations;
   so.logging_type = ceres::SILENT;
   so.minimizer_progress_to_stdout = false;
@@ -908,9 +982,9 @@ FitResult identify(const RobotModel& robot,
       Identifiability again =
           check_identifiability(model, last_jacobian, s.typical, opt.rank_tolerance);
       if (again == idf || pass == 2) break;
-      // A parameter held so far became visible (or the reverse): solve again from here.
-      for (int k = 0; k < p; ++k)
-        if (idf.fixed[k] && !again.fixed[k]) theta(k) = std::max(theta(k), model.spec(k).start);
+      // A parameter held so far became visible (or the reverse): solve again from here, a
+      // freed parameter from the value it was held at (theta unchanged: the Jacobians cached
+      // at this point serve the next solve's first iteration).
       idf = again;
     }
   };

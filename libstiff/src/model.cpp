@@ -338,8 +338,7 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
     s.jac_load.resize(6, 0);
   }
   s.tau.resize(n);
-  double jm[kMax][3];      // J_p(P) translational columns
-  double wmv[kMax][3][S];  // their derivative parts when the points moved
+  double jm[kMax][3];  // J_p(P) translational columns
   for (int j = 0; j < n; ++j) {
     const double* z = c.chain.axis.data() + 3 * j;
     const double* o = c.chain.origin.data() + 3 * j;
@@ -352,18 +351,13 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
     for (int k = 0; k < 3; ++k) jm[j][k] = wm[k];
     const double tau =
         (wl[0] * f[0] + wl[1] * f[1] + wl[2] * f[2]) + (z[0] * mo[0] + z[1] * mo[1] + z[2] * mo[2]);
-    double tv[S], wlv[3][S];
-    for (int i = 0; i < S; ++i) tv[i] = 0.0;
+    Vec tv = Vec::Zero();
     if (moved) {
-      for (int i = 0; i < S; ++i) {
-        wmv[j][0][i] = z[1] * pmv[2][i] - z[2] * pmv[1][i];
-        wmv[j][1][i] = z[2] * pmv[0][i] - z[0] * pmv[2][i];
-        wmv[j][2][i] = z[0] * pmv[1][i] - z[1] * pmv[0][i];
-        wlv[0][i] = z[1] * plv[2][i] - z[2] * plv[1][i];
-        wlv[1][i] = z[2] * plv[0][i] - z[0] * plv[2][i];
-        wlv[2][i] = z[0] * plv[1][i] - z[1] * plv[0][i];
-        tv[i] += wlv[0][i] * f[0] + wlv[1][i] * f[1] + wlv[2][i] * f[2];
-      }
+      // (z x L') . F = L' . (F x z): one dot product per derivative instead of a cross product.
+      const double fz[3] = {f[1] * z[2] - f[2] * z[1], f[2] * z[0] - f[0] * z[2],
+                            f[0] * z[1] - f[1] * z[0]};
+      tv = fz[0] * Eigen::Map<const Vec>(plv[0]) + fz[1] * Eigen::Map<const Vec>(plv[1]) +
+           fz[2] * Eigen::Map<const Vec>(plv[2]);
     }
     if (wrench_moved)
       for (int i = 0; i < S; ++i)
@@ -371,39 +365,52 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
                  (mv[0][i] * z[0] + mv[1][i] * z[1] + mv[2][i] * z[2]);
     if (jet_jacobians_) {
       for (int k = 0; k < 3; ++k) {
-        s.jac_meas(k, j) = moved ? Jet(wm[k], Eigen::Map<const Vec>(wmv[j][k])) : Jet(wm[k]);
-        s.jac_load(k, j) = moved ? Jet(wl[k], Eigen::Map<const Vec>(wlv[k])) : Jet(wl[k]);
+        const int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        Vec wmv, wlv;  // derivative parts of z x P and z x L
+        for (int i = 0; i < S; ++i) {
+          wmv(i) = z[k1] * pmv[k2][i] - z[k2] * pmv[k1][i];
+          wlv(i) = z[k1] * plv[k2][i] - z[k2] * plv[k1][i];
+        }
+        s.jac_meas(k, j) = Jet(wm[k], wmv);
+        s.jac_load(k, j) = Jet(wl[k], wlv);
         s.jac_meas(3 + k, j) = Jet(z[k]);
         s.jac_load(3 + k, j) = Jet(z[k]);
       }
     }
-    s.tau(j) = Jet(tau, Eigen::Map<const Vec>(tv));
+    s.tau(j) = Jet(tau, tv);
   }
   s.dtheta.resize(n);
   for (int j = 0; j < n; ++j) s.dtheta(j) = Jet(0.0);
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->joint(theta + offsets_[e], s);
-  // d = J_p dtheta, rot = J_r dtheta as small products of the values and derivative parts.
-  double da[3] = {0, 0, 0}, ra[3] = {0, 0, 0}, dv[3][S], rv[3][S];
-  for (int k = 0; k < 3; ++k)
-    for (int i = 0; i < S; ++i) dv[k][i] = rv[k][i] = 0.0;
+  // d = J_p dtheta, rot = J_r dtheta as small products of the values and derivative parts
+  // (fixed-size vectors: GCC left the same loops over [3][S] arrays scalar).
+  double da[3] = {0, 0, 0}, ra[3] = {0, 0, 0};
+  Vec dv[3], rv[3];
+  for (int k = 0; k < 3; ++k) {
+    dv[k].setZero();
+    rv[k].setZero();
+  }
   for (int j = 0; j < n; ++j) {
     const double dt = s.dtheta(j).a;
-    const double* dtv = s.dtheta(j).v.data();
+    const Vec& dtv = s.dtheta(j).v;
     const double* z = c.chain.axis.data() + 3 * j;
     for (int k = 0; k < 3; ++k) {
       da[k] += jm[j][k] * dt;
       ra[k] += z[k] * dt;
-      for (int i = 0; i < S; ++i) {
-        dv[k][i] += jm[j][k] * dtv[i];
-        rv[k][i] += z[k] * dtv[i];
-      }
-      if (moved)
-        for (int i = 0; i < S; ++i) dv[k][i] += dt * wmv[j][k][i];
+      dv[k] += jm[j][k] * dtv;
+      rv[k] += z[k] * dtv;
     }
   }
+  if (moved) {
+    // Moving P adds sum_j dtheta_j (z_j x P') = rot x P': one cross product for all joints.
+    const Eigen::Map<const Vec> p0(pmv[0]), p1(pmv[1]), p2(pmv[2]);
+    dv[0] += ra[1] * p2 - ra[2] * p1;
+    dv[1] += ra[2] * p0 - ra[0] * p2;
+    dv[2] += ra[0] * p1 - ra[1] * p0;
+  }
   for (int k = 0; k < 3; ++k) {
-    s.d(k) = Jet(da[k], Eigen::Map<const Vec>(dv[k]));
-    s.rot(k) = Jet(ra[k], Eigen::Map<const Vec>(rv[k]));
+    s.d(k) = Jet(da[k], dv[k]);
+    s.rot(k) = Jet(ra[k], rv[k]);
   }
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->cartesian(theta + offsets_[e], s);
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);

@@ -55,43 +55,52 @@ class LinkCompliance : public EffectT<LinkCompliance> {
   template <typename T>
   void cartesian_t(const T* p, EvalState<T>& s) const {
     const auto& chain = s.context->chain;
-    // Points and wrench without derivatives (a pass that differentiates other parameters):
-    // torques and lever arms are plain numbers.
-    const bool wrench_fixed = effects::constant(s.force) && effects::constant(s.moment);
-    const bool fixed = wrench_fixed && effects::constant(s.p_load) && effects::constant(s.p_meas);
-    for (size_t k = 0; k < springs_.size(); ++k) {
+    // The spring axis u and origin o do not depend on the parameters: kept in double so that
+    // automatic differentiation only carries derivatives where they can be non-zero.
+    const auto axis = [&](size_t k, Eigen::Vector3d& u, Eigen::Vector3d& o) {
       const int i = springs_[k].link;
-      // The spring axis and origin do not depend on the parameters: keep them in double so
-      // that automatic differentiation only carries derivatives where they can be non-zero.
-      const Eigen::Vector3d u = chain.link[i].template block<3, 3>(0, 0) * springs_[k].axis;
-      const Eigen::Vector3d o = chain.origin.col(i);
-      if (fixed) {
-        const Eigen::Vector3d f = effects::value(s.force), m = effects::value(s.moment);
-        const double torque = cross(u, effects::value(s.p_load), o).dot(f) +
-                              (m(0) * u(0) + m(1) * u(1) + m(2) * u(2));
-        const T angle = p[k] * torque;
-        const Eigen::Vector3d lever = cross(u, effects::value(s.p_meas), o);
-        for (int r = 0; r < 3; ++r) {
-          s.d(r) += angle * lever(r);
-          s.rot(r) += angle * u(r);
-        }
-        continue;
+      u = chain.link[i].template block<3, 3>(0, 0) * springs_[k].axis;
+      o = chain.origin.col(i);
+    };
+    Eigen::Vector3d u, o;
+    const bool wrench_fixed = effects::constant(s.force) && effects::constant(s.moment);
+    if (wrench_fixed && effects::constant(s.p_load) && effects::constant(s.p_meas)) {
+      // Points and wrench without derivatives (a pass that differentiates other parameters):
+      // torques and lever arms are plain numbers.
+      const Eigen::Vector3d f = effects::value(s.force), m = effects::value(s.moment);
+      const Eigen::Vector3d pl = effects::value(s.p_load), pm = effects::value(s.p_meas);
+      for (size_t k = 0; k < springs_.size(); ++k) {
+        axis(k, u, o);
+        const T angle = p[k] * (cross(u, pl, o).dot(f) + m.dot(u));
+        effects::add_scaled(s.d, angle, cross(u, pm, o));
+        effects::add_scaled(s.rot, angle, u);
       }
+      return;
+    }
+    // The springs' sum c_v t_v (u_v x (P - o_v)) is w x P - sum c_v t_v (u_v x o_v) with
+    // w = sum c_v t_v u_v (their rotation): one product with P for all springs.
+    Vector3<T> w = Vector3<T>::Zero(), wo = Vector3<T>::Zero();
+    for (size_t k = 0; k < springs_.size(); ++k) {
+      axis(k, u, o);
       T torque;
       if (wrench_fixed) {
-        // (u x (L - o)) . F = (L - o) . (F x u): derivatives only through L.
+        // (u x (L - o)) . F = L . (F x u) - o . (F x u): derivatives only through L.
         const Eigen::Vector3d f = effects::value(s.force), m = effects::value(s.moment);
         const Eigen::Vector3d a = f.cross(u);
-        torque = (s.p_load(0) - o(0)) * a(0) + (s.p_load(1) - o(1)) * a(1) +
-                 (s.p_load(2) - o(2)) * a(2) + (m(0) * u(0) + m(1) * u(1) + m(2) * u(2));
+        torque = effects::dot(s.p_load, a) + (m.dot(u) - o.dot(a));
       } else {
         torque = cross(u, s.p_load, o).dot(s.force) +
                  (s.moment(0) * u(0) + s.moment(1) * u(1) + s.moment(2) * u(2));
       }
       const T angle = p[k] * torque;
-      s.d += angle * cross(u, s.p_meas, o);
-      for (int r = 0; r < 3; ++r) s.rot(r) += angle * u(r);
+      effects::add_scaled(w, angle, u);
+      effects::add_scaled(wo, angle, u.cross(o));
     }
+    const Vector3<T>& pm = s.p_meas;
+    s.d(0) += w(1) * pm(2) - w(2) * pm(1) - wo(0);
+    s.d(1) += w(2) * pm(0) - w(0) * pm(2) - wo(1);
+    s.d(2) += w(0) * pm(1) - w(1) * pm(0) - wo(2);
+    s.rot += w;
   }
 
  private:

@@ -41,11 +41,28 @@ inline ParameterSpec parameter(std::string name,
 /// differentiation that does not move it.
 inline bool constant(const Vector3<double>&) { return true; }
 inline bool constant(const Vector3<Jet>& v) {
-  return v(0).v.isZero(0.0) && v(1).v.isZero(0.0) && v(2).v.isZero(0.0);
+  // Exact zeros (a NaN is not one), as isZero(0.0) but without its per-element abs.
+  return (v(0).v.array() == 0.0).all() && (v(1).v.array() == 0.0).all() &&
+         (v(2).v.array() == 0.0).all();
 }
 /// The values of v.
 inline Eigen::Vector3d value(const Vector3<double>& v) { return v; }
 inline Eigen::Vector3d value(const Vector3<Jet>& v) { return {v(0).a, v(1).a, v(2).a}; }
+
+/// a . b for a constant vector b, and y += x b: one pass over a Jet's derivative part instead
+/// of a Jet temporary per product and sum.
+inline double dot(const Vector3<double>& a, const Eigen::Vector3d& b) { return a.dot(b); }
+inline Jet dot(const Vector3<Jet>& a, const Eigen::Vector3d& b) {
+  return Jet(a(0).a * b(0) + a(1).a * b(1) + a(2).a * b(2),
+             a(0).v * b(0) + a(1).v * b(1) + a(2).v * b(2));
+}
+inline void add_scaled(Vector3<double>& y, double x, const Eigen::Vector3d& b) { y += x * b; }
+inline void add_scaled(Vector3<Jet>& y, const Jet& x, const Eigen::Vector3d& b) {
+  for (int r = 0; r < 3; ++r) {
+    y(r).a += x.a * b(r);
+    y(r).v += x.v * b(r);
+  }
+}
 
 /// Flange rotation R_06 (flange frame -> base frame) of the measurement's configuration.
 template <typename T>
