@@ -135,11 +135,10 @@ struct CandidatePool {
   std::vector<double> packed_load_jacobian;
   std::vector<double> weight2;
   std::vector<double> packed_force;
-  /// Kernel data written by finalize() when it fits in 4 MB (about 3.5e4 elements at m = 5):
-  /// per element the packed lower triangle of A_e^T A_e / sigma_e^2 (m (m + 1) / 2 doubles,
-  /// row-major: entry (k, l), l <= k, at k (k + 1) / 2 + l). Empty above that budget (a larger
-  /// table misses the cache and is slower than recomputing); the kernels then compute it from
-  /// the per-pose data, with the same values bit for bit.
+  /// Kernel data written by finalize() when it fits in 64 MB (1e5 elements up to m = 10): per
+  /// element the packed lower triangle of A_e^T A_e / sigma_e^2 (m (m + 1) / 2 doubles,
+  /// row-major: entry (k, l), l <= k, at k (k + 1) / 2 + l). Empty above that budget; the
+  /// kernels then compute it from the per-pose data, with the same values bit for bit.
   std::vector<double> packed_element_information;
 
   int size() const { return static_cast<int>(element_pose.size()); }
