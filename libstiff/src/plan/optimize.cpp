@@ -171,17 +171,17 @@ struct Anneal {
     // m = 5) the row arrives while earlier steps run. A candidate is uniform over the pool and
     // independent of the state, and one already in the set is skipped when used, so the
     // proposals are distributed exactly as with drawing at the time of use.
-    constexpr int kAhead = 8;
+    constexpr int kAhead = 8;  // a power of two
     uint32_t ahead[kAhead];
     int ahead_at = 0;
-    for (uint32_t& a : ahead) {
-      a = fast_index(rng, static_cast<uint32_t>(P));
-      K.prefetch(static_cast<int>(a));
-    }
+    auto draw_ahead = [&](uint32_t& slot) {
+      slot = fast_index(rng, static_cast<uint32_t>(P));
+      K.prefetch(static_cast<int>(slot));
+    };
+    for (uint32_t& a : ahead) draw_ahead(a);
     auto next_candidate = [&]() {
       const int e = static_cast<int>(ahead[ahead_at]);
-      ahead[ahead_at] = fast_index(rng, static_cast<uint32_t>(P));
-      K.prefetch(static_cast<int>(ahead[ahead_at]));
+      draw_ahead(ahead[ahead_at]);
       ahead_at = (ahead_at + 1) & (kAhead - 1);
       return e;
     };

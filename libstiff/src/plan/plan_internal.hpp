@@ -195,27 +195,35 @@ struct ExponentialZiggurat {
 };
 inline const ExponentialZiggurat kExponentialZiggurat;
 
+/// One draw of the ziggurat: layer i from the low 8 bits, abscissa x = u x_i from the high 53.
+struct ZigguratPoint {
+  int i;
+  double x;
+  /// Inside the layer's rectangle, under the density: x is the variate.
+  bool inside() const { return x < kExponentialZiggurat.x[i + 1]; }
+};
+STIFF_ALWAYS_INLINE inline ZigguratPoint ziggurat_point(Xoshiro256pp& rng) {
+  const uint64_t bits = rng();
+  const int i = static_cast<int>(bits & 0xff);
+  return {i, static_cast<double>(bits >> 11) * 0x1.0p-53 * kExponentialZiggurat.x[i]};
+}
+
 // The tail (memoryless: r + E) and the wedges of the ziggurat.
-STIFF_NOINLINE inline double exponential_slow(Xoshiro256pp& rng, int i, double x) {
-  const ExponentialZiggurat& z = kExponentialZiggurat;
+STIFF_NOINLINE inline double exponential_slow(Xoshiro256pp& rng, ZigguratPoint z) {
+  const ExponentialZiggurat& t = kExponentialZiggurat;
   for (;;) {
-    if (i == 0) return z.r - std::log(rng.uniform_open());
-    if (z.f[i] + (z.f[i + 1] - z.f[i]) * (1.0 - rng.uniform_open()) < std::exp(-x)) return x;
-    const uint64_t bits = rng();
-    i = static_cast<int>(bits & 0xff);
-    x = static_cast<double>(bits >> 11) * 0x1.0p-53 * z.x[i];
-    if (x < z.x[i + 1]) return x;
+    if (z.i == 0) return t.r - std::log(rng.uniform_open());
+    const double y = t.f[z.i] + (t.f[z.i + 1] - t.f[z.i]) * (1.0 - rng.uniform_open());
+    if (y < std::exp(-z.x)) return z.x;
+    z = ziggurat_point(rng);
+    if (z.inside()) return z.x;
   }
 }
 
 /// E ~ Exp(1).
 STIFF_ALWAYS_INLINE inline double standard_exponential(Xoshiro256pp& rng) {
-  const ExponentialZiggurat& z = kExponentialZiggurat;
-  const uint64_t bits = rng();
-  const int i = static_cast<int>(bits & 0xff);  // layer; the 53 high bits give the abscissa
-  const double x = static_cast<double>(bits >> 11) * 0x1.0p-53 * z.x[i];
-  if (x < z.x[i + 1]) return x;  // inside the layer's rectangle, under the density
-  return exponential_slow(rng, i, x);
+  const ZigguratPoint z = ziggurat_point(rng);
+  return z.inside() ? z.x : exponential_slow(rng, z);
 }
 
 // The rare rejection branch of fast_index, out of line so that its division is not hoisted.
@@ -516,9 +524,9 @@ inline double cost_of(Crit id, double s) {
 }
 
 // ------------------------------------------------------------------------------------------
-// Closed form for the annealing's serial loop. Each Metropolis decision depends on the
-// previous one, so the annealing is bound by the latency of one evaluation as much as by its
-// instruction count, and the Cholesky above is a chain of m square roots and m divisions. For
+// Closed form for the annealing's serial loop, where the criterion is evaluated once per step:
+// the Cholesky above is a chain of m square roots and m divisions and about twice the
+// instructions. For
 // m <= 6 the closed form below splits M = [A B; B^T D] with blocks of at most 3 x 3 and uses
 // the Schur complement S = D - B^T A^-1 B (block inversion; Golub & Van Loan, Matrix
 // Computations, 4th ed., section 3.2.11; Horn & Johnson, Matrix Analysis, 0.8.5):
