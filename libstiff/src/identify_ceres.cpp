@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstring>
 #include <functional>
+#include <map>
 #include <memory>
 #include <sstream>
 
@@ -50,17 +51,27 @@ struct Setup;
 /// Jacobian at a trial point in its line search and again when it accepts it, the cost there
 /// in between, and the identifiability check and the statistics want the Jacobian at the
 /// solution, where the minimizer last evaluated it. Each row keeps its last two evaluations
-/// (theta, d and, when asked for, dd/dtheta for every parameter or for one column set). A model
+/// (d and, when asked for, dd/dtheta for every parameter or for one column set), tagged with
+/// the key of their theta: the recent distinct thetas get keys (key()), so that a row stores
+/// and compares one number instead of a copy of theta (rows then stream less memory). A model
 /// made only of linear effects (Effect::linear) predicts d affine in theta: after one Jacobian
 /// evaluation per row, d and its derivatives follow without the model.
 class Evaluations {
  public:
+  /// A parameter vector and its key.
+  struct Key {
+    const double* theta;
+    unsigned id;
+  };
   void init(const Setup* s, int rows, int p, bool linear);
+  /// The key of theta (its contents: equal vectors have equal keys while they are among the
+  /// kKeys most recent distinct ones; an older one gets a new key and misses the cache).
+  Key key(const double* theta);
   /// d and, with `cols` (a list owned by the caller and stable while cached), the derivatives
-  /// dd/dtheta(k) (3 per column, column-major) of row `row` at theta. `*jcols` says which
+  /// dd/dtheta(k) (3 per column, column-major) of row `row` at key.theta. `*jcols` says which
   /// columns `*jac` holds: `cols` itself or all() (every parameter).
   void get(int row,
-           const double* theta,
+           const Key& key,
            const std::vector<int>* cols,
            const double** d,
            const double** jac,
@@ -68,15 +79,17 @@ class Evaluations {
   const std::vector<int>& all() const { return all_; }
 
  private:
-  int find(int row, const double* theta, const std::vector<int>* cols) const;
-  double* theta_at(int slot, int row) { return theta_.data() + (2 * row + slot) * p_; }
+  static constexpr int kKeys = 16;
   const Setup* s_ = nullptr;
   int p_ = 0;
   bool linear_ = false;
   std::vector<int> all_;
-  std::vector<double> ones_, theta_, d_, jac_;
-  std::vector<const std::vector<int>*> cols_;  ///< per slot: nullptr (value only), &all_, list
+  std::vector<double> keys_;  ///< kKeys thetas, slot id % kKeys holds key id
+  unsigned next_ = 1;         ///< next key (0: empty)
+  std::vector<double> d_, jac_;
+  std::vector<unsigned> id_;                   ///< per slot: key of its theta, 0 empty
   std::vector<char> used_;                     ///< per slot: 0 empty, else recency 1 or 2
+  std::vector<const std::vector<int>*> cols_;  ///< per slot: nullptr (value only), &all_, list
   std::vector<char> ref_;                      ///< per row: linear model's reference present
   std::vector<double> ref_theta_, ref_d_, ref_jac_;
 };
@@ -97,14 +110,17 @@ struct Setup {
 };
 
 /// Derivatives of the predicted displacement of measurement `row` with respect to
-/// theta(cols[i]) * scale[i], by kJetStride parameters per pass of
+/// theta(cols[i]) * scale[i] (scale null: ones), by kJetStride parameters per pass of
 /// DeflectionModel::evaluate_jet; `theta` is the full parameter vector. Writes d (3) and the
-/// 3 x cols.size() derivatives (column-major, leading dimension 3) into `out`.
+/// 3 x cols.size() derivatives (column-major, leading dimension 3) into `out`. With `every`
+/// (cols lists every parameter, no scale) of an analytic model, the passes differentiate only
+/// its jet_parameters() and the other columns come from DeflectionModel::analytic_columns.
 void displacement_and_jacobian(const Setup& s,
                                int row,
                                const double* theta,
                                const std::vector<int>& cols,
                                const double* scale,
+                               bool every,
                                Eigen::Vector3d& d,
                                double* out) {
   const DeflectionModel& model = *s.model;
@@ -112,25 +128,24 @@ void displacement_and_jacobian(const Setup& s,
   auto& t = s.theta_jet;
   t.resize(p);
   for (int k = 0; k < p; ++k) t[k] = Jet(theta[k]);
-  const int nc = static_cast<int>(cols.size());
+  const bool analytic = every && model.analytic();
+  const std::vector<int>& jc = analytic ? model.jet_parameters() : cols;
+  const int nc = static_cast<int>(jc.size());
   const Measurement& m = s.data->rows[row];
   Vector3<Jet> dj;
-  if (nc == 0) {
-    model.evaluate_jet(t.data(), m, s.ctx[row], s.scratch, &dj);
-    for (int k = 0; k < 3; ++k) d(k) = dj(k).a;
-    return;
-  }
+  if (nc == 0) model.evaluate_jet(t.data(), m, s.ctx[row], s.scratch, &dj);
   for (int first = 0; first < nc; first += kJetStride) {
     const int last = std::min(nc, first + kJetStride);
-    for (int i = first; i < last; ++i) t[cols[i]].v(i - first) = scale[i];
+    for (int i = first; i < last; ++i) t[jc[i]].v(i - first) = scale ? scale[i] : 1.0;
     model.evaluate_jet(t.data(), m, s.ctx[row], s.scratch, &dj);
     for (int i = first; i < last; ++i) {
-      t[cols[i]].v(i - first) = 0.0;
-      for (int k = 0; k < 3; ++k) out[3 * i + k] = dj(k).v(i - first);
+      t[jc[i]].v(i - first) = 0.0;
+      double* o = out + 3 * (analytic ? jc[i] : i);
+      for (int k = 0; k < 3; ++k) o[k] = dj(k).v(i - first);
     }
-    if (first == 0)
-      for (int k = 0; k < 3; ++k) d(k) = dj(k).a;
   }
+  for (int k = 0; k < 3; ++k) d(k) = dj(k).a;
+  if (analytic) model.analytic_columns(s.scratch, s.dscratch, out);
 }
 
 void Evaluations::init(const Setup* s, int rows, int p, bool linear) {
@@ -139,12 +154,13 @@ void Evaluations::init(const Setup* s, int rows, int p, bool linear) {
   linear_ = linear;
   all_.resize(p);
   for (int k = 0; k < p; ++k) all_[k] = k;
-  ones_.assign(p, 1.0);
-  theta_.assign(2 * static_cast<size_t>(rows) * p, 0.0);
+  keys_.assign(static_cast<size_t>(kKeys) * p, 0.0);
+  next_ = 1;
   d_.assign(6 * static_cast<size_t>(rows), 0.0);
   jac_.assign(6 * static_cast<size_t>(rows) * p, 0.0);
-  cols_.assign(2 * static_cast<size_t>(rows), nullptr);
+  id_.assign(2 * static_cast<size_t>(rows), 0);
   used_.assign(2 * static_cast<size_t>(rows), 0);
+  cols_.assign(2 * static_cast<size_t>(rows), nullptr);
   if (linear) {
     ref_.assign(rows, 0);
     ref_theta_.assign(static_cast<size_t>(rows) * p, 0.0);
@@ -153,31 +169,36 @@ void Evaluations::init(const Setup* s, int rows, int p, bool linear) {
   }
 }
 
-int Evaluations::find(int row, const double* theta, const std::vector<int>* cols) const {
-  for (int slot = 0; slot < 2; ++slot) {
-    const size_t i = 2 * static_cast<size_t>(row) + slot;
-    if (!used_[i] || std::memcmp(theta, theta_.data() + i * p_, p_ * sizeof(double)) != 0) continue;
-    if (!cols || cols_[i] == &all_ || cols_[i] == cols) return slot;
-  }
-  return -1;
+Evaluations::Key Evaluations::key(const double* theta) {
+  const unsigned oldest = next_ > kKeys ? next_ - kKeys : 1;
+  for (unsigned id = next_; id-- > oldest;)  // the most recent first
+    if (std::memcmp(theta, keys_.data() + (id % kKeys) * p_, p_ * sizeof(double)) == 0)
+      return {theta, id};
+  const unsigned id = next_++;
+  std::copy(theta, theta + p_, keys_.data() + (id % kKeys) * p_);
+  return {theta, id};
 }
 
 void Evaluations::get(int row,
-                      const double* theta,
+                      const Key& key,
                       const std::vector<int>* cols,
                       const double** d,
                       const double** jac,
                       const std::vector<int>** jcols) {
   const size_t r2 = 2 * static_cast<size_t>(row);
-  int slot = find(row, theta, cols);
+  const double* theta = key.theta;
+  int slot = -1;
+  for (int k = 0; k < 2 && slot < 0; ++k)
+    if (id_[r2 + k] == key.id && (!cols || cols_[r2 + k] == &all_ || cols_[r2 + k] == cols))
+      slot = k;
   if (slot < 0) {
     // Replace the entry at this theta (it lacks the columns) or else the older one.
-    slot = -1;
-    for (int k = 0; k < 2 && slot < 0; ++k)
-      if (used_[r2 + k] &&
-          std::memcmp(theta, theta_.data() + (r2 + k) * p_, p_ * sizeof(double)) == 0)
-        slot = k;
-    if (slot < 0) slot = used_[r2] <= used_[r2 + 1] ? 0 : 1;
+    if (id_[r2] == key.id)
+      slot = 0;
+    else if (id_[r2 + 1] == key.id)
+      slot = 1;
+    else
+      slot = used_[r2] <= used_[r2 + 1] ? 0 : 1;
     const size_t i = r2 + slot;
     double* dd = d_.data() + 3 * i;
     double* jj = jac_.data() + 3 * i * p_;
@@ -195,10 +216,10 @@ void Evaluations::get(int row,
     } else if (cols || linear_) {
       // Every column when that takes no more passes of the model than the ones asked for.
       const int want = cols ? static_cast<int>(cols->size()) : 0;
-      const bool every =
-          linear_ || (p_ + kJetStride - 1) / kJetStride <= (want + kJetStride - 1) / kJetStride;
+      const int passes = static_cast<int>(s_->model->jet_parameters().size()) + kJetStride - 1;
+      const bool every = linear_ || passes / kJetStride <= (want + kJetStride - 1) / kJetStride;
       const std::vector<int>& c = every ? all_ : *cols;
-      displacement_and_jacobian(*s_, row, theta, c, ones_.data(), dv, jj);
+      displacement_and_jacobian(*s_, row, theta, c, nullptr, every, dv, jj);
       cols_[i] = every ? &all_ : cols;
       if (linear_) {
         ref_[row] = 1;
@@ -213,7 +234,7 @@ void Evaluations::get(int row,
       cols_[i] = nullptr;
     }
     std::copy(dv.data(), dv.data() + 3, dd);
-    std::copy(theta, theta + p_, theta_.data() + i * p_);
+    id_[i] = key.id;
   }
   const size_t i = r2 + slot;
   used_[i] = 2;
@@ -230,7 +251,7 @@ struct ResidualSetup {
   const std::vector<int>* free;
   const Eigen::VectorXd* held;
   const std::vector<double>* free_typical;
-  const std::vector<std::unique_ptr<ceres::LossFunction>>* losses;
+  const std::vector<const ceres::LossFunction*>* losses;  ///< per row, may be null
 };
 
 /// Residuals of measurements first .. first + count - 1 over the free parameters in scaled
@@ -250,13 +271,14 @@ bool chunk_residuals(
   auto& theta = s.theta_double;
   theta.assign(rs.held->data(), rs.held->data() + p);
   for (int f = 0; f < nf; ++f) theta[free[f]] = z[f] * s.typical(free[f]);
+  const Evaluations::Key key = s.eval.key(theta.data());
   for (int i = 0; i < count; ++i) {
     const int row = first + i;
     const Measurement& m = s.data->rows[row];
     const double w = s.row_weight(row);
     const double *d = nullptr, *jrow = nullptr;
     const std::vector<int>* jcols = nullptr;
-    s.eval.get(row, theta.data(), jac ? &free : nullptr, &d, &jrow, &jcols);
+    s.eval.get(row, key, jac ? &free : nullptr, &d, &jrow, &jcols);
     double* ri = r + 3 * i;
     for (int k = 0; k < 3; ++k) ri[k] = (m.displacement(k) - d[k]) * w;
     const double sq = ri[0] * ri[0] + ri[1] * ri[1] + ri[2] * ri[2];
@@ -264,7 +286,7 @@ bool chunk_residuals(
     if (!std::isfinite(sq)) return false;
     // Robust scaling a = sqrt(rho(s) / s) and da/ds (limits at s = 0).
     double a = 1.0, da = 0.0;
-    const ceres::LossFunction* loss = (*rs.losses)[row].get();
+    const ceres::LossFunction* loss = (*rs.losses)[row];
     if (loss) {
       double rho[3];
       loss->Evaluate(sq, rho);
@@ -396,9 +418,10 @@ class CompressedResidual final : public ceres::CostFunction {
 Eigen::VectorXd weighted_residuals(const Setup& s, const Eigen::VectorXd& theta) {
   const int n = static_cast<int>(s.data->rows.size());
   Eigen::VectorXd e(3 * n);
+  const Evaluations::Key key = s.eval.key(theta.data());
   for (int r = 0; r < n; ++r) {
     const double* d = nullptr;
-    s.eval.get(r, theta.data(), nullptr, &d, nullptr, nullptr);
+    s.eval.get(r, key, nullptr, &d, nullptr, nullptr);
     e.segment<3>(3 * r) =
         (s.data->rows[r].displacement - Eigen::Map<const Eigen::Vector3d>(d)) * s.row_weight(r);
   }
@@ -410,9 +433,10 @@ Eigen::MatrixXd weighted_jacobian(const Setup& s, const Eigen::VectorXd& theta) 
   const int n = static_cast<int>(s.data->rows.size());
   const int p = s.model->parameter_count();
   Eigen::MatrixXd j(3 * n, p);
+  const Evaluations::Key key = s.eval.key(theta.data());
   for (int r = 0; r < n; ++r) {
     const double *d = nullptr, *jac = nullptr;
-    s.eval.get(r, theta.data(), &s.eval.all(), &d, &jac, nullptr);
+    s.eval.get(r, key, &s.eval.all(), &d, &jac, nullptr);
     j.middleRows(3 * r, 3) =
         Eigen::Map<const Eigen::Matrix<double, 3, Eigen::Dynamic>>(jac, 3, p) * s.row_weight(r);
   }
@@ -425,9 +449,10 @@ bool held_has_effect(const Setup& s, const Eigen::VectorXd& theta, const std::ve
   if (std::find(held.begin(), held.end(), true) == held.end()) return false;
   const int p = s.model->parameter_count();
   Eigen::VectorXd sq = Eigen::VectorXd::Zero(p);
+  const Evaluations::Key key = s.eval.key(theta.data());
   for (int r = 0; r < static_cast<int>(s.data->rows.size()); ++r) {
     const double *d = nullptr, *jac = nullptr;
-    s.eval.get(r, theta.data(), &s.eval.all(), &d, &jac, nullptr);
+    s.eval.get(r, key, &s.eval.all(), &d, &jac, nullptr);
     const double w2 = s.row_weight(r) * s.row_weight(r);
     for (int k = 0; k < p; ++k)
       if (held[k])
@@ -666,8 +691,18 @@ SolveOutcome solve_once(const Setup& s,
   for (int f = 0; f < nf; ++f) free_typical[f] = s.typical(free[f]);
   ceres::Problem problem;
   const int n = static_cast<int>(s.data->rows.size());
-  std::vector<std::unique_ptr<ceres::LossFunction>> losses(n);
-  for (int r = 0; r < n; ++r) losses[r].reset(make_loss(opt.loss, loss_scale(r)));
+  // One loss per distinct scale, shared by its rows (no object per row to fetch).
+  std::vector<std::unique_ptr<ceres::LossFunction>> owned;
+  std::map<double, const ceres::LossFunction*> by_scale;
+  std::vector<const ceres::LossFunction*> losses(n);
+  for (int r = 0; r < n; ++r) {
+    auto it = by_scale.find(loss_scale(r));
+    if (it == by_scale.end()) {
+      owned.emplace_back(make_loss(opt.loss, loss_scale(r)));
+      it = by_scale.emplace(loss_scale(r), owned.back().get()).first;
+    }
+    losses[r] = it->second;
+  }
   const ResidualSetup rs{&s, &free, &theta, &free_typical, &losses};
   // Tall problems as one compressed block (Ceres would take the normal equations anyway);
   // else chunks of 64 measurements, solved by QR.
@@ -759,7 +794,7 @@ Eigen::VectorXd cost_gradient(const Setup& s,
   Eigen::Matrix<double, 3, Eigen::Dynamic> blk(3, nc);
   Eigen::Vector3d d;
   for (int r = 0; r < static_cast<int>(s.data->rows.size()); ++r) {
-    displacement_and_jacobian(s, r, theta.data(), cols, scale.data(), d, blk.data());
+    displacement_and_jacobian(s, r, theta.data(), cols, scale.data(), false, d, blk.data());
     const double w = s.row_weight(r);
     const Eigen::Vector3d e = (s.data->rows[r].displacement - d) * w;
     double rho[3] = {0, 1, 0};
@@ -912,9 +947,10 @@ FitResult identify(const RobotModel& robot,
   const double stated = stated_noise_m(data);
   s.row_weight.resize(n);
   Eigen::VectorXd raw(3 * n);
+  const Evaluations::Key start_key = s.eval.key(theta.data());
   for (int r = 0; r < n; ++r) {
     const double* d = nullptr;
-    s.eval.get(r, theta.data(), nullptr, &d, nullptr, nullptr);
+    s.eval.get(r, start_key, nullptr, &d, nullptr, nullptr);
     raw.segment<3>(3 * r) = data.rows[r].displacement - Eigen::Map<const Eigen::Vector3d>(d);
   }
   double robust_sigma = 0;

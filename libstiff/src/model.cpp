@@ -58,6 +58,17 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
     count_ += e->size();
     effects_.push_back(std::move(e));
   }
+  bool derivatives = false, wrench_only = true;
+  for (const auto& e : effects_) {
+    if (e->has_displacement_derivatives())
+      derivatives = true;
+    else
+      wrench_only = wrench_only && (e->stages() & ~unsigned{kWrenchStage}) == 0;
+  }
+  analytic_ = derivatives && wrench_only;
+  for (size_t e = 0; e < effects_.size(); ++e)
+    if (!analytic_ || !effects_[e]->has_displacement_derivatives())
+      for (int k = 0; k < effects_[e]->size(); ++k) jet_parameters_.push_back(offsets_[e] + k);
 }
 
 std::vector<std::string> DeflectionModel::effect_names() const {
@@ -276,7 +287,8 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
   using Vec = Eigen::Matrix<double, S, 1>;
   const int n = robot_.dof();
   if (n > kMax) {
-    evaluate<Jet>(theta, m, c, d, nullptr);
+    evaluate_into(theta, m, c, s);
+    *d = s.d;
     return;
   }
   s.robot = &robot_;
@@ -415,6 +427,36 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->cartesian(theta + offsets_[e], s);
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
   *d = s.d;
+}
+
+void DeflectionModel::analytic_columns(const EvalState<Jet>& js,
+                                       EvalState<double>& ds,
+                                       double* jac) const {
+  if (!analytic_) return;
+  const int n = robot_.dof();
+  ds.robot = js.robot;
+  ds.measurement = js.measurement;
+  ds.context = js.context;
+  for (int k = 0; k < 3; ++k) {
+    ds.force(k) = js.force(k).a;
+    ds.moment(k) = js.moment(k).a;
+    ds.r_meas(k) = js.r_meas(k).a;
+    ds.r_load(k) = js.r_load(k).a;
+    ds.p_meas(k) = js.p_meas(k).a;
+    ds.p_load(k) = js.p_load(k).a;
+  }
+  const ChainState& chain = js.context->chain;
+  ds.jac_meas.resize(6, n);
+  ds.tau.resize(n);
+  for (int j = 0; j < n; ++j) {
+    const Eigen::Vector3d z = chain.axis.col(j);
+    ds.jac_meas.block<3, 1>(0, j) = z.cross(ds.p_meas - chain.origin.col(j));
+    ds.jac_meas.block<3, 1>(3, j) = z;
+    ds.tau(j) = js.tau(j).a;
+  }
+  for (size_t e = 0; e < effects_.size(); ++e)
+    if (effects_[e]->has_displacement_derivatives())
+      effects_[e]->displacement_derivatives(ds, jac + 3 * offsets_[e]);
 }
 
 Eigen::Matrix<double, 6, 1> DeflectionModel::predict(const Eigen::VectorXd& theta,

@@ -18,6 +18,7 @@
 
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "stiff/dataset.hpp"
@@ -80,6 +81,15 @@ enum Requirement : unsigned {
   kNeedsSessions = 1u << 2,  ///< a `session` column
 };
 
+/// The stages of an evaluation (Effect::stages).
+enum Stage : unsigned {
+  kWrenchStage = 1u << 0,
+  kJointStage = 1u << 1,
+  kCartesianStage = 1u << 2,
+  kMeasurementStage = 1u << 3,
+  kAllStages = 15u,
+};
+
 /// A physical effect configured for one robot (and, where it matters, one dataset).
 class Effect {
  public:
@@ -98,6 +108,18 @@ class Effect {
   /// dtheta, d or rot, and moves neither the points nor the wrench). A model of linear effects
   /// predicts d affine in theta (identify() then needs one Jacobian per measurement).
   virtual bool linear() const { return false; }
+  /// Optional analytic derivatives of a linear effect (automatic differentiation otherwise):
+  /// true when displacement_derivatives is provided.
+  virtual bool has_displacement_derivatives() const { return false; }
+  /// dd/dp, the derivatives of the effect's additions to d with respect to its parameters (3 x
+  /// size(), column-major) at the state s of stage 1 (points, wrench, tau and the
+  /// translational rows of jac_meas); an addition to dtheta reaches d through jac_meas. Used
+  /// by DeflectionModel::analytic_columns when every other effect acts only in the wrench
+  /// stage.
+  virtual void displacement_derivatives(const EvalState<double>& /*s*/, double* /*out*/) const {}
+  /// The stages the effect acts in (Stage bits); EffectT finds them from the stage functions
+  /// the effect defines.
+  virtual unsigned stages() const { return kAllStages; }
   /// Parameters, in the order of the parameter block.
   virtual const std::vector<ParameterSpec>& parameters() const = 0;
   int size() const { return static_cast<int>(parameters().size()); }
@@ -138,6 +160,20 @@ class EffectT : public Effect {
     self().measurement_t(p, s);
   }
   void measurement(const Jet* p, EvalState<Jet>& s) const final { self().measurement_t(p, s); }
+  unsigned stages() const override {
+    // A stage function the effect does not define is this class's: its member pointer type
+    // names EffectT.
+    using Fn = void (EffectT::*)(const double*, EvalState<double>&) const;
+    using std::is_same;
+    return (is_same<decltype(&Derived::template wrench_t<double>), Fn>::value ? 0u : kWrenchStage) |
+           (is_same<decltype(&Derived::template joint_t<double>), Fn>::value ? 0u : kJointStage) |
+           (is_same<decltype(&Derived::template cartesian_t<double>), Fn>::value
+                ? 0u
+                : kCartesianStage) |
+           (is_same<decltype(&Derived::template measurement_t<double>), Fn>::value
+                ? 0u
+                : kMeasurementStage);
+  }
 
  private:
   const Derived& self() const { return static_cast<const Derived&>(*this); }

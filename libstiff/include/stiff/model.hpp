@@ -32,6 +32,17 @@ class DeflectionModel {
   int parameter_count() const { return count_; }
   /// Every effect is linear (Effect::linear): d is affine in theta.
   bool linear() const { return linear_; }
+  /// The parameters whose derivatives need evaluate_jet passes: all of them, or, when the
+  /// model is analytic(), those of the effects without analytic derivatives.
+  const std::vector<int>& jet_parameters() const { return jet_parameters_; }
+  /// Some effects give their columns of dd/dtheta analytically (analytic_columns): each effect
+  /// is linear with Effect::displacement_derivatives or acts only in the wrench stage (so
+  /// that the linear effects' additions reach d unchanged).
+  bool analytic() const { return analytic_; }
+  /// The columns of dd/dtheta (3 x P, column-major, into `jac`) of the effects with analytic
+  /// derivatives at the state `js` an evaluate_jet pass at theta left (its values; the other
+  /// columns are left as they are). `ds` is scratch (one per thread).
+  void analytic_columns(const EvalState<Jet>& js, EvalState<double>& ds, double* jac) const;
   /// Offset of effect e's block in theta.
   int offset(int e) const { return offsets_[e]; }
   /// Index of an effect by name, -1 if absent.
@@ -98,6 +109,8 @@ class DeflectionModel {
   int count_ = 0;
   bool jet_jacobians_ = false;  ///< an effect reads EvalState::jac_meas / jac_load
   bool linear_ = true;
+  bool analytic_ = false;
+  std::vector<int> jet_parameters_;
   std::map<std::string, int> sessions_;
 };
 

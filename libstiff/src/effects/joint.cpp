@@ -30,6 +30,12 @@ class JointCompliance : public EffectT<JointCompliance> {
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
   bool linear() const override { return true; }
+  bool has_displacement_derivatives() const override { return true; }
+  void displacement_derivatives(const EvalState<double>& s, double* out) const override {
+    // dtheta_j = c_j tau_j moves P along column j of J_p(P).
+    for (int j = 0; j < static_cast<int>(s.tau.size()); ++j)
+      for (int k = 0; k < 3; ++k) out[3 * j + k] = s.jac_meas(k, j) * s.tau(j);
+  }
 
   template <typename T>
   void joint_t(const T* c, EvalState<T>& s) const {

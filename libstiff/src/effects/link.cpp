@@ -51,17 +51,19 @@ class LinkCompliance : public EffectT<LinkCompliance> {
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
   bool linear() const override { return true; }
+  bool has_displacement_derivatives() const override { return true; }
+  void displacement_derivatives(const EvalState<double>& s, double* out) const override {
+    Eigen::Vector3d u, o;
+    for (size_t k = 0; k < springs_.size(); ++k) {
+      axis(s.context->chain, k, u, o);
+      Eigen::Map<Eigen::Vector3d>(out + 3 * k) =
+          torque(u, o, s.p_load, s.force, s.moment) * cross(u, s.p_meas, o);
+    }
+  }
 
   template <typename T>
   void cartesian_t(const T* p, EvalState<T>& s) const {
     const auto& chain = s.context->chain;
-    // The spring axis u and origin o do not depend on the parameters: kept in double so that
-    // automatic differentiation only carries derivatives where they can be non-zero.
-    const auto axis = [&](size_t k, Eigen::Vector3d& u, Eigen::Vector3d& o) {
-      const int i = springs_[k].link;
-      u = chain.link[i].template block<3, 3>(0, 0) * springs_[k].axis;
-      o = chain.origin.col(i);
-    };
     Eigen::Vector3d u, o;
     const bool wrench_fixed = effects::constant(s.force) && effects::constant(s.moment);
     if (wrench_fixed && effects::constant(s.p_load) && effects::constant(s.p_meas)) {
@@ -70,8 +72,8 @@ class LinkCompliance : public EffectT<LinkCompliance> {
       const Eigen::Vector3d f = effects::value(s.force), m = effects::value(s.moment);
       const Eigen::Vector3d pl = effects::value(s.p_load), pm = effects::value(s.p_meas);
       for (size_t k = 0; k < springs_.size(); ++k) {
-        axis(k, u, o);
-        const T angle = p[k] * (cross(u, pl, o).dot(f) + m.dot(u));
+        axis(chain, k, u, o);
+        const T angle = p[k] * torque(u, o, pl, f, m);
         effects::add_scaled(s.d, angle, cross(u, pm, o));
         effects::add_scaled(s.rot, angle, u);
       }
@@ -81,18 +83,18 @@ class LinkCompliance : public EffectT<LinkCompliance> {
     // w = sum c_v t_v u_v (their rotation): one product with P for all springs.
     Vector3<T> w = Vector3<T>::Zero(), wo = Vector3<T>::Zero();
     for (size_t k = 0; k < springs_.size(); ++k) {
-      axis(k, u, o);
-      T torque;
+      axis(chain, k, u, o);
+      T tk;  // the spring's torque
       if (wrench_fixed) {
         // (u x (L - o)) . F = L . (F x u) - o . (F x u): derivatives only through L.
         const Eigen::Vector3d f = effects::value(s.force), m = effects::value(s.moment);
         const Eigen::Vector3d a = f.cross(u);
-        torque = effects::dot(s.p_load, a) + (m.dot(u) - o.dot(a));
+        tk = effects::dot(s.p_load, a) + (m.dot(u) - o.dot(a));
       } else {
-        torque = cross(u, s.p_load, o).dot(s.force) +
-                 (s.moment(0) * u(0) + s.moment(1) * u(1) + s.moment(2) * u(2));
+        tk = cross(u, s.p_load, o).dot(s.force) +
+             (s.moment(0) * u(0) + s.moment(1) * u(1) + s.moment(2) * u(2));
       }
-      const T angle = p[k] * torque;
+      const T angle = p[k] * tk;
       effects::add_scaled(w, angle, u);
       effects::add_scaled(wo, angle, u.cross(o));
     }
@@ -104,6 +106,21 @@ class LinkCompliance : public EffectT<LinkCompliance> {
   }
 
  private:
+  // The spring axis u and origin o do not depend on the parameters: kept in double so that
+  // automatic differentiation only carries derivatives where they can be non-zero.
+  void axis(const ChainState& chain, size_t k, Eigen::Vector3d& u, Eigen::Vector3d& o) const {
+    const int i = springs_[k].link;
+    u = chain.link[i].block<3, 3>(0, 0) * springs_[k].axis;
+    o = chain.origin.col(i);
+  }
+  // Torque (u x (L - o)) . F + u . M about the spring's axis [N*m].
+  static double torque(const Eigen::Vector3d& u,
+                       const Eigen::Vector3d& o,
+                       const Eigen::Vector3d& l,
+                       const Eigen::Vector3d& f,
+                       const Eigen::Vector3d& m) {
+    return cross(u, l, o).dot(f) + m.dot(u);
+  }
   // u x (p - o) with a constant axis u and origin o.
   template <typename T>
   static Vector3<T> cross(const Eigen::Vector3d& u, const Vector3<T>& p, const Eigen::Vector3d& o) {

@@ -294,6 +294,69 @@ TEST(IdentifyCeres, FastJetEvaluationEqualsTheGenericOne) {
   }
 }
 
+// Effects find the stages they act in from the stage functions they define (Effect::stages).
+TEST(IdentifyCeres, EffectsKnowTheirStages) {
+  const RobotModel robot = test::rokae();
+  const Dataset data = test::design60(3, 4);
+  EffectSetup setup;
+  setup.robot = &robot;
+  setup.data = &data;
+  EXPECT_EQ(make_effect("point_offset", setup)->stages(), unsigned{kWrenchStage});
+  EXPECT_EQ(make_effect("force_frame", setup)->stages(), unsigned{kWrenchStage});
+  EXPECT_EQ(make_effect("joint", setup)->stages(), unsigned{kJointStage});
+  EXPECT_EQ(make_effect("link", setup)->stages(), unsigned{kCartesianStage});
+  EXPECT_EQ(make_effect("tracker_frame", setup)->stages(), unsigned{kMeasurementStage});
+}
+
+// The analytic columns of linear effects (Effect::displacement_derivatives) equal the automatic
+// derivatives to 1e-12, with the other parameters differentiated by evaluate_jet passes; a
+// model with an effect that acts on d after the geometry (or a linear effect without analytic
+// derivatives) is differentiated automatically throughout.
+TEST(IdentifyCeres, AnalyticColumnsEqualAutomaticDerivatives) {
+  const RobotModel robot = test::rokae();
+  const Dataset data = test::design60(3, 12);
+  for (const std::vector<std::string>& effects :
+       {std::vector<std::string>{"joint"}, std::vector<std::string>{"joint", "link"},
+        std::vector<std::string>{"joint", "link", "point_offset"},
+        std::vector<std::string>{"link", "force_frame"}}) {
+    const DeflectionModel model(robot, effects, &data);
+    ASSERT_TRUE(model.analytic()) << model.model_string();
+    const int p = model.parameter_count();
+    Eigen::VectorXd theta = model.start_parameters();
+    for (int k = 0; k < p; ++k) theta(k) += 0.1 * std::abs(model.spec(k).typical) * (k % 3 - 1);
+    const std::vector<int>& jp = model.jet_parameters();
+    for (int k : jp) EXPECT_FALSE(model.owner(k).has_displacement_derivatives());
+    ASSERT_LE(jp.size(), size_t{kJetStride});
+    const auto ctx = model.contexts(data);
+    EvalState<Jet> scratch;
+    EvalState<double> ds;
+    for (size_t r = 0; r < data.rows.size(); ++r) {
+      std::vector<Jet> t(p);
+      for (int k = 0; k < p; ++k) t[k] = Jet(theta(k));
+      for (size_t i = 0; i < jp.size(); ++i) t[jp[i]].v(i) = 1.0;
+      Vector3<Jet> d;
+      model.evaluate_jet(t.data(), data.rows[r], ctx[r], scratch, &d);
+      Eigen::Matrix<double, 3, Eigen::Dynamic> fast(3, p);
+      fast.setConstant(NAN);
+      for (size_t i = 0; i < jp.size(); ++i)
+        for (int k = 0; k < 3; ++k) fast(k, jp[i]) = d(k).v(i);
+      model.analytic_columns(scratch, ds, fast.data());
+      const auto ad = model.displacement_jacobian(theta, data.rows[r], ctx[r]);
+      for (int k = 0; k < p; ++k)
+        EXPECT_LE((fast.col(k) - ad.col(k)).norm(), 1e-12 * ad.col(k).norm() + 1e-300)
+            << model.model_string() << " " << model.spec(k).name << " row " << r;
+    }
+  }
+  for (const std::vector<std::string>& effects :
+       {std::vector<std::string>{"joint", "point_offset", "tracker_frame"},
+        std::vector<std::string>{"joint", "link", "coupling"},
+        std::vector<std::string>{"point_offset"}}) {
+    const DeflectionModel model(robot, effects, &data);
+    EXPECT_FALSE(model.analytic()) << model.model_string();
+    EXPECT_EQ(static_cast<int>(model.jet_parameters().size()), model.parameter_count());
+  }
+}
+
 // Models made only of linear effects (Effect::linear) predict d affine in theta, so that
 // identify() needs one Jacobian per measurement; effects that move the points or the wrench,
 // rotate the measurement or multiply the compliances are not linear.
