@@ -260,27 +260,27 @@ struct Anneal {
       }
       const double temp = T0 * (1.0 - static_cast<double>(it) * inv_iters);
       propose(k);
-      // Metropolis: downhill always; uphill by Delta when Delta <= dmax = T E, E ~ Exp(1) (E =
-      // -ln u, u uniform in (0, 1]), i.e. with probability exp(-Delta / T). E is drawn uphill only.
+      // Metropolis: accept when Delta <= dmax = T E with E ~ Exp(1) (E = -ln u, u uniform in
+      // (0, 1]): downhill always, uphill with probability exp(-Delta / T). E is drawn before the
+      // evaluation so that one comparison decides (one unpredictable branch per step, not two).
+      const double dmax = temp > 0 ? temp * standard_exponential(rng) : 0.0;
       bool accept = false;
       double cn = kInf;
       bool decided = false;
       if constexpr (kClosed) {
+        const double threshold = dmax > 0 ? raw_threshold<C>(cost + dmax, m) : down;
         double p, q;
-        if (raw_fraction<MC, C>(Xn, p, q)) {
+        if (bound_rejects<MC, C>(Xn, threshold)) {
           decided = true;
-          accept = within<C>(p, q, down);
-          if (!accept && temp > 0) {
-            const double dmax = temp * standard_exponential(rng);
-            accept = within<C>(p, q, raw_threshold<C>(cost + dmax, m));
-          }
+        } else if (raw_fraction<MC, C>(Xn, p, q)) {
+          decided = true;
+          accept = within<C>(p, q, threshold);
           if (accept) cn = cost_from_raw<C>(p / q, m);
         }
       }
       if (!decided) {
         cn = cost_of(C, score_packed<MC, C>(ctx, Xn));
-        accept = cn < kInf &&
-                 (cn <= cost || (temp > 0 && cn - cost <= temp * standard_exponential(rng)));
+        accept = cn < kInf && cn - cost <= dmax;
       }
       if (accept) {
         for (int s = 0; s < k; ++s) {

@@ -264,6 +264,70 @@ TEST(PlanFastPath, ClosedFormEqualsCholeskyForEveryM) {
   expect_closed_form_matches_cholesky<6>(rng);
 }
 
+// The annealing's early rejection (bound_rejects: block-diagonal bounds on tr M^-1 and det M)
+// never rejects a proposal the exact test accepts, for m = 1..6 and each closed-form criterion,
+// with thresholds spread around the exact value (relative 0.5 ... 2 and within 1e-9 of it);
+// and it is not vacuous: it rejects most proposals whose exact value misses the threshold by a
+// factor of 4, and for m = 1 and 2 (one block: the bound is exact) every one that misses at all.
+template <int M, plan_detail::Crit C>
+void expect_bound_is_a_bound(Rng& rng) {
+  using namespace plan_detail;
+  int missed = 0, missed_by_4 = 0, rejected = 0, rejected_by_4 = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    Eigen::MatrixXd a(3 * M + 3, M);
+    for (int i = 0; i < a.rows(); ++i)
+      for (int j = 0; j < M; ++j) a(i, j) = rng.normal();
+    for (int j = 0; j < M; ++j) a.col(j) *= std::pow(10.0, 2.0 * rng.uniform());
+    const Eigen::MatrixXd info = 1e10 * (a.transpose() * a);
+    double packed[21];
+    for (int i = 0, idx = 0; i < M; ++i)
+      for (int j = 0; j <= i; ++j) packed[idx++] = info(i, j);
+    double p, q;
+    const bool closed = raw_fraction<M, C>(packed, p, q);
+    ASSERT_TRUE(closed);
+    const double exact = p / q;
+    for (const double f : {0.25, 0.5, 0.9, 1.0 - 1e-9, 1.0 + 1e-9, 1.1, 2.0, 4.0}) {
+      // For d_opt the test passes when det >= threshold, for the others when value <= threshold.
+      const double threshold = C == Crit::d_opt ? exact / f : exact * f;
+      const bool exact_accepts = within<C>(p, q, threshold);
+      const bool bound = bound_rejects<M, C>(packed, threshold);
+      EXPECT_FALSE(bound && exact_accepts) << "m = " << M << " factor " << f;
+      if (!exact_accepts) {
+        ++missed;
+        rejected += bound;
+        if (f == 0.25) {
+          ++missed_by_4;
+          rejected_by_4 += bound;
+        }
+      }
+    }
+  }
+  ASSERT_GT(missed_by_4, 0);
+  if (M <= 2)
+    EXPECT_EQ(rejected, missed) << "m = " << M;  // one block: the bound is the exact value
+  else
+    EXPECT_GT(rejected_by_4, missed_by_4 / 2) << "m = " << M;
+}
+
+template <plan_detail::Crit C>
+void expect_bound_for_every_m(Rng& rng) {
+  expect_bound_is_a_bound<1, C>(rng);
+  expect_bound_is_a_bound<2, C>(rng);
+  expect_bound_is_a_bound<3, C>(rng);
+  expect_bound_is_a_bound<4, C>(rng);
+  expect_bound_is_a_bound<5, C>(rng);
+  expect_bound_is_a_bound<6, C>(rng);
+}
+
+TEST(PlanFastPath, EarlyRejectionIsABound) {
+  using plan_detail::Crit;
+  Rng rng(17);
+  expect_bound_for_every_m<Crit::kappa_a>(rng);
+  expect_bound_for_every_m<Crit::kappa_j>(rng);
+  expect_bound_for_every_m<Crit::a_opt>(rng);
+  expect_bound_for_every_m<Crit::d_opt>(rng);
+}
+
 // The annealing's engine (xoshiro256++): integers uniform over [0, n) by a chi-square test
 // (bound at about 6 standard deviations of the statistic), uniforms in (0, 1] with the right
 // mean, seeds giving different streams.
