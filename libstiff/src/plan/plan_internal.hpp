@@ -707,7 +707,8 @@ STIFF_ALWAYS_INLINE inline bool raw_fraction(const double* X, double& p, double&
 // ------------------------------------------------------------------------------------------
 // A cheap bound that rejects a proposal before the closed form. For a positive definite M and
 // a partition of its indices into blocks, (M^-1)_BB >= (M_BB)^-1 for every diagonal block B
-// (the inverse of a Schur complement, Horn & Johnson 0.7.3 and 7.7.8), hence
+// (the inverse of a Schur complement; inversion reverses the Loewner order: Horn & Johnson,
+// Matrix Analysis, 2nd ed., 0.7.3 and 7.7), hence
 //   tr M^-1 >= sum_B tr (M_BB)^-1   and (Fischer's inequality)   det M <= prod_B det M_BB.
 // With blocks {0,1}, {2,3}, ... (a last 1 x 1 block for odd m) this costs a few products of the
 // diagonal and first sub-diagonal, and on the paper's set-up it decides about two thirds of the
