@@ -212,20 +212,29 @@ TEST(PlanFastPath, AnnealingWithAndWithoutElementTableAndFastRng) {
 // on weighted information matrices of the size the pools produce (entries ~1e13) with column
 // scales over four decades (condition numbers up to ~1e9); rank-deficient ones are declined.
 template <int M>
+void pack_lower(const Eigen::MatrixXd& info, double* packed) {
+  for (int i = 0, idx = 0; i < M; ++i)
+    for (int j = 0; j <= i; ++j) packed[idx++] = info(i, j);
+}
+
+// A weighted information matrix as the pools produce it: 3M + 3 Gaussian rows, column scales
+// over four decades, entries ~1e13 (condition numbers up to ~1e9).
+template <int M>
+Eigen::MatrixXd random_information(Rng& rng) {
+  Eigen::MatrixXd a(3 * M + 3, M);
+  for (int i = 0; i < a.rows(); ++i)
+    for (int j = 0; j < M; ++j) a(i, j) = rng.normal();
+  for (int j = 0; j < M; ++j) a.col(j) *= std::pow(10.0, 2.0 * rng.uniform());
+  return 1e10 * (a.transpose() * a);
+}
+
+template <int M>
 void expect_closed_form_matches_cholesky(Rng& rng) {
   using namespace plan_detail;
-  auto pack = [](const Eigen::MatrixXd& info, double* packed) {
-    for (int i = 0, idx = 0; i < M; ++i)
-      for (int j = 0; j <= i; ++j) packed[idx++] = info(i, j);
-  };
   for (int trial = 0; trial < 200; ++trial) {
-    Eigen::MatrixXd a(3 * M + 3, M);
-    for (int i = 0; i < a.rows(); ++i)
-      for (int j = 0; j < M; ++j) a(i, j) = rng.normal();
-    for (int j = 0; j < M; ++j) a.col(j) *= std::pow(10.0, 2.0 * rng.uniform());
-    const Eigen::MatrixXd info = 1e10 * (a.transpose() * a);
+    const Eigen::MatrixXd info = random_information<M>(rng);
     double packed[21];
-    pack(info, packed);
+    pack_lower<M>(info, packed);
     ClosedForm f;
     ASSERT_TRUE(closed_form<M>(packed, f)) << "m = " << M;
     const Eigen::LLT<Eigen::MatrixXd> llt(info);
@@ -248,7 +257,7 @@ void expect_closed_form_matches_cholesky(Rng& rng) {
     a.col(M - 1) = a.col(0) - 0.5 * a.col(M - 2);
     const Eigen::MatrixXd info = 1e10 * (a.transpose() * a);
     double packed[21];
-    pack(info, packed);
+    pack_lower<M>(info, packed);
     ClosedForm f;
     EXPECT_FALSE(closed_form<M>(packed, f)) << "m = " << M;
   }
@@ -274,14 +283,8 @@ void expect_bound_is_a_bound(Rng& rng) {
   using namespace plan_detail;
   int missed = 0, missed_by_4 = 0, rejected = 0, rejected_by_4 = 0;
   for (int trial = 0; trial < 400; ++trial) {
-    Eigen::MatrixXd a(3 * M + 3, M);
-    for (int i = 0; i < a.rows(); ++i)
-      for (int j = 0; j < M; ++j) a(i, j) = rng.normal();
-    for (int j = 0; j < M; ++j) a.col(j) *= std::pow(10.0, 2.0 * rng.uniform());
-    const Eigen::MatrixXd info = 1e10 * (a.transpose() * a);
     double packed[21];
-    for (int i = 0, idx = 0; i < M; ++i)
-      for (int j = 0; j <= i; ++j) packed[idx++] = info(i, j);
+    pack_lower<M>(random_information<M>(rng), packed);
     double p, q;
     const bool closed = raw_fraction<M, C>(packed, p, q);
     ASSERT_TRUE(closed);
