@@ -141,7 +141,7 @@ struct Anneal {
     // Per position of the set, its element's packed matrix (the "out" side of a swap).
     std::vector<double> gset(static_cast<size_t>(N) * T);
     for (int i = 0; i < N; ++i) K.copy_element(set[i], gset.data() + static_cast<size_t>(i) * T);
-    double X[K_t::kT], Xn[K_t::kT], D[K_t::kT];
+    double X[K_t::kT], Xn[K_t::kT];
     K.rebuild(gset, N, X);
     // cost of a packed matrix: the closed form when it applies, else the Cholesky path.
     auto cost_of_matrix = [&](const double* Y) {
@@ -186,7 +186,7 @@ struct Anneal {
       return e;
     };
 
-    // One k-element swap proposal: D = sum (G_in - G_out), no rebuild of A; Xn = X + D.
+    // One k-element swap proposal: Xn = X + sum (G_in - G_out), no rebuild of A.
     auto propose = [&](int k) {
       for (int s = 0; s < k; ++s) {
         const int j = s + static_cast<int>(fast_index(rng, static_cast<uint32_t>(N - s)));
@@ -199,12 +199,11 @@ struct Anneal {
         const double* gi = K.element(e, scratch.data() + static_cast<size_t>(s) * T);
         const double* go = gset.data() + static_cast<size_t>(pos[s]) * T;
         gin[s] = gi;
-        if (s == 0)
-          for (int q = 0; q < T; ++q) D[q] = gi[q] - go[q];
-        else
-          for (int q = 0; q < T; ++q) D[q] = (D[q] + gi[q]) - go[q];
+        // Element by element (in place for s > 0): no dependence between iterations.
+        const double* from = s == 0 ? X : Xn;
+#pragma GCC ivdep
+        for (int q = 0; q < T; ++q) Xn[q] = (from[q] + gi[q]) - go[q];
       }
-      for (int q = 0; q < T; ++q) Xn[q] = X[q] + D[q];
     };
     auto reject = [&](int k) {
       for (int s = 0; s < k; ++s) in[new_e[s]] = 0;
