@@ -445,15 +445,9 @@ void DeflectionModel::analytic_columns(const EvalState<Jet>& js,
     ds.p_meas(k) = js.p_meas(k).a;
     ds.p_load(k) = js.p_load(k).a;
   }
-  const ChainState& chain = js.context->chain;
-  ds.jac_meas.resize(6, n);
+  ds.jac_meas = robot_.jacobian_at(js.context->chain, ds.p_meas);
   ds.tau.resize(n);
-  for (int j = 0; j < n; ++j) {
-    const Eigen::Vector3d z = chain.axis.col(j);
-    ds.jac_meas.block<3, 1>(0, j) = z.cross(ds.p_meas - chain.origin.col(j));
-    ds.jac_meas.block<3, 1>(3, j) = z;
-    ds.tau(j) = js.tau(j).a;
-  }
+  for (int j = 0; j < n; ++j) ds.tau(j) = js.tau(j).a;
   for (size_t e = 0; e < effects_.size(); ++e)
     if (effects_[e]->has_displacement_derivatives())
       effects_[e]->displacement_derivatives(ds, jac + 3 * offsets_[e]);
