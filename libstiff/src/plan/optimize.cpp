@@ -199,9 +199,7 @@ struct Anneal {
         const double* gi = K.element(e, scratch.data() + static_cast<size_t>(s) * T);
         const double* go = gset.data() + static_cast<size_t>(pos[s]) * T;
         gin[s] = gi;
-        // Element by element (in place for s > 0): no dependence between iterations.
         const double* from = s == 0 ? X : Xn;
-#pragma GCC ivdep
         for (int q = 0; q < T; ++q) Xn[q] = (from[q] + gi[q]) - go[q];
       }
     };

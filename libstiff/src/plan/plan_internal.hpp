@@ -372,6 +372,10 @@ inline double score(const Context& c, const double* M, const double* MJ) {
 // ------------------------------------------------------------------------------------------
 
 constexpr int packed_size(int m) { return m * (m + 1) / 2; }
+/// Entry (r, c), r >= c, of a packed lower triangle.
+STIFF_ALWAYS_INLINE inline double packed_at(const double* X, int r, int c) {
+  return X[packed_size(r) + c];
+}
 
 /// Largest per-element table finalize() stores (CandidatePool::packed_element_information):
 /// 64 MB, a 1e5-element pool up to m = 10. Beyond the L2 cache the annealing's random reads of
@@ -526,10 +530,9 @@ inline double cost_of(Crit id, double s) {
 // ------------------------------------------------------------------------------------------
 // Closed form for the annealing's serial loop, where the criterion is evaluated once per step:
 // the Cholesky above is a chain of m square roots and m divisions and about twice the
-// instructions. For
-// m <= 6 the closed form below splits M = [A B; B^T D] with blocks of at most 3 x 3 and uses
-// the Schur complement S = D - B^T A^-1 B (block inversion; Golub & Van Loan, Matrix
-// Computations, 4th ed., section 3.2.11; Horn & Johnson, Matrix Analysis, 0.8.5):
+// instructions. For m <= 6 the closed form below splits M = [A B; B^T D] with blocks of at
+// most 3 x 3 and uses the Schur complement S = D - B^T A^-1 B (block inversion; Golub & Van
+// Loan, Matrix Computations, 4th ed., section 3.2.11; Horn & Johnson, Matrix Analysis, 0.8.5):
 //   det M = det A det S,   tr M^-1 = tr A^-1 + tr S^-1 + tr(Q S^-1 Q^T),   Q = A^-1 B.
 // With a = det A, Q' = adj(A) B and the scaled complement S' = a S = a D - B^T Q' (ns x ns):
 //   det M = det S' / a^(ns - 1),
@@ -601,8 +604,7 @@ template <int MC>
 STIFF_ALWAYS_INLINE inline bool closed_form(const double* X, ClosedForm& f) {
   static_assert(has_closed_form<MC>(), "closed form for m = 1..6 only");
   constexpr int na = MC <= 3 ? MC : MC / 2, ns = MC - na;
-  // Entry (r, c), r >= c, of the packed lower triangle.
-  auto at = [X](int r, int c) { return X[r * (r + 1) / 2 + c]; };
+  auto at = [X](int r, int c) { return packed_at(X, r, c); };
   double a[3][3], adja[3][3];
   f.tr = 0.0;
 #pragma GCC unroll 8
@@ -723,7 +725,7 @@ STIFF_ALWAYS_INLINE inline bool raw_fraction(const double* X, double& p, double&
 template <int MC, Crit C>
 STIFF_ALWAYS_INLINE inline bool bound_rejects(const double* X, double threshold) {
   static_assert(uses_closed_form<MC, C>(), "the bound serves the closed-form criteria");
-  auto at = [X](int r, int c) { return X[r * (r + 1) / 2 + c]; };
+  auto at = [X](int r, int c) { return packed_at(X, r, c); };
   // sum_B tr(M_BB)^-1 = num / den: a pair's tr inverse is its trace over its determinant.
   double num = 0.0, den = 1.0, tr = 0.0;
   bool positive = true;
