@@ -3,7 +3,8 @@ numpy. It rebuilds the stacked observation matrix A of the current set from the 
 Jacobians at every step and evaluates kappa_F^-1(A) = m / sqrt(tr(A^T A) tr((A^T A)^-1)).
 
 Same algorithm as stiff::anneal (docs/planning.md): k-element swaps with k falling linearly from
-k0 to 1, Metropolis acceptance exp(-Delta/T) on the cost kappa_F(A), linear cooling from T0.
+k0 to 1, Metropolis acceptance exp(-Delta/T) on the cost kappa_F(A), linear cooling from T0
+(by default a hundredth of the mean cost increase of 200 random k0-swaps, as stiff's).
 """
 import math
 import struct
@@ -67,7 +68,8 @@ def anneal(pool, count=10, iterations=10000, seed=1, t0=None, k0=None):
 
     if t0 is None:
         ups = [c - cost for _, c in (propose(k0) for _ in range(200)) if math.isfinite(c) and c > cost]
-        t0 = float(np.mean(ups)) if ups else 1e-3 * cost
+        # stiff's automatic T0 (AnnealingOptions::automatic_temperature_fraction = 0.01)
+        t0 = 0.01 * float(np.mean(ups)) if ups else 1e-3 * cost
     for it in range(iterations):
         frac = it / iterations
         k = max(1, math.ceil(k0 * (1 - frac)))

@@ -32,6 +32,7 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -97,6 +98,26 @@ struct PoolOptions {
 /// Candidate pool Omega: poses with their Jacobians, loads, and the list of elements
 /// (pose index, load index). Fields are public for the planning kernels; call finalize() after
 /// filling them by hand. Memory: O(poses * n + elements).
+/// Allocator whose blocks start on a 64-byte cache line (C++17 aligned operator new).
+template <class T>
+struct CacheLineAllocator {
+  using value_type = T;
+  static constexpr std::align_val_t kAlignment{64};
+  CacheLineAllocator() = default;
+  template <class U>
+  CacheLineAllocator(const CacheLineAllocator<U>&) {}
+  T* allocate(std::size_t n) { return static_cast<T*>(::operator new(n * sizeof(T), kAlignment)); }
+  void deallocate(T* p, std::size_t) { ::operator delete(p, kAlignment); }
+  template <class U>
+  bool operator==(const CacheLineAllocator<U>&) const {
+    return true;
+  }
+  template <class U>
+  bool operator!=(const CacheLineAllocator<U>&) const {
+    return false;
+  }
+};
+
 struct CandidatePool {
   int dof = 0;
   /// Identified joints (0-based), m = identified_joints.size(). Filled by finalize() when empty:
@@ -137,9 +158,16 @@ struct CandidatePool {
   std::vector<double> packed_force;
   /// Kernel data written by finalize() when it fits in 64 MB (1e5 elements up to m = 10): per
   /// element the packed lower triangle of A_e^T A_e / sigma_e^2 (m (m + 1) / 2 doubles,
-  /// row-major: entry (k, l), l <= k, at k (k + 1) / 2 + l). Empty above that budget; the
-  /// kernels then compute it from the per-pose data, with the same values bit for bit.
-  std::vector<double> packed_element_information;
+  /// row-major: entry (k, l), l <= k, at k (k + 1) / 2 + l). Rows start on 64-byte cache lines
+  /// and are padded to whole lines (15 doubles for m = 5 then span two lines, never three: a
+  /// random read of the table moves a third less memory). Read it through element_table().
+  /// Empty above the budget; the kernels then compute the rows from the per-pose data, with
+  /// the same values bit for bit.
+  std::vector<double, CacheLineAllocator<double>> element_table_storage;
+  /// Row e of the element table at element_table() + e * element_table_stride(); nullptr when
+  /// finalize() did not store it.
+  const double* element_table() const;
+  int element_table_stride() const;
 
   int size() const { return static_cast<int>(element_pose.size()); }
   int identified_count() const { return static_cast<int>(identified_joints.size()); }
@@ -265,9 +293,14 @@ struct PlanProgress {
 struct AnnealingOptions {
   bool enabled = true;
   long iterations = 100000;
-  /// T0 in cost units; 0 = automatic: mean cost increase of 200 random k0-swaps from the start
-  /// set (an uphill move of typical size is then accepted with probability 1/e at the start).
+  /// T0 in cost units; 0 = automatic: automatic_temperature_fraction times the mean cost
+  /// increase of 200 random k0-swaps from the (random) start set.
   double initial_temperature = 0.0;
+  /// The automatic T0 as a fraction of that mean. The cost increases that matter near good sets
+  /// are about a hundredth of those around a random set; 0.01 gave the best designs over
+  /// kappa_a, d_opt and a_opt, pools of 1e3 to 1e5 and 1e4 to 1e6 iterations (1.0, the classical
+  /// rule, ran hot for most of the schedule: docs/planning.md, "Initial temperature").
+  double automatic_temperature_fraction = 0.01;
   /// k0: elements swapped per step at the start; k falls linearly to 1 over the iterations:
   /// k(t) = max(1, ceil(k0 * (1 - t / iterations))). 0 = automatic: max(1, N / 3).
   int initial_swap_count = 0;

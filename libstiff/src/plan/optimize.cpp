@@ -83,29 +83,29 @@ struct PackedKernel {
   const int t;
   const bool jac;
   const double* table;
+  const int stride;
   PackedKernel(const CandidatePool& p, const Context& c)
-      : pool(p), t(packed_size(c.m)), jac(c.id == Crit::kappa_j), table(nullptr) {
-    if (!jac && p.packed_element_information.size() == static_cast<size_t>(p.size()) * t)
-      table = p.packed_element_information.data();
-  }
+      : pool(p),
+        t(packed_size(c.m)),
+        jac(c.id == Crit::kappa_j),
+        table(jac ? nullptr : p.element_table()),
+        stride(p.element_table_stride()) {}
   int size() const { return MC > 0 ? packed_size(MC) : t; }
   // Element e's packed matrix: a pointer into the table, or `scratch` filled.
   const double* element(int e, double* scratch) const {
-    if (table) return table + static_cast<size_t>(e) * size();
+    if (table) return table + static_cast<size_t>(e) * stride;
     if (jac)
       element_jacobian_information<MC>(pool, e, scratch);
     else
       element_information<MC>(pool, e, scratch);
     return scratch;
   }
-  // Start loading element e's table row (it may span three cache lines).
+  // Start loading element e's table row (whole cache lines: two for m = 5).
   void prefetch(int e) const {
 #if defined(__GNUC__)
     if (!table) return;
-    const char* row = reinterpret_cast<const char*>(table + static_cast<size_t>(e) * size());
-    __builtin_prefetch(row);
-    __builtin_prefetch(row + 64);
-    __builtin_prefetch(row + size() * sizeof(double) - 1);
+    const char* row = reinterpret_cast<const char*>(table + static_cast<size_t>(e) * stride);
+    for (int b = 0; b < size(); b += 8) __builtin_prefetch(row + b * sizeof(double));
 #else
     (void)e;
 #endif
@@ -211,8 +211,13 @@ struct Anneal {
     if (ao.initial_temperature < 0 || !std::isfinite(ao.initial_temperature))
       throw InvalidArgument("plan: initial temperature must be finite and >= 0");
     if (ao.iterations < 0) throw InvalidArgument("plan: iterations must be >= 0");
+    if (!(ao.automatic_temperature_fraction > 0) ||
+        !std::isfinite(ao.automatic_temperature_fraction))
+      throw InvalidArgument("plan: automatic_temperature_fraction must be finite and > 0");
     if (k0 > 0 && T0 == 0) {
-      // Automatic T0: mean uphill cost change of random k0-swaps from the start set.
+      // Automatic T0: a fraction of the mean uphill cost change of random k0-swaps from the
+      // start set. A random set's cost changes are far larger than those that decide near good
+      // sets (docs/planning.md, "Initial temperature"), hence the fraction.
       double sum = 0;
       int cnt = 0;
       for (int t = 0; t < 200; ++t) {
@@ -224,7 +229,8 @@ struct Anneal {
           ++cnt;
         }
       }
-      T0 = cnt > 0 ? sum / cnt : (std::isfinite(cost) ? 1e-3 * std::abs(cost) + 1e-300 : 1.0);
+      T0 = cnt > 0 ? ao.automatic_temperature_fraction * (sum / cnt)
+                   : (std::isfinite(cost) ? 1e-3 * std::abs(cost) + 1e-300 : 1.0);
     }
     r.trace.initial_temperature = T0;
     r.trace.initial_swap_count = k0;

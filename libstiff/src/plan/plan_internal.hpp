@@ -377,7 +377,7 @@ STIFF_ALWAYS_INLINE inline double packed_at(const double* X, int r, int c) {
   return X[packed_size(r) + c];
 }
 
-/// Largest per-element table finalize() stores (CandidatePool::packed_element_information):
+/// Largest per-element table finalize() stores (CandidatePool::element_table()):
 /// 64 MB, a 1e5-element pool up to m = 10. Beyond the L2 cache the annealing's random reads of
 /// the table miss, but it draws its candidates eight draws ahead and prefetches their rows, so
 /// the table still beats computing elements from the per-pose data: m = 5, 1e5 elements

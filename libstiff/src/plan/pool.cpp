@@ -12,6 +12,8 @@
 namespace stiff {
 namespace {
 
+constexpr int kLineDoubles = 8;  // doubles per 64-byte cache line (x86-64, AArch64)
+
 std::string num(double v) {
   std::ostringstream o;
   o.precision(6);
@@ -330,16 +332,24 @@ void CandidatePool::finalize() {
   for (size_t l = 0; l < forces.size(); ++l)
     for (int r = 0; r < 3; ++r) packed_force[3 * l + r] = forces[l](r);
   // Per-element A_e^T A_e / sigma_e^2 for the optimizers' inner loop, below a memory budget.
-  const int t = plan_detail::packed_size(m);
-  const size_t ne = element_pose.size();
-  packed_element_information.clear();
-  packed_element_information.shrink_to_fit();
-  if (static_cast<double>(ne) * t * sizeof(double) <= plan_detail::kElementTableBudgetBytes) {
-    packed_element_information.resize(ne * t);
+  const size_t ne = element_pose.size(), stride = element_table_stride();
+  element_table_storage.clear();
+  element_table_storage.shrink_to_fit();
+  if (static_cast<double>(ne) * stride * sizeof(double) <= plan_detail::kElementTableBudgetBytes) {
+    element_table_storage.assign(ne * stride, 0.0);
+    double* table = element_table_storage.data();
     for (size_t e = 0; e < ne; ++e)
-      plan_detail::element_information<0>(*this, static_cast<int>(e),
-                                          packed_element_information.data() + e * t);
+      plan_detail::element_information<0>(*this, static_cast<int>(e), table + e * stride);
   }
+}
+
+int CandidatePool::element_table_stride() const {
+  const int t = plan_detail::packed_size(identified_count());
+  return (t + kLineDoubles - 1) / kLineDoubles * kLineDoubles;
+}
+
+const double* CandidatePool::element_table() const {
+  return element_table_storage.empty() ? nullptr : element_table_storage.data();
 }
 
 Eigen::Matrix<double, 3, Eigen::Dynamic> CandidatePool::block(int e) const {

@@ -114,8 +114,9 @@ void expect_same_scores(const CandidatePool& pool, const plan_detail::Context& c
       } else {
         add_element<0>(pool, e, 1.0, full.data());
         element_information<0>(pool, e, g.data());
-        if (!pool.packed_element_information.empty()) {
-          for (int q = 0; q < t; ++q) ASSERT_EQ(g[q], pool.packed_element_information[e * t + q]);
+        if (const double* table = pool.element_table()) {
+          const double* row = table + static_cast<size_t>(e) * pool.element_table_stride();
+          for (int q = 0; q < t; ++q) ASSERT_EQ(g[q], row[q]);
         }
       }
       for (int q = 0; q < t; ++q) packed[q] += g[q];
@@ -132,7 +133,15 @@ TEST(PlanFastPath, SameCriterionValuesAsGenericPathOnRandomSets) {
   const RobotModel robot = test::rokae();
   const CandidatePool pool = build_pool(robot, paper_pool(200, 50));
   ASSERT_EQ(pool.identified_count(), 5);
-  ASSERT_EQ(pool.packed_element_information.size(), 15u * pool.size());  // table stored
+  // Table stored, rows on 64-byte lines, two lines each.
+  ASSERT_NE(pool.element_table(), nullptr);
+  ASSERT_EQ(reinterpret_cast<std::uintptr_t>(pool.element_table()) % 64, 0u);
+  ASSERT_EQ(pool.element_table_stride(), 16);
+  const CandidatePool copy = pool;  // a copy is aligned too
+  ASSERT_EQ(reinterpret_cast<std::uintptr_t>(copy.element_table()) % 64, 0u);
+  for (int e : {0, pool.size() / 2, pool.size() - 1})
+    for (int q = 0; q < 15; ++q)
+      ASSERT_EQ(copy.element_table()[16 * e + q], pool.element_table()[16 * e + q]);
   const std::vector<double> task =
       task_information(robot, test::paper_design_j(), pool.identified_joints);
   Rng rng(11);
@@ -190,9 +199,10 @@ TEST(PlanFastPath, AnnealingWithAndWithoutElementTableAndFastRng) {
   // A pool above the table budget computes the elements on the fly: same plan.
   const RobotModel robot = test::rokae();
   const CandidatePool pool = build_pool(robot, paper_pool(100, 20));
-  ASSERT_FALSE(pool.packed_element_information.empty());
+  ASSERT_NE(pool.element_table(), nullptr);
   CandidatePool no_table = pool;
-  no_table.packed_element_information.clear();
+  no_table.element_table_storage.clear();
+  ASSERT_EQ(no_table.element_table(), nullptr);
   PlanOptions o;
   o.annealing.iterations = 5000;
   o.exchange.max_passes = 2;
