@@ -49,6 +49,7 @@ void BM_AnnealSwaps(benchmark::State& state) {
   o.count = 10;
   o.criterion = "kappa_a";  // the paper's criterion (the library default is d_opt)
   o.annealing.iterations = 100000;
+  double t0used = 0;
   long swaps = 0, accepted = 0;
   double score = 0;
   for (auto _ : state) {
@@ -56,6 +57,7 @@ void BM_AnnealSwaps(benchmark::State& state) {
     swaps += r.trace.evaluations;
     accepted += r.trace.accepted;
     score = r.score;
+    t0used = r.trace.initial_temperature;
     benchmark::DoNotOptimize(r.elements.data());
   }
   state.counters["swaps_per_s"] =
@@ -63,6 +65,7 @@ void BM_AnnealSwaps(benchmark::State& state) {
   state.counters["kappa_a"] = score;
   state.counters["accepted"] = swaps > 0 ? static_cast<double>(accepted) / swaps : 0.0;
   state.counters["pool"] = static_cast<double>(pl.size());
+  state.counters["T0"] = t0used;
   state.SetLabel("N=10 m=5 iterations=1e5");
 }
 BENCHMARK(BM_AnnealSwaps)->Arg(1000)->Arg(10000)->Arg(100000)->Unit(benchmark::kMillisecond);

@@ -1,7 +1,12 @@
 // Measurement planning through the C ABI.
 #include "stiff/plan.hpp"
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
 #include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
 
 #include "boundary.hpp"
 #include "handles.hpp"
@@ -56,6 +61,17 @@ stiff_status stiff_plan_create(stiff_plan** out,
       plan.refine.enabled = o.optimizers & STIFF_PLAN_REFINE;
     }
     if (o.annealing_iterations) plan.annealing.iterations = o.annealing_iterations;
+    // Checked here, before the pool is built, with the C field's name (the core checks too).
+    if (!(std::isfinite(o.annealing_initial_temperature) && o.annealing_initial_temperature >= 0)) {
+      std::ostringstream got;
+      got << o.annealing_initial_temperature;
+      throw InvalidArgument("annealing_initial_temperature must be finite and >= 0 (got " +
+                            got.str() + ")");
+    }
+    plan.annealing.initial_temperature = o.annealing_initial_temperature;
+    // The core caps k0 at N and at pool - N; the cap here only keeps the value an int.
+    plan.annealing.initial_swap_count = static_cast<int>(
+        std::min<uint32_t>(o.annealing_initial_swap_count, std::numeric_limits<int>::max()));
     if (o.use_workspace_box) {
       require_finite(o.box_min_m, 3, "box_min_m");
       require_finite(o.box_max_m, 3, "box_max_m");

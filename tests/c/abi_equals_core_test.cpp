@@ -1,7 +1,12 @@
 // Results through the C ABI equal the C++ core to the last bit for the same inputs.
 #include <gtest/gtest.h>
 
+#include <cstddef>
 #include <cstring>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
 
 #include "stiff/identify.hpp"
 #include "stiff/robot_io.hpp"
@@ -73,6 +78,84 @@ TEST(CApi, IdentificationAndPredictionEqualTheCoreBitForBit) {
   stiff_result_destroy(f);
   stiff_dataset_destroy(d);
   stiff_dataset_destroy(design);
+  stiff_robot_destroy(r);
+}
+
+// A small, quick plan request: annealing only, on a 50 x 10 pool.
+stiff_plan_options small_plan_options() {
+  stiff_plan_options o;
+  std::memset(&o, 0, sizeof o);
+  o.struct_size = sizeof o;
+  o.count = 10;
+  o.pool_poses = 50;
+  o.pool_loads = 10;
+  o.optimizers = STIFF_PLAN_ANNEALING;
+  o.annealing_iterations = 500;
+  return o;
+}
+
+std::string plan_json(const stiff_plan* p) {
+  size_t needed = 0;
+  EXPECT_EQ(stiff_plan_json(nullptr, 0, &needed, p), STIFF_E_BUFFER_TOO_SMALL);
+  std::vector<char> text(needed);
+  EXPECT_EQ(stiff_plan_json(text.data(), text.size(), &needed, p), STIFF_OK);
+  return std::string(text.data());
+}
+
+// The annealing entry of the plan JSON's optimizer trace.
+nlohmann::json annealing_trace(const std::string& text) {
+  const auto j = nlohmann::json::parse(text);
+  for (const auto& t : j.at("trace"))
+    if (t.at("optimizer") == "annealing") return t;
+  ADD_FAILURE() << "no annealing trace in " << text;
+  return nlohmann::json::object();
+}
+
+TEST(CApi, PlanAnnealingInitialTemperatureAndSwapCountReachTheOptimizer) {
+  stiff_robot* r = nullptr;
+  ASSERT_EQ(stiff_robot_load(&r, src("examples/robots/rokae.yaml").c_str()), STIFF_OK);
+
+  stiff_plan_options o = small_plan_options();
+  o.annealing_initial_temperature = 0.125;
+  o.annealing_initial_swap_count = 2;
+  stiff_plan* p = nullptr;
+  ASSERT_EQ(stiff_plan_create(&p, r, &o), STIFF_OK) << stiff_last_error();
+  const auto trace = annealing_trace(plan_json(p));
+  EXPECT_EQ(trace.value("initial_temperature", -1.0), 0.125);
+  EXPECT_EQ(trace.value("initial_swap_count", -1), 2);
+  stiff_plan_destroy(p);
+
+  // A caller compiled against the header before these fields (smaller struct_size; whatever
+  // lies where the new fields would be is not read) gets the automatic T0 and
+  // k0 = max(1, N / 3).
+  stiff_plan_options old = small_plan_options();
+  old.annealing_initial_temperature = -7.0;  // beyond the old struct_size: never read
+  old.annealing_initial_swap_count = 9;
+  old.struct_size =
+      static_cast<uint32_t>(offsetof(stiff_plan_options, annealing_initial_temperature));
+  p = nullptr;
+  ASSERT_EQ(stiff_plan_create(&p, r, &old), STIFF_OK) << stiff_last_error();
+  const auto automatic = annealing_trace(plan_json(p));
+  EXPECT_GT(automatic.value("initial_temperature", -1.0), 0.0);
+  EXPECT_EQ(automatic.value("initial_swap_count", -1), 3);
+  stiff_plan_destroy(p);
+  stiff_robot_destroy(r);
+}
+
+TEST(CApi, PlanRejectsANegativeOrNonFiniteInitialTemperature) {
+  stiff_robot* r = nullptr;
+  ASSERT_EQ(stiff_robot_load(&r, src("examples/robots/rokae.yaml").c_str()), STIFF_OK);
+  for (const double t0 :
+       {-1.0, std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+    stiff_plan_options o = small_plan_options();
+    o.annealing_initial_temperature = t0;
+    stiff_plan* p = nullptr;
+    EXPECT_EQ(stiff_plan_create(&p, r, &o), STIFF_E_INVALID_ARGUMENT) << t0;
+    EXPECT_EQ(p, nullptr);
+    const std::string msg = stiff_last_error();
+    EXPECT_EQ(msg.rfind("stiff_plan_create", 0), 0u) << msg;
+    EXPECT_NE(msg.find("annealing_initial_temperature"), std::string::npos) << msg;
+  }
   stiff_robot_destroy(r);
 }
 

@@ -213,6 +213,14 @@ TEST(CApiMisuse, EveryFunctionReturnsItsStatusAndNamesItself) {
          o.load_min_N = kNaN;
          return stiff_plan_create(&p, f.robot, &o);
        }},
+      {"stiff_plan_create", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         stiff_plan_options o;
+         std::memset(&o, 0, sizeof o);
+         o.struct_size = sizeof o;
+         o.annealing_initial_temperature = -1.0;
+         return stiff_plan_create(&p, f.robot, &o);
+       }},
       {"stiff_plan_dataset", STIFF_E_INVALID_ARGUMENT,
        [&] { return stiff_plan_dataset(&d, nullptr); }},
       {"stiff_plan_json", STIFF_E_INVALID_ARGUMENT,

@@ -57,10 +57,16 @@ typedef struct stiff_plan_options {
   size_t fixture_direction_count;   /**< k */
   const double* fixture_forces_N;   /**< force magnitudes applied along each direction [N] */
   size_t fixture_force_count;
+  /* Appended fields: a caller whose struct_size ends before them gets the defaults. */
+  double annealing_initial_temperature;  /**< T0 in cost units; 0 = automatic [0]; negative or
+                                              non-finite: INVALID_ARGUMENT. @since 0.1 */
+  uint32_t annealing_initial_swap_count; /**< k0; 0 = automatic, max(1, N/3) [0]; capped at N
+                                              and at pool - N. @since 0.1 */
 } stiff_plan_options;
 
 /** Plan measurements for robot. Errors: INVALID_ARGUMENT (count larger than the pool, too few
- *  to identify the compliances, empty load range, every pose singular, unknown criterion),
+ *  to identify the compliances, empty load range, every pose singular, unknown criterion,
+ *  negative or non-finite annealing_initial_temperature),
  *  PARSE/IO (candidate file), CANCELLED. Release with stiff_plan_destroy. @since 0.1 */
 STIFF_API stiff_status stiff_plan_create(stiff_plan** out,
                                          const stiff_robot* robot,

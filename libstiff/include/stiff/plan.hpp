@@ -98,22 +98,29 @@ struct PoolOptions {
 /// Candidate pool Omega: poses with their Jacobians, loads, and the list of elements
 /// (pose index, load index). Fields are public for the planning kernels; call finalize() after
 /// filling them by hand. Memory: O(poses * n + elements).
-/// Allocator whose blocks start on a 64-byte cache line (C++17 aligned operator new).
+namespace detail {
+/// Blocks on 64-byte cache lines; blocks of 2 MB and more on 2 MB boundaries, and on Linux
+/// marked for transparent huge pages (a random read of a large table then misses the TLB far
+/// less often).
+void* allocate_table(std::size_t bytes);
+void free_table(void* p, std::size_t bytes) noexcept;
+}  // namespace detail
+
+/// std::allocator for the planning tables: see detail::allocate_table.
 template <class T>
-struct CacheLineAllocator {
+struct TableAllocator {
   using value_type = T;
-  static constexpr std::align_val_t kAlignment{64};
-  CacheLineAllocator() = default;
+  TableAllocator() = default;
   template <class U>
-  CacheLineAllocator(const CacheLineAllocator<U>&) {}
-  T* allocate(std::size_t n) { return static_cast<T*>(::operator new(n * sizeof(T), kAlignment)); }
-  void deallocate(T* p, std::size_t) { ::operator delete(p, kAlignment); }
+  TableAllocator(const TableAllocator<U>&) {}
+  T* allocate(std::size_t n) { return static_cast<T*>(detail::allocate_table(n * sizeof(T))); }
+  void deallocate(T* p, std::size_t n) noexcept { detail::free_table(p, n * sizeof(T)); }
   template <class U>
-  bool operator==(const CacheLineAllocator<U>&) const {
+  bool operator==(const TableAllocator<U>&) const {
     return true;
   }
   template <class U>
-  bool operator!=(const CacheLineAllocator<U>&) const {
+  bool operator!=(const TableAllocator<U>&) const {
     return false;
   }
 };
@@ -163,7 +170,7 @@ struct CandidatePool {
   /// random read of the table moves a third less memory). Read it through element_table().
   /// Empty above the budget; the kernels then compute the rows from the per-pose data, with
   /// the same values bit for bit.
-  std::vector<double, CacheLineAllocator<double>> element_table_storage;
+  std::vector<double, TableAllocator<double>> element_table_storage;
   /// Row e of the element table at element_table() + e * element_table_stride(); nullptr when
   /// finalize() did not store it.
   const double* element_table() const;

@@ -167,15 +167,19 @@ struct Anneal {
     for (int i = 0; i < N; ++i) pos[i] = i;
 
     // Candidate elements are drawn kAhead draws before they are used and their table rows
-    // prefetched meanwhile: on pools whose table exceeds the cache (1e5 elements: 12 MB for
+    // prefetched meanwhile: on pools whose table exceeds the cache (1e5 elements: 13 MB for
     // m = 5) the row arrives while earlier steps run. A candidate is uniform over the pool and
     // independent of the state, and one already in the set is skipped when used, so the
     // proposals are distributed exactly as with drawing at the time of use.
+    // They come from a stream of their own, so that the look-ahead distance does not change
+    // which draws become candidates (the result is the same for any kAhead).
     constexpr int kAhead = 8;  // a power of two
+    Xoshiro256pp candidate_rng = rng;
+    candidate_rng.jump();
     uint32_t ahead[kAhead];
     int ahead_at = 0;
     auto draw_ahead = [&](uint32_t& slot) {
-      slot = fast_index(rng, static_cast<uint32_t>(P));
+      slot = fast_index(candidate_rng, static_cast<uint32_t>(P));
       K.prefetch(static_cast<int>(slot));
     };
     for (uint32_t& a : ahead) draw_ahead(a);

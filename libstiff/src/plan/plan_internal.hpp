@@ -170,6 +170,20 @@ class Xoshiro256pp {
   double uniform_open() { return static_cast<double>(((*this)() >> 11) + 1) * 0x1.0p-53; }
   /// Uniform integer in [0, n) by rejection.
   uint64_t index(uint64_t n) { return rejection_index(*this, n); }
+  /// Advance by 2^128 draws (the authors' jump polynomial): a stream that does not overlap
+  /// this one's next 2^128 draws.
+  void jump() {
+    static constexpr uint64_t kJump[4] = {0x180ec6d33cfd0aba, 0xd5a61266f0c9392c,
+                                          0xa9582618e03fc9aa, 0x39abdc4529b1661c};
+    uint64_t t[4] = {0, 0, 0, 0};
+    for (uint64_t word : kJump)
+      for (int b = 0; b < 64; ++b) {
+        if (word & (uint64_t{1} << b))
+          for (int i = 0; i < 4; ++i) t[i] ^= s_[i];
+        (*this)();
+      }
+    for (int i = 0; i < 4; ++i) s_[i] = t[i];
+  }
 
  private:
   static uint64_t rotl(uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }

@@ -9,6 +9,10 @@
 #include "stiff/error.hpp"
 #include "stiff/random.hpp"
 
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
 namespace stiff {
 namespace {
 
@@ -342,6 +346,30 @@ void CandidatePool::finalize() {
       plan_detail::element_information<0>(*this, static_cast<int>(e), table + e * stride);
   }
 }
+
+namespace detail {
+
+namespace {
+constexpr std::size_t kLineBytes = 64, kHugePageBytes = std::size_t{2} << 20;
+std::align_val_t table_alignment(std::size_t bytes) {
+  return std::align_val_t{bytes >= kHugePageBytes ? kHugePageBytes : kLineBytes};
+}
+}  // namespace
+
+void* allocate_table(std::size_t bytes) {
+  void* p = ::operator new(bytes, table_alignment(bytes));
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+  // Before the first write, so that the pages are faulted in huge. Only a hint: ignore errors.
+  if (bytes >= kHugePageBytes) madvise(p, bytes, MADV_HUGEPAGE);
+#endif
+  return p;
+}
+
+void free_table(void* p, std::size_t bytes) noexcept {
+  ::operator delete(p, table_alignment(bytes));
+}
+
+}  // namespace detail
 
 int CandidatePool::element_table_stride() const {
   const int t = plan_detail::packed_size(identified_count());

@@ -220,6 +220,8 @@ class PlanOptions(C.Structure):
         ("fixture_direction_count", C.c_size_t),
         ("fixture_forces_N", c_double_p),
         ("fixture_force_count", C.c_size_t),
+        ("annealing_initial_temperature", C.c_double),
+        ("annealing_initial_swap_count", C.c_uint32),
     ]
 
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import ctypes as C
 import json
+import math
 import os
 from typing import Callable, Optional, Sequence
 
@@ -72,7 +73,8 @@ def plan(robot: Robot, count: int = 10, criterion: str = "d_opt", *, seed: int =
          load_range_N: Sequence[float] = (15.0, 35.0), load_step_N: float = 5.0,
          load_max_magnitude_N: float = 0.0, min_sigma_m: float = 0.05,
          q_fixed: Optional[Sequence[float]] = None, optimizers: Sequence[str] = ("annealing", "exchange"),
-         annealing_iterations: int = 100000, candidate_file=None, task: Optional[Dataset] = None,
+         annealing_iterations: int = 100000, annealing_t0: float = 0.0, annealing_k0: int = 0,
+         candidate_file=None, task: Optional[Dataset] = None,
          tracker_sigma_m: float = 10e-6, tracker_ppm: float = 0.0,
          workspace_box_m: Optional[Sequence[Sequence[float]]] = None,
          fixture_directions: Optional[Sequence[Sequence[float]]] = None,
@@ -81,12 +83,19 @@ def plan(robot: Robot, count: int = 10, criterion: str = "d_opt", *, seed: int =
     """Plan `count` measurements (poses and loads) on `criterion` (default d_opt: it predicts
     best in the Monte-Carlo study of docs/paper-study.md; "kappa_a" is the paper's). `q_fixed` holds joints at
     values [rad] (NaN = free). `progress(optimizer, iteration, total, best_score)` may return
-    False to stop (raises CancelledError); an exception it raises is re-raised here."""
+    False to stop (raises CancelledError); an exception it raises is re-raised here.
+    `annealing_t0` is the annealing's initial temperature in cost units and `annealing_k0` the
+    elements swapped per step at its start; 0 = automatic (T0 from random swaps of the start
+    set, k0 = max(1, count / 3))."""
     # The C options read 0 as "library default": an explicit 0 must not silently become 10.
     if int(count) < 1:
         raise InvalidArgumentError(f"plan: count must be >= 1 (got {count})")
     if not 0 < range_fraction <= 1:
         raise InvalidArgumentError(f"plan: range_fraction must be in (0, 1] (got {range_fraction})")
+    if not (math.isfinite(annealing_t0) and annealing_t0 >= 0):
+        raise InvalidArgumentError(f"plan: annealing_t0 must be finite and >= 0 (got {annealing_t0})")
+    if int(annealing_k0) != annealing_k0 or not 0 <= annealing_k0 <= 2**31 - 1:
+        raise InvalidArgumentError(f"plan: annealing_k0 must be an integer >= 0 (got {annealing_k0})")
     o = _c.PlanOptions()
     o.struct_size = C.sizeof(o)
     o.count, o.criterion, o.seed = count, criterion.encode(), seed
@@ -105,6 +114,8 @@ def plan(robot: Robot, count: int = 10, criterion: str = "d_opt", *, seed: int =
             raise ValueError(f"unknown optimizer {name!r} (use {', '.join(OPTIMIZERS)})")
         mask |= OPTIMIZERS[name]
     o.optimizers, o.annealing_iterations = mask, annealing_iterations
+    o.annealing_initial_temperature = float(annealing_t0)
+    o.annealing_initial_swap_count = int(annealing_k0)
     if candidate_file is not None:
         o.candidate_file = _c.encode(os.fspath(candidate_file))
     if task is not None:

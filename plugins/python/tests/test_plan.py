@@ -43,6 +43,10 @@ def test_progress_callback_can_stop_and_exceptions_propagate(rokae_path):
     (dict(count=1), "3N"),
     (dict(criterion="nope"), "unknown plan criterion"),
     (dict(load_range_N=(40, 20)), "load"),
+    (dict(annealing_t0=-1.0), "annealing_t0"),
+    (dict(annealing_t0=float("nan")), "annealing_t0"),
+    (dict(annealing_t0=float("inf")), "annealing_t0"),
+    (dict(annealing_k0=-1), "annealing_k0"),
 ])
 def test_bad_requests_are_clear_errors(rokae_path, kwargs, message):
     robot = stiff.Robot(rokae_path)
@@ -62,3 +66,47 @@ def test_cli_plan_writes_plan_file_and_json(tmp_path, rokae_path):
     assert "fx_flange_N" in header and "contribution" in header and "q6_rad" in header
     summary = json.loads((tmp_path / "plan.json").read_text())
     assert set(stiff.criteria()) <= set(summary["criteria"])
+
+
+def _annealing_trace(summary):
+    return next(t for t in summary["trace"] if t["optimizer"] == "annealing")
+
+
+def test_annealing_t0_and_k0_reach_the_optimizer(rokae_path):
+    robot = stiff.Robot(rokae_path)
+    args = dict(pool_poses=50, pool_loads=10, optimizers=["annealing"], annealing_iterations=500)
+    t = _annealing_trace(stiff.plan(robot, 10, annealing_t0=0.125, annealing_k0=2, **args).summary)
+    assert t["initial_temperature"] == 0.125 and t["initial_swap_count"] == 2
+    # 0 = automatic: T0 from random swaps, k0 = max(1, N / 3).
+    t = _annealing_trace(stiff.plan(robot, 10, **args).summary)
+    assert t["initial_temperature"] > 0 and t["initial_swap_count"] == 3
+
+
+def test_negative_t0_is_rejected_by_the_c_abi_naming_the_field(rokae_path):
+    # Past the Python check: the C library itself refuses it and names its field.
+    import ctypes as C
+
+    from stiff import _capi
+
+    robot = stiff.Robot(rokae_path)
+    o = _capi.PlanOptions()
+    o.struct_size = C.sizeof(o)
+    o.annealing_initial_temperature = -1.0
+    h = C.c_void_p()
+    with pytest.raises(stiff.InvalidArgumentError, match="annealing_initial_temperature"):
+        _capi.check(_capi.lib.stiff_plan_create(C.byref(h), robot, C.byref(o)))
+    assert not h.value
+
+
+def test_cli_plan_t0_and_k0(tmp_path, rokae_path):
+    cmd = [sys.executable, "-m", "stiff.cli", "plan", "--robot", rokae_path, "--count", "10",
+           "--pool-poses", "50", "--pool-loads", "10", "--optimizers", "annealing",
+           "--iterations", "500"]
+    subprocess.run(cmd + ["--t0", "0.125", "--k0", "2", "--json", tmp_path / "plan.json"],
+                   capture_output=True, text=True, check=True)
+    t = _annealing_trace(json.loads((tmp_path / "plan.json").read_text()))
+    assert t["initial_temperature"] == 0.125 and t["initial_swap_count"] == 2
+    bad = subprocess.run(cmd + ["--t0", "-1", "--json", tmp_path / "bad.json"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "--t0 -1" in bad.stderr and "Traceback" not in bad.stderr
+    assert not (tmp_path / "bad.json").exists()

@@ -411,6 +411,20 @@ TEST(PlanFastPath, AnnealingEngineDrawsUniformly) {
   int same = 0;
   for (int i = 0; i < 1000; ++i) same += a() == b();
   EXPECT_EQ(same, 0);
+  // jump(): a stream disjoint from the next draws of the original, and deterministic.
+  Xoshiro256pp c(7), d(7), e(7);
+  d.jump();
+  e.jump();
+  std::vector<uint64_t> head(100000);
+  for (auto& x : head) x = c();
+  std::sort(head.begin(), head.end());
+  int shared = 0;
+  for (int i = 0; i < 1000; ++i) {
+    const uint64_t x = d();
+    shared += std::binary_search(head.begin(), head.end(), x);
+    ASSERT_EQ(x, e());
+  }
+  EXPECT_EQ(shared, 0);
 }
 
 TEST(PlanCriteria, RegistryAndEvaluateAgreeWithPoolKernel) {

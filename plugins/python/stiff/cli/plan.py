@@ -52,6 +52,13 @@ def register(sub):
     p.add_argument("--fix", action="append", default=[], metavar="J=DEG",
                    help="hold joint J at DEG degrees (the paper holds 6=0); repeatable")
     p.add_argument("--iterations", type=int, default=100000, help="annealing iterations (default 1e5)")
+    p.add_argument("--t0", type=float, default=0.0, metavar="T0",
+                   help="annealing initial temperature in cost units (cost = 1/score for "
+                        "kappa_a and kappa_j, -score otherwise; default 0 = automatic: from the "
+                        "cost increases of random swaps of the start set)")
+    p.add_argument("--k0", type=int, default=0, metavar="K0",
+                   help="elements the annealing swaps per step at the start, falling to 1 "
+                        "(default 0 = automatic: max(1, N/3))")
     p.add_argument("--optimizers", default="annealing,exchange",
                    help="comma-separated: annealing, exchange (default both)")
     p.add_argument("--refine", action="store_true", help="refine poses and loads continuously with NLopt")
@@ -110,6 +117,10 @@ def run(args):
         lo, hi = (float(x) for x in args.load_range.split(","))
     except ValueError:
         raise UserError(f"--load-range {args.load_range}: expected MIN,MAX in N")
+    if not (math.isfinite(args.t0) and args.t0 >= 0):
+        raise UserError(f"--t0 {args.t0}: expected a finite temperature >= 0 in cost units (0 = automatic)")
+    if args.k0 < 0:
+        raise UserError(f"--k0 {args.k0}: expected a swap count >= 0 (0 = automatic)")
     optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
     if args.refine:
         optimizers.append("refine")
@@ -140,6 +151,7 @@ def run(args):
                           load_step_N=args.load_step, load_max_magnitude_N=args.load_max,
                           min_sigma_m=args.min_sigma, q_fixed=_fixed(args, robot.dof),
                           optimizers=optimizers, annealing_iterations=args.iterations,
+                          annealing_t0=args.t0, annealing_k0=args.k0,
                           candidate_file=args.candidates, task=task,
                           tracker_sigma_m=args.tracker_sigma_um * 1e-6, workspace_box_m=box,
                           fixture_directions=dirs, fixture_forces_N=forces, progress=progress)
