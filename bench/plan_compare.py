@@ -33,12 +33,13 @@ def main():
             subprocess.run([exe, "--dump-pool", path, str(poses), str(size // poses)], check=True)
             pool = plan_numpy.load_pool(path)
         out = subprocess.run(
-            [exe, f"--benchmark_filter=BM_(AnnealSwaps|PlanToFinalSet)/{size}$",
+            [exe, f"--benchmark_filter=BM_(AnnealSwaps|AnnealSwapsClassicalT0|PlanToFinalSet)/{size}$",
              "--benchmark_format=json", "--benchmark_repetitions=3",
              "--benchmark_report_aggregates_only=true"],
             check=True, capture_output=True, text=True).stdout
         runs = [r for r in json.loads(out)["benchmarks"] if r.get("aggregate_name") == "median"]
-        swaps = next(r for r in runs if r["name"].startswith("BM_AnnealSwaps"))
+        swaps = next(r for r in runs if r["name"].startswith("BM_AnnealSwaps/"))
+        hot = next(r for r in runs if r["name"].startswith("BM_AnnealSwapsClassicalT0/"))
         plan = next(r for r in runs if r["name"].startswith("BM_PlanToFinalSet"))
         cpp, cpp_kappa = swaps["swaps_per_s"], swaps["kappa_a"]
         unit = {"ns": 1e-6, "us": 1e-3, "ms": 1.0, "s": 1e3}[plan.get("time_unit", "ns")]
@@ -50,7 +51,9 @@ def main():
               f"CPU time, median of 3) | numpy {py_rate:.4g} swaps/s (kappa_a {py_kappa:.4f}, "
               f"5000 iterations, CPU {cpu:.2f} s; wall {py_wall_rate:.4g} swaps/s) | "
               f"ratio {cpp / py_rate:.0f}x (CPU time) | C++ 1e5-iteration plan "
-              f"{plan['cpu_time'] * unit:.1f} ms CPU / {plan['real_time'] * unit:.1f} ms wall")
+              f"{plan['cpu_time'] * unit:.1f} ms CPU / {plan['real_time'] * unit:.1f} ms wall | "
+              f"classical T0 (accepted {hot['accepted']:.1%}): C++ {hot['swaps_per_s']:.4g} swaps/s, "
+              f"ratio {hot['swaps_per_s'] / py_rate:.0f}x")
 
 if __name__ == "__main__":
     main()

@@ -164,12 +164,11 @@ struct CandidatePool {
   std::vector<double> weight2;
   std::vector<double> packed_force;
   /// Kernel data written by finalize() when it fits in 64 MB (1e5 elements up to m = 10): per
-  /// element the packed lower triangle of A_e^T A_e / sigma_e^2 (m (m + 1) / 2 doubles,
-  /// row-major: entry (k, l), l <= k, at k (k + 1) / 2 + l). Rows start on 64-byte cache lines
-  /// and are padded to whole lines (15 doubles for m = 5 then span two lines, never three: a
-  /// random read of the table moves a third less memory). Read it through element_table().
-  /// Empty above the budget; the kernels then compute the rows from the per-pose data, with
-  /// the same values bit for bit.
+  /// element the packed lower triangle of A_e^T A_e / sigma_e^2 (m (m + 1) / 2 doubles in the
+  /// planning kernels' order, 2 x 2 diagonal blocks first: plan_internal.hpp, packed_index).
+  /// Rows start on 64-byte cache lines and are padded to whole lines (15 doubles for m = 5 then
+  /// span two lines, never three). Read it through element_table(). Empty above the budget;
+  /// the kernels then compute the rows from the per-pose data, with the same values bit for bit.
   std::vector<double, TableAllocator<double>> element_table_storage;
   /// Row e of the element table at element_table() + e * element_table_stride(); nullptr when
   /// finalize() did not store it.

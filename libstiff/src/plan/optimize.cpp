@@ -100,14 +100,16 @@ struct PackedKernel {
       element_information<MC>(pool, e, scratch);
     return scratch;
   }
-  // Start loading element e's table row (whole cache lines: two for m = 5).
-  void prefetch(int e) const {
+  // Start loading the cache lines of element e's table row that hold its first `count`
+  // entries.
+  void prefetch(int e, int count) const {
 #if defined(__GNUC__)
     if (!table) return;
     const char* row = reinterpret_cast<const char*>(table + static_cast<size_t>(e) * stride);
-    for (int b = 0; b < size(); b += 8) __builtin_prefetch(row + b * sizeof(double));
+    for (int b = 0; b < count; b += 8) __builtin_prefetch(row + b * sizeof(double));
 #else
     (void)e;
+    (void)count;
 #endif
   }
   void copy_element(int e, double* out) const {
@@ -178,9 +180,12 @@ struct Anneal {
     candidate_rng.jump();
     uint32_t ahead[kAhead];
     int ahead_at = 0;
+    // A proposal reads the first TB entries of a candidate's row, and the rest only when the
+    // bound cannot reject it (see complete below): for m = 5 one cache line, not two.
+    const int TB = kClosed ? packed_bound_size(MC) : T;
     auto draw_ahead = [&](uint32_t& slot) {
       slot = fast_index(candidate_rng, static_cast<uint32_t>(P));
-      K.prefetch(static_cast<int>(slot));
+      K.prefetch(static_cast<int>(slot), TB);
     };
     for (uint32_t& a : ahead) draw_ahead(a);
     auto next_candidate = [&]() {
@@ -190,7 +195,9 @@ struct Anneal {
       return e;
     };
 
-    // One k-element swap proposal: Xn = X + sum (G_in - G_out), no rebuild of A.
+    // One k-element swap proposal: Xn = X + sum (G_in - G_out), no rebuild of A; only the
+    // first TB entries of Xn, those the bound reads (packed_bound_size).
+    std::vector<const double*> gout(kmax);
     auto propose = [&](int k) {
       for (int s = 0; s < k; ++s) {
         const int j = s + static_cast<int>(fast_index(rng, static_cast<uint32_t>(N - s)));
@@ -203,8 +210,16 @@ struct Anneal {
         const double* gi = K.element(e, scratch.data() + static_cast<size_t>(s) * T);
         const double* go = gset.data() + static_cast<size_t>(pos[s]) * T;
         gin[s] = gi;
+        gout[s] = go;
         const double* from = s == 0 ? X : Xn;
-        for (int q = 0; q < T; ++q) Xn[q] = (from[q] + gi[q]) - go[q];
+        for (int q = 0; q < TB; ++q) Xn[q] = (from[q] + gi[q]) - go[q];
+      }
+    };
+    // The other entries of Xn, each summed in the same order as in propose.
+    auto complete = [&](int k) {
+      for (int s = 0; s < k; ++s) {
+        const double* from = s == 0 ? X : Xn;
+        for (int q = TB; q < T; ++q) Xn[q] = (from[q] + gin[s][q]) - gout[s][q];
       }
     };
     auto reject = [&](int k) {
@@ -226,6 +241,7 @@ struct Anneal {
       int cnt = 0;
       for (int t = 0; t < 200; ++t) {
         propose(k0);
+        complete(k0);
         const double c = cost_of_matrix(Xn);
         reject(k0);
         if (std::isfinite(c) && std::isfinite(cost) && c > cost) {
@@ -279,11 +295,16 @@ struct Anneal {
         double p, q;
         if (bound_rejects<MC, C>(Xn, threshold)) {
           decided = true;
-        } else if (raw_fraction<MC, C>(Xn, p, q)) {
-          decided = true;
-          accept = within<C>(p, q, threshold);
-          if (accept) cn = cost_from_raw<C>(p / q, m);
+        } else {
+          complete(k);
+          if (raw_fraction<MC, C>(Xn, p, q)) {
+            decided = true;
+            accept = within<C>(p, q, threshold);
+            if (accept) cn = cost_from_raw<C>(p / q, m);
+          }
         }
+      } else {
+        complete(k);
       }
       if (!decided) {
         cn = cost_of(C, score_packed<MC, C>(ctx, Xn));

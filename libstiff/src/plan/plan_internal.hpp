@@ -379,16 +379,28 @@ inline double score(const Context& c, const double* M, const double* MJ) {
 
 // ------------------------------------------------------------------------------------------
 // Packed kernels: the fast path of the set optimizers. A symmetric m x m matrix is its packed
-// lower triangle, row-major ((k, l), l <= k, at k (k + 1) / 2 + l): 15 doubles for m = 5.
-// Every function does the same floating-point operations in the same order as its full-storage
-// counterpart above (add_element, cholesky, invert_lower, ...), so both paths give the same
-// values bit for bit (tests/unit/plan/plan_test.cpp, PlanFastPath).
+// lower triangle, m (m + 1) / 2 doubles (15 for m = 5), in "bound-first" order: first the 2 x 2
+// diagonal blocks {0, 1}, {2, 3}, ... (a last 1 x 1 block for odd m), each as (2b, 2b),
+// (2b + 1, 2b), (2b + 1, 2b + 1); then every other entry (r, c), c < r, row by row. The
+// annealing's bound (bound_rejects) reads only those blocks, the first packed_bound_size(m)
+// entries (7 of 15 for m = 5): a proposal the bound rejects, most of them, updates only those
+// and reads one cache line of each table row. Every function does the same floating-point
+// operations in the same order as its full-storage counterpart above (add_element, cholesky,
+// invert_lower, ...), so both paths give the same values bit for bit
+// (tests/unit/plan/plan_test.cpp, PlanFastPath).
 // ------------------------------------------------------------------------------------------
 
 constexpr int packed_size(int m) { return m * (m + 1) / 2; }
-/// Entry (r, c), r >= c, of a packed lower triangle.
+constexpr int packed_bound_size(int m) { return 3 * (m / 2) + m % 2; }
+/// Position of entry (r, c), c <= r, of a packed m x m matrix.
+constexpr int packed_index(int m, int r, int c) {
+  return r / 2 == c / 2 ? 3 * (r / 2) + (r % 2) + (c % 2)
+                        : packed_bound_size(m) + packed_size(r) + c - (r + r / 2);
+}
+/// Entry (r, c), c <= r, of a packed MC x MC matrix.
+template <int MC>
 STIFF_ALWAYS_INLINE inline double packed_at(const double* X, int r, int c) {
-  return X[packed_size(r) + c];
+  return X[packed_index(MC, r, c)];
 }
 
 /// Largest per-element table finalize() stores (CandidatePool::element_table()):
@@ -410,10 +422,9 @@ inline void element_information(const CandidatePool& p, int e, double* G) {
   double t[kMaxM];
   for (int k = 0; k < m; ++k) t[k] = jl[3 * k] * f[0] + jl[3 * k + 1] * f[1] + jl[3 * k + 2] * f[2];
   const double s = p.weight2[pose];
-  int idx = 0;
   for (int k = 0; k < m; ++k) {
     const double sk = s * t[k];
-    for (int l = 0; l <= k; ++l) G[idx++] = sk * t[l] * g[k * m + l];
+    for (int l = 0; l <= k; ++l) G[packed_index(m, k, l)] = sk * t[l] * g[k * m + l];
   }
 }
 
@@ -422,28 +433,29 @@ template <int MC>
 inline void element_jacobian_information(const CandidatePool& p, int e, double* G) {
   const int m = dim<MC>(p.identified_count());
   const double* g = p.packed_gram.data() + static_cast<size_t>(p.element_pose[e]) * m * m;
-  int idx = 0;
   for (int k = 0; k < m; ++k)
-    for (int l = 0; l <= k; ++l) G[idx++] = g[k * m + l];
+    for (int l = 0; l <= k; ++l) G[packed_index(m, k, l)] = g[k * m + l];
 }
 
+// M packed (packed_index); L and its inverse Li packed row-major ((i, j) at i (i + 1) / 2 + j).
 template <int MC>
 inline bool cholesky_packed(const double* M, double* L, int m_runtime) {
   const int m = dim<MC>(m_runtime);
 #pragma GCC unroll 16
   for (int j = 0; j < m; ++j) {
     const int rj = j * (j + 1) / 2;
-    double d = M[rj + j];
+    const double mjj = M[packed_index(m, j, j)];
+    double d = mjj;
 #pragma GCC unroll 16
     for (int k = 0; k < j; ++k) d -= L[rj + k] * L[rj + k];
     // = !(d > 1e-14 |M_jj|) || !isfinite(d)
-    if (!(d > 1e-14 * std::abs(M[rj + j]) && d < kInf)) return false;
+    if (!(d > 1e-14 * std::abs(mjj) && d < kInf)) return false;
     const double inv = 1.0 / std::sqrt(d);
     L[rj + j] = inv;
 #pragma GCC unroll 16
     for (int i = j + 1; i < m; ++i) {
       const int ri = i * (i + 1) / 2;
-      double s = M[ri + j];
+      double s = M[packed_index(m, i, j)];
 #pragma GCC unroll 16
       for (int k = 0; k < j; ++k) s -= L[ri + k] * L[rj + k];
       L[ri + j] = s * inv;
@@ -497,7 +509,7 @@ inline double kappa_inverse_packed(const double* M, int m_runtime) {
   if (!cholesky_packed<MC>(M, L, m)) return 0.0;
   invert_lower_packed<MC>(L, Li, m);
   double tr = 0.0;
-  for (int i = 0; i < m; ++i) tr += M[i * (i + 1) / 2 + i];
+  for (int i = 0; i < m; ++i) tr += M[packed_index(m, i, i)];
   return m / std::sqrt(tr * trace_inverse_packed<MC>(Li, m));
 }
 
@@ -528,8 +540,8 @@ inline double score_packed(const Context& c, const double* X) {
     // e_opt, task: full storage and the generic score (an eigensolver or m^3 work anyway).
     constexpr int kSize = MC > 0 ? MC * MC : kMaxM * kMaxM;
     double full[kSize];
-    for (int i = 0, idx = 0; i < m; ++i)
-      for (int j = 0; j <= i; ++j) full[i * m + j] = X[idx++];
+    for (int i = 0; i < m; ++i)
+      for (int j = 0; j <= i; ++j) full[i * m + j] = X[packed_index(m, i, j)];
     return score<MC>(c, full, full);
   }
 }
@@ -618,7 +630,7 @@ template <int MC>
 STIFF_ALWAYS_INLINE inline bool closed_form(const double* X, ClosedForm& f) {
   static_assert(has_closed_form<MC>(), "closed form for m = 1..6 only");
   constexpr int na = MC <= 3 ? MC : MC / 2, ns = MC - na;
-  auto at = [X](int r, int c) { return packed_at(X, r, c); };
+  auto at = [X](int r, int c) { return packed_at<MC>(X, r, c); };
   double a[3][3], adja[3][3];
   f.tr = 0.0;
 #pragma GCC unroll 8
@@ -739,7 +751,7 @@ STIFF_ALWAYS_INLINE inline bool raw_fraction(const double* X, double& p, double&
 template <int MC, Crit C>
 STIFF_ALWAYS_INLINE inline bool bound_rejects(const double* X, double threshold) {
   static_assert(uses_closed_form<MC, C>(), "the bound serves the closed-form criteria");
-  auto at = [X](int r, int c) { return packed_at(X, r, c); };
+  auto at = [X](int r, int c) { return packed_at<MC>(X, r, c); };
   // sum_B tr(M_BB)^-1 = num / den: a pair's tr inverse is its trace over its determinant.
   double num = 0.0, den = 1.0, tr = 0.0;
   bool positive = true;

@@ -128,6 +128,25 @@ void expect_same_scores(const CandidatePool& pool, const plan_detail::Context& c
   }
 }
 
+// The packed layout is a bijection onto 0 .. m (m + 1) / 2 - 1 whose first
+// packed_bound_size(m) positions are the 2 x 2 diagonal blocks the bound reads.
+TEST(PlanFastPath, PackedLayoutPutsTheBoundBlocksFirst) {
+  using namespace plan_detail;
+  for (int m = 1; m <= kMaxM; ++m) {
+    std::vector<int> hits(packed_size(m), 0);
+    for (int r = 0; r < m; ++r)
+      for (int c = 0; c <= r; ++c) {
+        const int at = packed_index(m, r, c);
+        ASSERT_GE(at, 0);
+        ASSERT_LT(at, packed_size(m));
+        ++hits[at];
+        EXPECT_EQ(at < packed_bound_size(m), r / 2 == c / 2) << m << " " << r << " " << c;
+      }
+    for (int h : hits) EXPECT_EQ(h, 1) << "m = " << m;
+  }
+  EXPECT_EQ(packed_bound_size(5), 7);
+}
+
 TEST(PlanFastPath, SameCriterionValuesAsGenericPathOnRandomSets) {
   using namespace plan_detail;
   const RobotModel robot = test::rokae();
@@ -223,8 +242,8 @@ TEST(PlanFastPath, AnnealingWithAndWithoutElementTableAndFastRng) {
 // scales over four decades (condition numbers up to ~1e9); rank-deficient ones are declined.
 template <int M>
 void pack_lower(const Eigen::MatrixXd& info, double* packed) {
-  for (int i = 0, idx = 0; i < M; ++i)
-    for (int j = 0; j <= i; ++j) packed[idx++] = info(i, j);
+  for (int i = 0; i < M; ++i)
+    for (int j = 0; j <= i; ++j) packed[plan_detail::packed_index(M, i, j)] = info(i, j);
 }
 
 // A weighted information matrix as the pools produce it: 3M + 3 Gaussian rows, column scales
