@@ -630,7 +630,8 @@ template <int MC>
 STIFF_ALWAYS_INLINE inline bool closed_form(const double* X, ClosedForm& f) {
   static_assert(has_closed_form<MC>(), "closed form for m = 1..6 only");
   constexpr int na = MC <= 3 ? MC : MC / 2, ns = MC - na;
-  auto at = [X](int r, int c) { return packed_at<MC>(X, r, c); };
+  // Inlined, so that packed_index folds to a constant for the unrolled indices.
+  auto at = [X](int r, int c) STIFF_ALWAYS_INLINE { return packed_at<MC>(X, r, c); };
   double a[3][3], adja[3][3];
   f.tr = 0.0;
 #pragma GCC unroll 8
@@ -751,7 +752,8 @@ STIFF_ALWAYS_INLINE inline bool raw_fraction(const double* X, double& p, double&
 template <int MC, Crit C>
 STIFF_ALWAYS_INLINE inline bool bound_rejects(const double* X, double threshold) {
   static_assert(uses_closed_form<MC, C>(), "the bound serves the closed-form criteria");
-  auto at = [X](int r, int c) { return packed_at<MC>(X, r, c); };
+  // Inlined, so that packed_index folds to a constant for the unrolled indices.
+  auto at = [X](int r, int c) STIFF_ALWAYS_INLINE { return packed_at<MC>(X, r, c); };
   // sum_B tr(M_BB)^-1 = num / den: a pair's tr inverse is its trace over its determinant.
   double num = 0.0, den = 1.0, tr = 0.0;
   bool positive = true;
