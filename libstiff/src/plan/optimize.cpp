@@ -100,16 +100,21 @@ struct PackedKernel {
       element_information<MC>(pool, e, scratch);
     return scratch;
   }
-  // Start loading the cache lines of element e's table row that hold its first `count`
-  // entries.
-  void prefetch(int e, int count) const {
+  // Start loading element e's table row: its first cache line and the line `last` bytes
+  // into the row (rows of m <= 5 span at most two lines); longer rows whole.
+  void prefetch(int e, int last) const {
 #if defined(__GNUC__)
     if (!table) return;
     const char* row = reinterpret_cast<const char*>(table + static_cast<size_t>(e) * stride);
-    for (int b = 0; b < count; b += 8) __builtin_prefetch(row + b * sizeof(double));
+    if (size() > 16) {
+      for (int b = 0; b < size(); b += 8) __builtin_prefetch(row + b * sizeof(double));
+      return;
+    }
+    __builtin_prefetch(row);
+    __builtin_prefetch(row + last);
 #else
     (void)e;
-    (void)count;
+    (void)last;
 #endif
   }
   void copy_element(int e, double* out) const {
@@ -181,11 +186,17 @@ struct Anneal {
     uint32_t ahead[kAhead];
     int ahead_at = 0;
     // A proposal reads the first TB entries of a candidate's row, and the rest only when the
-    // bound cannot reject it (see complete below): for m = 5 one cache line, not two.
+    // bound cannot reject it (see complete below): for m = 5 one cache line, not two. Only
+    // those are prefetched while the bound rejects most proposals (a cool chain, the default
+    // T0); a hot chain, where most proposals reach the closed form, prefetches whole rows.
+    // `last` (the byte offset of the last line to prefetch) follows the share of completed
+    // proposals over windows of 1024 steps.
     const int TB = kClosed ? packed_bound_size(MC) : T;
+    const int last_bound = (TB - 1) / 8 * 64, last_row = (T - 1) / 8 * 64;
+    int last = last_bound, completed = 0;
     auto draw_ahead = [&](uint32_t& slot) {
       slot = fast_index(candidate_rng, static_cast<uint32_t>(P));
-      K.prefetch(static_cast<int>(slot), TB);
+      K.prefetch(static_cast<int>(slot), last);
     };
     for (uint32_t& a : ahead) draw_ahead(a);
     auto next_candidate = [&]() {
@@ -297,6 +308,7 @@ struct Anneal {
           decided = true;
         } else {
           complete(k);
+          ++completed;
           if (raw_fraction<MC, C>(Xn, p, q)) {
             decided = true;
             accept = within<C>(p, q, threshold);
@@ -334,6 +346,10 @@ struct Anneal {
         }
       } else {
         reject(k);
+      }
+      if ((it & 1023) == 1023) {
+        last = completed > 512 ? last_row : last_bound;
+        completed = 0;
       }
       if (progress && (it + 1) % o.progress_interval == 0) {
         pr.iteration = it + 1;
