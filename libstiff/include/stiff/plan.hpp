@@ -95,9 +95,6 @@ struct PoolOptions {
   uint64_t seed = 1;
 };
 
-/// Candidate pool Omega: poses with their Jacobians, loads, and the list of elements
-/// (pose index, load index). Fields are public for the planning kernels; call finalize() after
-/// filling them by hand. Memory: O(poses * n + elements).
 namespace detail {
 /// Blocks on 64-byte cache lines; blocks of 2 MB and more on 2 MB boundaries, and on Linux
 /// marked for transparent huge pages (a random read of a large table then misses the TLB far
@@ -125,6 +122,9 @@ struct TableAllocator {
   }
 };
 
+/// Candidate pool Omega: poses with their Jacobians, loads, and the list of elements
+/// (pose index, load index). Fields are public for the planning kernels; call finalize() after
+/// filling them by hand. Memory: O(poses * n + elements).
 struct CandidatePool {
   int dof = 0;
   /// Identified joints (0-based), m = identified_joints.size(). Filled by finalize() when empty:

@@ -106,8 +106,9 @@ struct PackedKernel {
 #if defined(__GNUC__)
     if (!table) return;
     const char* row = reinterpret_cast<const char*>(table + static_cast<size_t>(e) * stride);
-    if (size() > 16) {
-      for (int b = 0; b < size(); b += 8) __builtin_prefetch(row + b * sizeof(double));
+    if (size() > 2 * kCacheLineDoubles) {
+      for (int b = 0; b < size(); b += kCacheLineDoubles)
+        __builtin_prefetch(row + b * sizeof(double));
       return;
     }
     __builtin_prefetch(row);
@@ -192,7 +193,8 @@ struct Anneal {
     // `last` (the byte offset of the last line to prefetch) follows the share of completed
     // proposals over windows of 1024 steps.
     const int TB = kClosed ? packed_bound_size(MC) : T;
-    const int last_bound = (TB - 1) / 8 * 64, last_row = (T - 1) / 8 * 64;
+    const int last_bound = (TB - 1) / kCacheLineDoubles * kCacheLineBytes,
+              last_row = (T - 1) / kCacheLineDoubles * kCacheLineBytes;
     int last = last_bound, completed = 0;
     auto draw_ahead = [&](uint32_t& slot) {
       slot = fast_index(candidate_rng, static_cast<uint32_t>(P));

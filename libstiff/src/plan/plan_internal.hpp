@@ -410,6 +410,10 @@ STIFF_ALWAYS_INLINE inline double packed_at(const double* X, int r, int c) {
 /// (12 MB) on a 2-core Xeon VM with 2 MB L2 per core: 1.75e7 swaps/s with the table and
 /// look-ahead, 1.0e7 computing elements (docs/benchmarks.md).
 constexpr double kElementTableBudgetBytes = 64.0 * 1024 * 1024;
+/// Cache line of x86-64 and AArch64: the element table's rows start on one and are padded to
+/// whole lines; the annealing prefetches them line by line.
+constexpr int kCacheLineBytes = 64;
+constexpr int kCacheLineDoubles = kCacheLineBytes / static_cast<int>(sizeof(double));
 
 /// Packed A_e^T A_e / sigma_e^2 of element e, computed as add_element does.
 template <int MC>

@@ -16,8 +16,6 @@
 namespace stiff {
 namespace {
 
-constexpr int kLineDoubles = 8;  // doubles per 64-byte cache line (x86-64, AArch64)
-
 std::string num(double v) {
   std::ostringstream o;
   o.precision(6);
@@ -350,9 +348,10 @@ void CandidatePool::finalize() {
 namespace detail {
 
 namespace {
-constexpr std::size_t kLineBytes = 64, kHugePageBytes = std::size_t{2} << 20;
+constexpr std::size_t kHugePageBytes = std::size_t{2} << 20;
 std::align_val_t table_alignment(std::size_t bytes) {
-  return std::align_val_t{bytes >= kHugePageBytes ? kHugePageBytes : kLineBytes};
+  return std::align_val_t{bytes >= kHugePageBytes ? kHugePageBytes
+                                                  : std::size_t{plan_detail::kCacheLineBytes}};
 }
 }  // namespace
 
@@ -373,7 +372,8 @@ void free_table(void* p, std::size_t bytes) noexcept {
 
 int CandidatePool::element_table_stride() const {
   const int t = plan_detail::packed_size(identified_count());
-  return (t + kLineDoubles - 1) / kLineDoubles * kLineDoubles;
+  constexpr int kLine = plan_detail::kCacheLineDoubles;
+  return (t + kLine - 1) / kLine * kLine;
 }
 
 const double* CandidatePool::element_table() const {
