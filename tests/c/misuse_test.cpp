@@ -20,6 +20,16 @@ const double kInf = std::numeric_limits<double>::infinity();
 
 std::string src(const char* rel) { return std::string(STIFF_SOURCE_DIR) + "/" + rel; }
 
+// A versioned options struct as a C caller starts it: every field 0 (the library's defaults),
+// struct_size set.
+template <class Options>
+Options zeroed() {
+  Options o;
+  std::memset(&o, 0, sizeof o);
+  o.struct_size = sizeof o;
+  return o;
+}
+
 struct Fixture {
   stiff_robot* robot = nullptr;
   stiff_dataset* design = nullptr;
@@ -119,9 +129,7 @@ TEST(CApiMisuse, EveryFunctionReturnsItsStatusAndNamesItself) {
        [&] { return stiff_dataset_id(text, sizeof text, &needed, f.data, 99); }},
       {"stiff_noise_read", STIFF_E_IO,
        [&] {
-         stiff_noise_options o;
-         std::memset(&o, 0, sizeof o);
-         o.struct_size = sizeof o;
+         auto o = zeroed<stiff_noise_options>();
          return stiff_noise_read(&o, "/nonexistent.yaml");
        }},
       {"stiff_design_random", STIFF_E_INVALID_ARGUMENT,
@@ -132,9 +140,7 @@ TEST(CApiMisuse, EveryFunctionReturnsItsStatusAndNamesItself) {
        [&] { return stiff_simulate(&d, f.robot, f.design, nullptr, w, 5, nullptr); }},
       {"stiff_simulate", STIFF_E_INVALID_ARGUMENT,
        [&] {
-         stiff_noise_options o;
-         std::memset(&o, 0, sizeof o);
-         o.struct_size = sizeof o;
+         auto o = zeroed<stiff_noise_options>();
          o.tracker_sigma_m = -1;
          const double k[6] = {1, 1, 1, 1, 1, 1};
          return stiff_simulate(&d, f.robot, f.design, nullptr, k, 6, &o);
@@ -199,25 +205,19 @@ TEST(CApiMisuse, EveryFunctionReturnsItsStatusAndNamesItself) {
        [&] { return stiff_effect_describe(text, sizeof text, &needed, nullptr, "warp_drive"); }},
       {"stiff_plan_create", STIFF_E_INVALID_ARGUMENT,
        [&] {
-         stiff_plan_options o;
-         std::memset(&o, 0, sizeof o);
-         o.struct_size = sizeof o;
+         auto o = zeroed<stiff_plan_options>();
          o.criterion = "prettiest";
          return stiff_plan_create(&p, f.robot, &o);
        }},
       {"stiff_plan_create", STIFF_E_INVALID_ARGUMENT,
        [&] {
-         stiff_plan_options o;
-         std::memset(&o, 0, sizeof o);
-         o.struct_size = sizeof o;
+         auto o = zeroed<stiff_plan_options>();
          o.load_min_N = kNaN;
          return stiff_plan_create(&p, f.robot, &o);
        }},
       {"stiff_plan_create", STIFF_E_INVALID_ARGUMENT,
        [&] {
-         stiff_plan_options o;
-         std::memset(&o, 0, sizeof o);
-         o.struct_size = sizeof o;
+         auto o = zeroed<stiff_plan_options>();
          o.annealing_initial_temperature = -1.0;
          return stiff_plan_create(&p, f.robot, &o);
        }},
