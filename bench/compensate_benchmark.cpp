@@ -7,9 +7,9 @@
 #include <cmath>
 #include <string>
 
-#include "stiff/compensate.hpp"
-#include "stiff/robot_io.hpp"
-#include "stiff/simulate.hpp"
+#include "stiff/compensate/compensate.hpp"
+#include "stiff/io/robot_io.hpp"
+#include "stiff/sim/simulate.hpp"
 
 namespace {
 

@@ -3,10 +3,10 @@
 // the top effect, every candidate's Jacobian), and the --auto loop.
 #include <benchmark/benchmark.h>
 
-#include "stiff/diagnose.hpp"
-#include "stiff/model.hpp"
-#include "stiff/robot_io.hpp"
-#include "stiff/simulate.hpp"
+#include "stiff/diagnose/diagnose.hpp"
+#include "stiff/io/robot_io.hpp"
+#include "stiff/model/model.hpp"
+#include "stiff/sim/simulate.hpp"
 
 namespace {
 

@@ -12,8 +12,8 @@
 #include <map>
 #include <string>
 
-#include "stiff/plan.hpp"
-#include "stiff/robot_io.hpp"
+#include "stiff/io/robot_io.hpp"
+#include "stiff/plan/plan.hpp"
 
 namespace {
 

@@ -1,6 +1,6 @@
 """Peer implementation of the identification, as a researcher would write it with numpy/scipy.
 
-Same models as libstiff (libstiff/src/effects/{joint,link,point_offset}.cpp), re-implemented
+Same models as libstiff (libstiff/src/model/effects/{joint,link,point_offset}.cpp), re-implemented
 from the robot's modified DH table (vectorised forward kinematics over all measurements):
 
 - joint:  d = sum_j c_j tau_j (z_j x (P - o_j)),  tau_j = (z_j x (L - o_j)) . F + z_j . M

@@ -1,13 +1,13 @@
 // C ABI of inverse kinematics, path files and compensation (stiff_compensate.h).
-#include "stiff/compensate.hpp"
+#include "stiff/compensate/compensate.hpp"
 
 #include <algorithm>
 
 #include "boundary.hpp"
 #include "handles.hpp"
-#include "stiff/ik.hpp"
-#include "stiff/path_io.hpp"
-#include "stiff/simulate.hpp"
+#include "stiff/compensate/ik.hpp"
+#include "stiff/io/path_io.hpp"
+#include "stiff/sim/simulate.hpp"
 #include "stiff/stiff_compensate.h"
 
 using namespace stiff;

@@ -3,8 +3,8 @@
 
 #include "boundary.hpp"
 #include "handles.hpp"
-#include "stiff/robot_io.hpp"
-#include "stiff/simulate.hpp"
+#include "stiff/io/robot_io.hpp"
+#include "stiff/sim/simulate.hpp"
 
 namespace stiff::capi {
 namespace {

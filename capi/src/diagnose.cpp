@@ -1,5 +1,5 @@
 // Model diagnosis over the C ABI (stiff_diagnose.h).
-#include "stiff/diagnose.hpp"
+#include "stiff/diagnose/diagnose.hpp"
 
 #include "boundary.hpp"
 #include "handles.hpp"

@@ -1,7 +1,7 @@
 // C ABI of the FMU export (stiff_fmu.h).
 #include "boundary.hpp"
 #include "handles.hpp"
-#include "stiff/fmu_export.hpp"
+#include "stiff/export/fmu_export.hpp"
 #include "stiff/stiff_fmu.h"
 
 extern "C" stiff_status stiff_fmu_export(const char* path,

@@ -3,10 +3,10 @@
 
 #include <memory>
 
-#include "stiff/dataset.hpp"
-#include "stiff/fit.hpp"
-#include "stiff/model.hpp"
-#include "stiff/robot_model.hpp"
+#include "stiff/identify/fit.hpp"
+#include "stiff/io/dataset.hpp"
+#include "stiff/kinematics/robot_model.hpp"
+#include "stiff/model/model.hpp"
 
 struct stiff_robot {
   stiff::RobotModel model;

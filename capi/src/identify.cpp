@@ -1,5 +1,5 @@
 // Identification, fit results, prediction.
-#include "stiff/identify.hpp"
+#include "stiff/identify/identify.hpp"
 
 #include "boundary.hpp"
 #include "handles.hpp"

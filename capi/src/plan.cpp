@@ -1,5 +1,5 @@
 // Measurement planning through the C ABI.
-#include "stiff/plan.hpp"
+#include "stiff/plan/plan.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -11,11 +11,13 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "stiff/compensate/compensate.hpp"
+
 namespace stiff::fmu {
 
 namespace {
 
-// Reader of resources/model.txt (format in stiff/fmu_export.hpp). Strict: any surprise is an
+// Reader of resources/model.txt (format in stiff/export/fmu_export.hpp). Strict: any surprise is an
 // error naming file:line, since a silently misread model would give wrong physics.
 class LineReader {
  public:
@@ -82,18 +84,6 @@ Eigen::Matrix4d matrix4(const LineReader& r, const std::vector<std::string>& t, 
 
 Eigen::Vector3d vector3(const LineReader& r, const std::vector<std::string>& t, size_t first) {
   return Eigen::Vector3d(r.number(t[first]), r.number(t[first + 1]), r.number(t[first + 2]));
-}
-
-// Small rotation vector of R (log map), for the orientation residual of the compensation.
-Eigen::Vector3d log_so3(const Eigen::Matrix3d& r) {
-  const Eigen::AngleAxisd aa(r);
-  return aa.angle() * aa.axis();
-}
-
-Eigen::Matrix3d exp_so3(const Eigen::Vector3d& w) {
-  const double a = w.norm();
-  if (a == 0.0) return Eigen::Matrix3d::Identity();
-  return Eigen::AngleAxisd(a, w / a).toRotationMatrix();
 }
 
 }  // namespace
@@ -357,10 +347,10 @@ Status Model::deflection(const double** d6, std::string* msg) {
   return Status::ok;
 }
 
-// Compensated joint targets: solve p(qc) + d(qc, W) = p(q) and exp(rot(qc, W)) R(qc) = R(q)
-// (n >= 6; position only for n < 6) by quasi-Newton steps, damped least squares
-// dq = B^T (B B^T + lambda^2 I)^-1 e, B = geometric Jacobian of the unloaded arm + Broyden
-// updates.
+// Compensated joint targets: the core's solver (stiff::solve_compensation) drives the loaded
+// pose of the measured point, p(qc) + d(qc, W) with rotation exp(rot(qc, W)) R(qc), to the
+// rigid pose at q (position only for n < 6). The wrench may be given in the tool frame, so it
+// is re-evaluated at every qc.
 Status Model::compensation(const double** qcmd, std::string* msg) {
   const double* d6 = nullptr;
   if (!compensation_valid_) {
@@ -368,50 +358,29 @@ Status Model::compensation(const double** qcmd, std::string* msg) {
     if (s != Status::ok) return s;
     const RobotModel& robot = layout_->robot;
     const int n = dof();
-    const int rows = n >= 6 ? 6 : 3;
     const Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(values_.q.data(), n);
-    const Eigen::Vector3d p0 = p_unloaded_;
-    const Eigen::Matrix3d r0 = flange_rotation_;
-    Eigen::VectorXd qc = q;
-    double err = INFINITY, previous = INFINITY;
-    constexpr double kLambda2 = 1e-12;
+    Eigen::Matrix4d target = Eigen::Matrix4d::Identity();
+    target.block<3, 3>(0, 0) = flange_rotation_;
+    target.block<3, 1>(0, 3) = p_unloaded_;
     MeasurementContext c;
-    Eigen::MatrixXd jac;  // Broyden estimate of d(loaded pose)/dq, started at the geometric J
-    Eigen::VectorXd e_prev, dq;
-    for (int it = 0; it < 30; ++it) {
+    const auto loaded = [&](const Eigen::VectorXd& qc) {
       Eigen::Vector3d pc;
       const Eigen::Matrix<double, 6, 1> d = predict_at(qc, &pc, &c);
-      Eigen::Matrix<double, 6, 1> e6;
-      e6.head<3>() = p0 - (pc + d.head<3>());
-      e6.tail<3>() =
-          log_so3(r0 * (exp_so3(d.tail<3>()) * c.chain.flange.block<3, 3>(0, 0)).transpose());
-      const Eigen::VectorXd e = e6.head(rows);
-      err = rows == 6 ? std::max(e6.head<3>().norm(), e6.tail<3>().norm()) : e6.head<3>().norm();
-      // Converged to round-off, or stagnating there (the residual cannot fall below ~1e-16).
-      if (!std::isfinite(err) || err < 1e-15 || (err < 1e-12 && err > 0.1 * previous)) break;
-      previous = err;
-      if (it == 0) {
-        jac = robot.jacobian_at(c.chain, pc).topRows(rows);
-      } else {
-        // Broyden update with the observed change of the pose, y = -(e - e_prev): the
-        // deflection's own dependence on q (~1e-2 of J under large loads) is learned, so the
-        // iteration converges superlinearly instead of by a factor ~1e-2 per step.
-        const Eigen::VectorXd y = e_prev - e;
-        jac += (y - jac * dq) * dq.transpose() / dq.squaredNorm();
-      }
-      Eigen::MatrixXd a = jac * jac.transpose();
-      a.diagonal().array() += kLambda2;
-      dq = jac.transpose() * a.ldlt().solve(e);
-      qc += dq;
-      e_prev = e;
-    }
+      Eigen::Matrix4d rigid = Eigen::Matrix4d::Identity();
+      rigid.block<3, 3>(0, 0) = c.chain.flange.block<3, 3>(0, 0);
+      rigid.block<3, 1>(0, 3) = pc;
+      return loaded_pose(rigid, d);
+    };
+    const PoseCompensation solved = solve_compensation(robot, loaded, target, q);
+    Eigen::VectorXd qc = solved.q_cmd;
+    const double err = solved.residual;
     compensation_status_ = Status::ok;
     compensation_message_.clear();
     if (!qc.allFinite()) {
       compensation_status_ = Status::error;
       compensation_message_ = "compensation failed: non-finite joint target (singular pose?)";
       qc = q;
-    } else if (!(err <= 1e-12)) {
+    } else if (!solved.converged) {
       compensation_status_ = Status::warning;
       char b[200];
       std::snprintf(b, sizeof b,

@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "stiff/fmu_export.hpp"
-#include "stiff/model.hpp"
+#include "stiff/export/fmu_export.hpp"
+#include "stiff/model/model.hpp"
 
 namespace stiff::fmu {
 

@@ -8,9 +8,9 @@
 #include <string>
 #include <vector>
 
-#include "stiff/identify.hpp"
-#include "stiff/robot_io.hpp"
-#include "stiff/simulate.hpp"
+#include "stiff/identify/identify.hpp"
+#include "stiff/io/robot_io.hpp"
+#include "stiff/sim/simulate.hpp"
 #include "stiff/stiff.h"
 
 namespace {

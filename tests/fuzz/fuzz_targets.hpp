@@ -18,18 +18,18 @@
 #include <string>
 #include <vector>
 
-#include "stiff/dataset.hpp"
 #include "stiff/error.hpp"
-#include "stiff/fit.hpp"
-#include "stiff/robot_io.hpp"
-#include "stiff/simulate.hpp"
+#include "stiff/identify/fit.hpp"
+#include "stiff/io/dataset.hpp"
+#include "stiff/io/robot_io.hpp"
+#include "stiff/sim/simulate.hpp"
 #include "stiff/stiff.h"
 #if __has_include(<glog/logging.h>)
 #include <glog/logging.h>  // Ceres logs through glog: a log line is a finding (never print)
 #define STIFF_FUZZ_HAVE_GLOG 1
 #endif
-#if __has_include("stiff/path_io.hpp")
-#include "stiff/path_io.hpp"
+#if __has_include("stiff/io/path_io.hpp")
+#include "stiff/io/path_io.hpp"
 #define STIFF_FUZZ_HAVE_PATH_IO 1
 #endif
 

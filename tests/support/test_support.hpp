@@ -5,8 +5,8 @@
 #include <string>
 #include <vector>
 
-#include "stiff/dataset.hpp"
-#include "stiff/robot_io.hpp"
+#include "stiff/io/dataset.hpp"
+#include "stiff/io/robot_io.hpp"
 
 namespace stiff::test {
 

@@ -3,7 +3,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "stiff/plan.hpp"
+#include "stiff/plan/plan.hpp"
 
 namespace stiff {
 namespace {

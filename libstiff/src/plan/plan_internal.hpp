@@ -10,7 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "stiff/plan.hpp"
+#include "stiff/kinematics/joint_torque.hpp"
+#include "stiff/plan/plan.hpp"
 #include "stiff/random.hpp"
 
 #if defined(__GNUC__)
@@ -58,7 +59,7 @@ inline void add_element(const CandidatePool& p, int e, double sign, double* M) {
   const double* f = p.packed_force.data() + 3 * static_cast<size_t>(p.element_load[e]);
   const double* g = p.packed_gram.data() + static_cast<size_t>(pose) * m * m;
   double t[kMaxM];
-  for (int k = 0; k < m; ++k) t[k] = jl[3 * k] * f[0] + jl[3 * k + 1] * f[1] + jl[3 * k + 2] * f[2];
+  for (int k = 0; k < m; ++k) t[k] = force_torque(jl + 3 * k, f);
   const double s = sign * p.weight2[pose];
   for (int k = 0; k < m; ++k) {
     const double sk = s * t[k];
@@ -424,7 +425,7 @@ inline void element_information(const CandidatePool& p, int e, double* G) {
   const double* f = p.packed_force.data() + 3 * static_cast<size_t>(p.element_load[e]);
   const double* g = p.packed_gram.data() + static_cast<size_t>(pose) * m * m;
   double t[kMaxM];
-  for (int k = 0; k < m; ++k) t[k] = jl[3 * k] * f[0] + jl[3 * k + 1] * f[1] + jl[3 * k + 2] * f[2];
+  for (int k = 0; k < m; ++k) t[k] = force_torque(jl + 3 * k, f);
   const double s = p.weight2[pose];
   for (int k = 0; k < m; ++k) {
     const double sk = s * t[k];

@@ -7,6 +7,7 @@
 
 #include "plan_internal.hpp"
 #include "stiff/error.hpp"
+#include "stiff/kinematics/joint_torque.hpp"
 #include "stiff/random.hpp"
 
 #if defined(__linux__)
@@ -387,7 +388,8 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> CandidatePool::block(int e) const {
   Eigen::Matrix<double, 3, Eigen::Dynamic> a(3, m);
   for (int k = 0; k < m; ++k) {
     const int j = identified_joints[k];
-    a.col(k) = jacobian_meas[p].col(j) * jacobian_load[p].col(j).dot(forces[element_load[e]]);
+    a.col(k) =
+        jacobian_meas[p].col(j) * force_torque(jacobian_load[p].col(j), forces[element_load[e]]);
   }
   return a;
 }

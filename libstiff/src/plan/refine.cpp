@@ -7,7 +7,7 @@
 
 #include "plan_internal.hpp"
 #include "stiff/error.hpp"
-#include "stiff/model.hpp"
+#include "stiff/model/model.hpp"
 
 namespace stiff {
 

@@ -1,12 +1,12 @@
 // Inverse kinematics: analytic branches of the spherical-wrist arms, numerical IK of the UR5,
 // branch continuity along a path.
-#include "stiff/ik.hpp"
+#include "stiff/compensate/ik.hpp"
 
 #include <gtest/gtest.h>
 
 #include <random>
 
-#include "stiff/robot_io.hpp"
+#include "stiff/io/robot_io.hpp"
 #include "test_support.hpp"
 
 namespace stiff {

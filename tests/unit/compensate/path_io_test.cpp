@@ -1,12 +1,12 @@
 // Path files: CSV of tool poses and the G-code subset; bad input names path:line:column.
-#include "stiff/path_io.hpp"
+#include "stiff/io/path_io.hpp"
 
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
 
+#include "stiff/compensate/ik.hpp"
 #include "stiff/error.hpp"
-#include "stiff/ik.hpp"
 #include "test_support.hpp"
 
 namespace stiff {

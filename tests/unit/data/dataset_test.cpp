@@ -1,4 +1,4 @@
-#include "stiff/dataset.hpp"
+#include "stiff/io/dataset.hpp"
 
 #include <gtest/gtest.h>
 

@@ -3,7 +3,7 @@
 // ranked first or reported in the ambiguous group, controls stay `adequate`, a left-out
 // effect is not claimed confidently, and adding the suggested effect brings the validation
 // error to the noise floor. Multi-seed sweeps are in tests named *Slow*.
-#include "stiff/diagnose.hpp"
+#include "stiff/diagnose/diagnose.hpp"
 
 #include <gtest/gtest.h>
 
@@ -14,7 +14,7 @@
 
 #include "../effects/effect_truths.hpp"
 #include "stiff/error.hpp"
-#include "stiff/simulate.hpp"
+#include "stiff/sim/simulate.hpp"
 
 namespace stiff {
 namespace {

@@ -6,16 +6,14 @@
 
 #include "effect_truths.hpp"
 #include "stiff/error.hpp"
-#include "stiff/model.hpp"
+#include "stiff/model/model.hpp"
 #include "test_support.hpp"
 
 namespace stiff {
 namespace {
 
-const std::vector<std::string> kEffects = {"complementary",   "link",        "gravity_compensator",
-                                           "nonlinear_joint", "backlash",    "coupling",
-                                           "tracker_frame",   "force_frame", "point_offset",
-                                           "tool_compliance", "drift"};
+// Every registered effect: a new one is covered without editing this file.
+const std::vector<std::string> kEffects = test::registered_effects();
 
 TEST(Effects, RegistryHasEveryEffectWithTexts) {
   const auto names = effect_names();
@@ -128,6 +126,48 @@ TEST(Effects, AutodiffJacobianOfAllEffectsTogether) {
 // Exact loaded equilibrium K dtheta = J(L(q + dtheta))^T F by fixed-point iteration (no
 // gravity): d_exact = P(q + dtheta) - P(q). The complementary term with gamma = 1 must account
 // for the second-order part, leaving a third-order remainder.
+// An effect that claims linear() predicts d affine in its parameters with a Jacobian no
+// parameter changes (identify() then evaluates one Jacobian per measurement): checked between
+// two parameter vectors a few typical sizes apart, to round-off.
+TEST(Effects, LinearClaimHoldsNumerically) {
+  const RobotModel robot = test::rokae();
+  const Dataset data = test::design60(5, 8);
+  for (const auto& name : kEffects) {
+    const DeflectionModel model(robot, {"joint", name}, &data);
+    if (!model.effects()[1]->linear()) continue;
+    ASSERT_TRUE(model.linear()) << name;
+    const int p = model.parameter_count();
+    Eigen::VectorXd t0 = test::effect_truth(name, robot).theta, t1 = t0;
+    for (int k = 0; k < p; ++k) {
+      t0(k) += 0.3 * std::abs(model.spec(k).typical) * (k % 3 - 1);
+      t1(k) += 0.7 * std::abs(model.spec(k).typical) * (k % 2 ? 1 : -0.5);
+    }
+    const auto ctx = model.contexts(data);
+    for (size_t r = 0; r < data.rows.size(); ++r) {
+      const auto j0 = model.displacement_jacobian(t0, data.rows[r], ctx[r]);
+      const auto j1 = model.displacement_jacobian(t1, data.rows[r], ctx[r]);
+      EXPECT_LE((j1 - j0).cwiseAbs().maxCoeff(), 1e-12 * j0.cwiseAbs().maxCoeff()) << name;
+      const Eigen::Vector3d d0 = model.predict(t0, data.rows[r], ctx[r]).head<3>();
+      const Eigen::Vector3d d1 = model.predict(t1, data.rows[r], ctx[r]).head<3>();
+      EXPECT_LE((d1 - d0 - j0 * (t1 - t0)).cwiseAbs().maxCoeff(), 1e-12 * d1.cwiseAbs().maxCoeff())
+          << name << " row " << r;
+    }
+  }
+}
+
+// Every registered effect gives the example its tests and the virtual robot use, and it is not
+// the null (switched-off) value.
+TEST(Effects, EveryEffectGivesAnExample) {
+  const RobotModel robot = test::rokae();
+  for (const auto& name : kEffects) {
+    DeflectionModel m(robot, {"joint", name});
+    const Truth t = test::effect_truth(name, robot);
+    EXPECT_NE(t.theta.tail(m.effects()[1]->size()),
+              m.null_parameters().tail(m.effects()[1]->size()))
+        << name;
+  }
+}
+
 TEST(Effects, ComplementaryIsTheSecondOrderOfTheExactEquilibrium) {
   RobotModel robot = test::rokae();
   robot.measured_point = Eigen::Vector3d(0.03, -0.02, 0.05);

@@ -7,7 +7,7 @@
 #include <map>
 
 #include "effect_truths.hpp"
-#include "stiff/identify.hpp"
+#include "stiff/identify/identify.hpp"
 
 namespace stiff {
 namespace {
@@ -85,18 +85,7 @@ TEST_P(EffectRecovery, SlowWithinThreeStandardErrors200Seeds) { check(GetParam()
 
 INSTANTIATE_TEST_SUITE_P(Effects,
                          EffectRecovery,
-                         ::testing::Values("joint",
-                                           "complementary",
-                                           "link",
-                                           "gravity_compensator",
-                                           "nonlinear_joint",
-                                           "backlash",
-                                           "coupling",
-                                           "tracker_frame",
-                                           "force_frame",
-                                           "point_offset",
-                                           "tool_compliance",
-                                           "drift"),
+                         ::testing::ValuesIn(effect_names()),
                          [](const auto& info) { return info.param; });
 
 TEST(EffectRecoveryDetails, PointOffsetMakesJointSixIdentifiable) {

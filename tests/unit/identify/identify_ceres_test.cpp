@@ -7,7 +7,7 @@
 
 #include "../effects/effect_truths.hpp"
 #include "stiff/error.hpp"
-#include "stiff/identify.hpp"
+#include "stiff/identify/identify.hpp"
 
 namespace stiff {
 namespace {

@@ -4,10 +4,10 @@
 #include <cmath>
 #include <vector>
 
-#include "../../../libstiff/src/fast_chain.hpp"
+#include "kinematics/fast_chain.hpp"
 #include "stiff/error.hpp"
-#include "stiff/identify.hpp"
-#include "stiff/simulate.hpp"
+#include "stiff/identify/identify.hpp"
+#include "stiff/sim/simulate.hpp"
 #include "test_support.hpp"
 
 namespace stiff {
@@ -101,8 +101,8 @@ TEST(FitJson, RoundTripKeepsEveryParameter) {
   EXPECT_THROW(fit_from_json("{not json", "x.json"), ParseError);
 }
 
-// The identification's kinematics (libstiff/src/fast_chain.hpp): the polynomial sincos within
-// 2 ulp-ish of libm, and the specialised chain equal to RobotModel::chain to round-off for
+// The identification's kinematics (libstiff/src/kinematics/fast_chain.hpp): the polynomial sincos
+// within 2 ulp-ish of libm, and the specialised chain equal to RobotModel::chain to round-off for
 // modified-DH (ROKAE, PUMA 560) and URDF (UR5) joints.
 TEST(IdentifyLinear, FastKinematicsEqualTheReference) {
   double worst = 0;

@@ -1,4 +1,4 @@
-#include "stiff/robot_model.hpp"
+#include "stiff/kinematics/robot_model.hpp"
 
 #include <ceres/jet.h>
 #include <gtest/gtest.h>
@@ -6,8 +6,8 @@
 #include <cmath>
 
 #include "stiff/error.hpp"
+#include "stiff/io/robot_io.hpp"
 #include "stiff/random.hpp"
-#include "stiff/robot_io.hpp"
 #include "test_support.hpp"
 
 namespace stiff {

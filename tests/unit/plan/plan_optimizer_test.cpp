@@ -6,7 +6,7 @@
 #include <cmath>
 
 #include "plan_test_support.hpp"
-#include "stiff/plan.hpp"
+#include "stiff/plan/plan.hpp"
 #include "test_support.hpp"
 
 namespace stiff {

@@ -1,5 +1,5 @@
 // Measurement planning: pool, criteria, incremental updates, errors, output.
-#include "stiff/plan.hpp"
+#include "stiff/plan/plan.hpp"
 
 #include <gtest/gtest.h>
 
@@ -8,11 +8,11 @@
 
 #include "plan_test_support.hpp"
 #include "stiff/error.hpp"
-#include "stiff/model.hpp"
+#include "stiff/model/model.hpp"
 #include "stiff/random.hpp"
 #include "test_support.hpp"
 // The optimizers' packed fast path is internal; it is tested against the generic kernels.
-#include "../../../libstiff/src/plan/plan_internal.hpp"
+#include "plan/plan_internal.hpp"
 
 namespace stiff {
 namespace {

@@ -3,7 +3,7 @@
 
 #include <limits>
 
-#include "stiff/plan.hpp"
+#include "stiff/plan/plan.hpp"
 
 namespace stiff::test {
 

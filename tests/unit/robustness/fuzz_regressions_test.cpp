@@ -5,10 +5,10 @@
 #include <string>
 
 #include "stiff/error.hpp"
-#include "stiff/fit.hpp"
-#include "stiff/path_io.hpp"
-#include "stiff/robot_io.hpp"
-#include "stiff/simulate.hpp"
+#include "stiff/identify/fit.hpp"
+#include "stiff/io/path_io.hpp"
+#include "stiff/io/robot_io.hpp"
+#include "stiff/sim/simulate.hpp"
 #include "stiff/stiff.h"
 #include "test_support.hpp"
 

@@ -9,11 +9,11 @@
 #include <string>
 
 #include "stiff/error.hpp"
-#include "stiff/fit.hpp"
-#include "stiff/identify.hpp"
-#include "stiff/plan.hpp"
-#include "stiff/robot_io.hpp"
-#include "stiff/simulate.hpp"
+#include "stiff/identify/fit.hpp"
+#include "stiff/identify/identify.hpp"
+#include "stiff/io/robot_io.hpp"
+#include "stiff/plan/plan.hpp"
+#include "stiff/sim/simulate.hpp"
 #include "stiff/stiff.h"
 #include "test_support.hpp"
 

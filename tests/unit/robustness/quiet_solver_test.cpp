@@ -10,8 +10,8 @@
 #include <string>
 
 #include "stiff/error.hpp"
-#include "stiff/identify.hpp"
-#include "stiff/simulate.hpp"
+#include "stiff/identify/identify.hpp"
+#include "stiff/sim/simulate.hpp"
 #include "stiff/stiff.h"
 #include "test_support.hpp"
 

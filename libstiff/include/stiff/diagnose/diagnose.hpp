@@ -1,0 +1,196 @@
+/// \file diagnose.hpp
+/// Model diagnosis (docs/diagnosis.md, effects-and-diagnosis.md section 2): how good is the
+/// model against the noise floor, where does it fail, which physical effect of the library is
+/// missing, and a verdict. Optionally walks the forward-stepwise loop (add the winner, re-fit,
+/// re-score conditionally).
+///
+/// Statistics. Rows are weighted by 1/sigma (sigma_d, the metadata tracker_sigma_m, or the
+/// pooled spread of replicated measurements). The current model is fitted (identify()), its
+/// weighted Jacobian X and residual r0 are taken at the fitted parameters. For each candidate
+/// effect g not in the model, Z_g = d(prediction)/d(theta_g) at theta_g = null (the model
+/// current+g, automatic differentiation) is projected off X, Z~ = (I - P_X) Z, and the
+/// numerically null directions of Z~ are dropped (rank-revealing SVD: "not identifiable from
+/// this data"). The group score is dRSS_g = ||P_{Z~} r0||^2 (Rao 1948); the partial F-test
+/// F = (dRSS_g/df_g) / ((RSS0 - dRSS_g)/(n - p - df_g)) is ranked by its log p-value (no
+/// underflow), Holm-corrected across groups (Holm 1979).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "stiff/io/dataset.hpp"
+#include "stiff/kinematics/robot_model.hpp"
+
+namespace stiff {
+
+/// Distribution tails (no Boost): regularised incomplete gamma and beta functions.
+namespace stats {
+/// Regularised lower incomplete gamma P(a, x), a > 0, x >= 0.
+double gamma_p(double a, double x);
+/// Regularised upper incomplete gamma Q(a, x) = 1 - P(a, x).
+double gamma_q(double a, double x);
+/// log Q(a, x), accurate where Q underflows (large x).
+double log_gamma_q(double a, double x);
+/// Regularised incomplete beta I_x(a, b), a, b > 0, 0 <= x <= 1.
+double beta_i(double a, double b, double x);
+/// log I_x(a, b), accurate where I underflows (small x).
+double log_beta_i(double a, double b, double x);
+/// P(X > x) for X ~ chi2_k, and its natural log.
+double chi2_sf(double x, double k);
+double log_chi2_sf(double x, double k);
+/// P(X > f) for X ~ F(d1, d2), and its natural log.
+double f_sf(double f, double d1, double d2);
+double log_f_sf(double f, double d1, double d2);
+/// Holm step-down adjusted p-values (same order as the input), from log p-values.
+std::vector<double> holm_adjust(const std::vector<double>& log_p);
+}  // namespace stats
+
+/// Options of diagnose().
+struct DiagnosisOptions {
+  /// Candidate effects; empty = every registered effect not in the model.
+  std::vector<std::string> candidates;
+  /// Family-wise error rate of the candidate tests (Holm) and of the other tests.
+  double alpha = 0.05;
+  /// Canonical correlation between two projected candidate groups above which the data cannot
+  /// tell them apart (they are reported as one ambiguous group).
+  double ambiguity_correlation = 0.8;
+  /// Relative singular value below which a direction of a projected candidate group counts as
+  /// numerically null (not identifiable from this data).
+  double rank_tolerance = 1e-5;
+  /// Walk the loop: add the top effect while the evidence holds, re-fit, re-score.
+  bool auto_loop = false;
+  int max_steps = 4;
+  /// Number of worst poses listed.
+  int worst_poses = 5;
+  /// Flag rows whose residual is improbable under chi2_3 at this family-wise level (after a
+  /// robust scale) as outliers; they are excluded from the fit and the tests. 0: no check.
+  double outlier_alpha = 0.05;
+  /// Start of the command that adds an effect ("stiff diagnose --robot r --data d.csv");
+  /// candidates get `<prefix> --model <model>+<effect>`.
+  std::string command_prefix = "stiff diagnose";
+};
+
+/// One candidate effect and its evidence.
+struct CandidateScore {
+  std::string effect;
+  int rank = 0;  ///< 1 = strongest evidence; 0 for untestable candidates
+  bool testable = true;
+  std::string reason;                       ///< why it is untestable / partly identifiable
+  int parameters = 0;                       ///< columns of the group
+  int df = 0;                               ///< identifiable directions after projection
+  bool identifiable = true;                 ///< every direction of the group is identifiable here
+  std::vector<std::string> unidentifiable;  ///< parameters the data cannot see
+  double statistic = 0.0;                   ///< partial F statistic
+  double lm = 0.0;     ///< score statistic dRSS / sigma^2 (chi2_df under H0, known sigma)
+  double log_p = 0.0;  ///< natural log of p_value
+  double p_value = 1.0;
+  double p_adjusted = 1.0;  ///< Holm
+  bool significant = false;
+  double delta_rss = 0.0;            ///< weighted (sigma units squared)
+  double expected_rms_drop_m = 0.0;  ///< sqrt(max(0, dRSS - df sigma^2) / n) [m]
+  double fit_rms_after_m = 0.0;      ///< fit RMS expected after adding it [m]
+  double excess_explained = 0.0;     ///< dRSS / (RSS0 - (n - p)), when the noise is known
+  double surviving_fraction = 0.0;   ///< ||Z~|| / ||Z|| (what the model does not absorb)
+  double max_correlation = 0.0;      ///< canonical correlation with the top candidate
+  std::vector<std::string> group;    ///< ambiguous set this candidate belongs to
+  std::string command;
+  /// Added-variable plot data (top candidates only): fitted candidate component Z~ theta
+  /// and the current residual r0, both per row component [m].
+  std::vector<double> av_fitted_m, av_residual_m;
+};
+
+/// A test of residual structure against one covariate.
+struct CovariateTest {
+  std::string covariate;  ///< e.g. "q2", "tau_load_3", "tau_gravity_2", "load_level", "time"
+  std::string description;
+  double statistic = 0.0;  ///< F
+  int df = 0;
+  double p_value = 1.0, p_adjusted = 1.0;
+  bool significant = false;
+  double correlation[3] = {0, 0, 0};  ///< Pearson r of the residual x,y,z with the covariate
+};
+
+/// One measurement's residual.
+struct PoseResidual {
+  int row = 0;
+  std::string id;
+  double residual_m[3] = {0, 0, 0};
+  double predicted_m[3] = {0, 0, 0};
+  double norm_m = 0.0;
+  double norm_sigma = 0.0;  ///< norm / sigma
+  bool outlier = false;
+};
+
+/// Fit quality of one model.
+struct ModelQuality {
+  std::string model;               ///< "joint+link"
+  int measurements = 0, used = 0;  ///< rows, rows not flagged as outliers
+  int parameters = 0;              ///< rank of the fitted Jacobian
+  double fit_rms_m = 0.0;
+  double chi2 = 0.0;  ///< RSS / sigma^2 (weighted)
+  int dof = 0;
+  double chi2_p = 1.0;  ///< P(chi2_dof > chi2); 1 without a noise level
+  double sigma_hat_m = 0.0;
+  bool has_validation = false;
+  double validation_rms_m = 0.0;
+  double validation_floor_m = 0.0;         ///< sigma sqrt(1 + p/n)
+  std::vector<double> validation_error_m;  ///< per validation row, norm of the error
+  std::vector<std::string> parameter_names;
+  std::vector<double> parameter_values;
+};
+
+/// One step of the loop.
+struct DiagnosisStep {
+  int step = 0;
+  std::string added;  ///< effect added at this step ("" for step 0)
+  ModelQuality quality;
+  std::string verdict;  ///< verdict of this step's model
+  std::string top;      ///< top candidate of this step's model ("" if none)
+  double top_p_adjusted = 1.0;
+  double top_expected_rms_drop_m = 0.0;
+};
+
+/// Result of diagnose().
+struct Diagnosis {
+  std::string robot;
+  std::vector<std::string> model;
+  /// "missing_effect", "adequate", "ambiguous" or "unexplained".
+  std::string verdict;
+  std::string summary;          ///< one paragraph for people
+  std::string suggested_model;  ///< model with the top effect ("" if none)
+  std::string suggested_command;
+  std::string experiment;  ///< discriminating experiment (ambiguous)
+  std::vector<std::string> ambiguous_group;
+  std::string unexplained_signature;  ///< what the structure looks like (unexplained)
+  double noise_floor_m = 0.0;
+  std::string noise_source;  ///< "sigma_d", "metadata", "replicates" or "none"
+  double alpha = 0.05;
+  ModelQuality fit;  ///< the model as given
+  bool omnibus_rejects = false;
+  ModelQuality after;  ///< after adding the top candidate (re-fitted), if any
+  bool after_valid = false;
+  std::vector<CandidateScore> candidates;  ///< testable by rank, then untestable
+  std::vector<PoseResidual> residuals;
+  std::vector<PoseResidual> worst;
+  double axis_rms_m[3] = {0, 0, 0};
+  double axis_chi2_p[3] = {1, 1, 1};
+  std::vector<CovariateTest> covariates;
+  std::vector<DiagnosisStep> steps;  ///< the loop (auto), step 0 = the given model
+  std::string final_model;           ///< auto: model at the end of the loop
+  std::string final_verdict;
+  std::vector<std::string> warnings;
+};
+
+/// Diagnose `model` (effect names) on `calibration` (with displacements); `validation` may be
+/// null. Throws InvalidArgument for bad data/model/options, NumericalError when the model
+/// cannot be fitted. Never prints.
+Diagnosis diagnose(const RobotModel& robot,
+                   const Dataset& calibration,
+                   const Dataset* validation,
+                   const std::vector<std::string>& model,
+                   const DiagnosisOptions& options = {});
+
+/// Serialise as JSON (format "stiff-diagnosis" version 1, docs/diagnosis.md).
+std::string diagnosis_to_json(const Diagnosis& diagnosis);
+
+}  // namespace stiff

@@ -1,0 +1,92 @@
+/// \file fmu_export.hpp
+/// Export of an identified deflection model as a Functional Mock-up Unit (FMI 2.0 or 3.0,
+/// Model Exchange and Co-Simulation in one binary) for co-simulation (docs/fmu.md).
+///
+/// The FMU binary (fmu/) is generic: it evaluates any stiff::DeflectionModel. Everything that
+/// depends on the robot and the fit is generated here, at export time, from one source of truth
+/// (the model's parameter list):
+///   - modelDescription.xml (variables, units, start values, model structure),
+///   - the GUID / instantiationToken, a hash of the XML and of the model file,
+///   - resources/model.txt: the value-reference table, start values, bounds, robot kinematics
+///     and the fit, in the small line-based numeric format below, which the binary reads at
+///     instantiation (and checks against the GUID it is given),
+///   - resources/robot.yaml: the robot in the project's YAML format, for humans.
+///
+/// resources/model.txt, format "stiff-fmu-model" version 1 (ASCII, one record per line, tokens
+/// separated by blanks, numbers with 17 significant digits so that they round-trip exactly;
+/// lines starting with '#' are comments):
+///   stiff-fmu-model 1
+///   guid <guid>
+///   fmi <2|3>
+///   robot <name (rest of line)>
+///   dof <n>
+///   joint <pre: 16 row-major> <axis: 3> <post: 16 row-major> <lower> <upper> <mass> <com: 3>
+///   measured_point <x> <y> <z>
+///   load_point <x> <y> <z>
+///   tool <mass> <com x> <com y> <com z>
+///   gravity <gx> <gy> <gz>
+///   effects <count> <name>...
+///   variables <count>
+///   var <vr> <name> <role> <index> <start> <min> <max>      (vr = 0 .. count-1, in order)
+///   end
+#pragma once
+
+#include <string>
+
+#include "stiff/identify/fit.hpp"
+#include "stiff/kinematics/robot_model.hpp"
+
+namespace stiff {
+
+/// Options of export_fmu.
+struct FmuExportOptions {
+  /// FMI version of the FMU: 2 (FMI 2.0, binaries/linux64) or 3 (FMI 3.0, binaries/x86_64-linux).
+  int fmi_version = 2;
+  /// modelIdentifier: name of the shared library inside the FMU; [A-Za-z_][A-Za-z0-9_]*.
+  std::string model_identifier = "stiff_arm";
+  /// Folder holding linux64/ and x86_64-linux/ with the generic FMU libraries (stiff_arm.so).
+  /// Empty: environment variable STIFF_FMU_BINARIES, else the build tree's fmu/binaries, else
+  /// the folder `fmu` next to the loaded libstiff_c.so (the Python package's stiff/_lib/fmu).
+  std::string binaries_dir;
+};
+
+/// Write `path` (.fmu, a zip file) with the model `fit` of `robot` baked in: parameters are the
+/// fit's values as start values, tunable, named `<effect>_<parameter>` (e.g. joint_c1).
+/// The file is written atomically (temporary file in the same folder, then renamed).
+/// Throws InvalidArgument (bad options, a fit that does not match the robot or the effects),
+/// IoError (binaries missing, output not writable).
+void export_fmu(const RobotModel& robot,
+                const FitResult& fit,
+                const std::string& path,
+                const FmuExportOptions& options = {});
+
+/// The folder export_fmu would take the FMU binaries from with `options` (see binaries_dir).
+std::string fmu_binaries_dir(const FmuExportOptions& options = {});
+
+namespace fmu_format {
+
+/// Version of resources/model.txt written by export_fmu and read by the FMU binary.
+constexpr int kVersion = 1;
+
+/// What a variable of the FMU is; the FMU binary dispatches on it.
+enum class Role : int {
+  time = 0,           ///< FMI 3 independent variable [s]
+  q = 1,              ///< input: joint position q<index+1> [rad]
+  wrench = 2,         ///< input: wrench component (fx fy fz mx my mz)[index] [N, N*m]
+  q_array = 3,        ///< FMI 3 input array q[n], same storage as the scalars q<i>
+  wrench_array = 4,   ///< FMI 3 input array wrench[6], same storage as fx..mz
+  wrench_frame = 5,   ///< Integer parameter: 0 = base frame, 1 = tool frame
+  parameter = 6,      ///< Real parameter theta[index] of the deflection model
+  deflection = 7,     ///< output (dx dy dz rx ry rz)[index] [m, rad], base frame
+  tool_position = 8,  ///< output: loaded tool point (x y z)[index], base frame [m]
+  q_cmd = 9,          ///< output: compensated joint target q_cmd<index+1> [rad]
+};
+
+constexpr const char* kRoleNames[] = {
+    "time",         "q",         "wrench",     "q_array",       "wrench_array",
+    "wrench_frame", "parameter", "deflection", "tool_position", "q_cmd"};
+constexpr int kRoleCount = 10;
+
+}  // namespace fmu_format
+
+}  // namespace stiff

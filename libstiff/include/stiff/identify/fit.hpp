@@ -1,0 +1,80 @@
+/// \file fit.hpp
+/// Result of an identification, and its JSON file (docs/formats.md, "fit.json").
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "stiff/model/model.hpp"
+
+namespace stiff {
+
+/// One identified parameter.
+struct FitParameter {
+  std::string effect;
+  std::string name;
+  std::string unit;
+  std::string meaning;
+  double value = 0.0;
+  double standard_error = 0.0;  ///< NaN when not identified
+  bool identified = true;       ///< false: the data could not identify it; held at `value`
+};
+
+/// A measurement the robust fit down-weighted.
+struct Outlier {
+  int row = 0;  ///< 0-based index in the data
+  std::string id;
+  double residual_m = 0.0;  ///< norm of the displacement residual
+  double weight = 1.0;      ///< robust weight in [0, 1]
+  std::string reason;
+};
+
+/// Result of an identification: the model, its parameters and the fit statistics.
+struct FitResult {
+  std::string robot_name;
+  std::string robot_path;
+  std::vector<std::string> model;  ///< effect names
+  std::string method;              ///< "linear_least_squares" or "ceres"
+  std::string loss = "none";
+  double loss_scale_m = 0.0;
+  std::vector<FitParameter> parameters;
+  Eigen::MatrixXd covariance;  ///< P x P (NaN rows/cols for unidentified parameters)
+  Eigen::VectorXd residuals;   ///< 3N residuals (measured - predicted) [m]
+  Eigen::VectorXd weights;     ///< N robust weights (1 without a robust loss)
+  std::vector<Outlier> outliers;
+  int measurements = 0;
+  int rank = 0;
+  double condition_number = 0.0;  ///< of the column-scaled Jacobian / observation matrix
+  double rms_m = 0.0;             ///< RMS of the displacement residual components
+  double sigma_hat_m = 0.0;       ///< residual standard deviation sqrt(RSS / (3N - rank))
+  double noise_floor_m = 0.0;     ///< stated noise (sigma_d or metadata); 0 if unknown
+  double chi2 = 0.0;              ///< sum of (residual / sigma)^2 when the noise is known
+  int dof = 0;                    ///< 3N - rank
+  std::vector<std::string> warnings;
+
+  /// Parameter vector theta in model order.
+  Eigen::VectorXd theta() const;
+  /// Joint stiffness k_j = 1/c_j [N*m/rad] from the `joint` effect (inf for c_j = 0).
+  Eigen::VectorXd joint_stiffness() const;
+  /// Standard error of k_j by the delta method, se(c)/c^2 [N*m/rad].
+  Eigen::VectorXd joint_stiffness_se() const;
+  /// Which joints the data identified.
+  std::vector<bool> joint_identified() const;
+};
+
+/// Serialise as JSON (stable format "stiff-fit" version 1).
+std::string fit_to_json(const FitResult& fit);
+/// Parse a fit file; throws ParseError naming the path and what is wrong.
+FitResult fit_from_json(const std::string& text, const std::string& name_for_errors);
+FitResult read_fit(const std::string& path);
+void write_fit(const std::string& path, const FitResult& fit);
+
+/// Noise level stated by the data: median sigma_d, else metadata tracker_sigma_m; 0 if none.
+double stated_noise_m(const Dataset& data);
+
+/// Predicted (dx, dy, dz, rx, ry, rz) of every row of `data` under a fit. The model is rebuilt
+/// from the fit's effect names for this robot.
+Eigen::MatrixXd predict_dataset(const RobotModel& robot, const FitResult& fit, const Dataset& data);
+
+}  // namespace stiff

@@ -1,0 +1,74 @@
+/// \file identify.hpp
+/// Identification of the compliance model from measurements.
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "stiff/identify/fit.hpp"
+
+namespace stiff {
+
+/// Options of the linear least-squares identification (method.md eq. 5).
+struct LinearOptions {
+  /// Relative tolerance on the column-scaled pivoted QR diagonal below which a direction is
+  /// declared unidentifiable.
+  double rank_tolerance = 1e-8;
+  /// Weight rows by 1/sigma_d when the data has sigma_d.
+  bool use_sigma = true;
+};
+
+/// Least-squares identification of the diagonal joint compliances (`joint` model), c =
+/// argmin ||A c - X||, with the rank decision of the column-pivoted QR of the column-scaled A
+/// (taken on the small normal matrix when no pivot is near the tolerance, else by the QR
+/// itself) and the solution at QR accuracy. Joints whose columns the
+/// data cannot identify (zero or dependent) are named in `warnings`, held at 0 and marked
+/// unidentified. Throws InvalidArgument for bad data and NumericalError when nothing is
+/// identifiable.
+FitResult identify_joint_linear(const RobotModel& robot,
+                                const Dataset& data,
+                                const LinearOptions& options = {});
+
+/// Options of the nonlinear (Ceres) identification of any effect model.
+struct IdentifyOptions {
+  /// Robust loss on the norm of each measurement's 3-vector residual (in units of its sigma):
+  /// "none" (least squares), "huber", "cauchy", "soft_l1" or "tukey".
+  std::string loss = "none";
+  /// Residual norm [m] at which the loss starts to down-weight a measurement. 0: three times
+  /// the stated noise (sigma_d column or `# tracker_sigma_m`), else three times a robust
+  /// (MAD) estimate of the residual scale of the start model.
+  double loss_scale_m = 0.0;
+  int max_iterations = 200;
+  /// A measurement whose robust weight rho'(s) falls below this is listed as an outlier.
+  double outlier_weight = 0.5;
+  /// Weight rows by 1/sigma_d when the data has sigma_d.
+  bool use_sigma = true;
+  /// Sine of the angle below which a (column-scaled) Jacobian column counts as lying in the
+  /// span of the columns before it: that parameter is not identifiable and is held fixed.
+  double rank_tolerance = 1e-6;
+  /// Called after every Ceres iteration with (iteration, cost); return false to cancel (the
+  /// call then throws Cancelled).
+  std::function<bool(int, double)> progress;
+};
+
+/// Names of the robust losses identify() accepts.
+std::vector<std::string> loss_names();
+
+/// Nonlinear identification of the effect model `effects` (e.g. {"joint", "force_frame"}) by
+/// Ceres: 3 residuals per measurement weighted by 1/sigma_d (docs/effects.md, solver details),
+/// automatic derivatives, bounds from each ParameterSpec, the joint compliances started from the
+/// linear least-squares solution and every other parameter from its spec start. Parameters (or
+/// combinations) the data cannot separate are found on the column-scaled Jacobian, held at
+/// their null value, marked unidentified and named in `warnings`; the check is repeated at
+/// the solution (a parameter such as c6 can become visible once offsets are known).
+/// Standard errors from the final Jacobian, scaled by the residual variance; robust weights
+/// and an outlier list. Throws InvalidArgument for bad data, unknown effects or losses,
+/// effects whose requirements the robot lacks; NumericalError when nothing is identifiable;
+/// Cancelled when `progress` returns false. Never prints, never aborts.
+FitResult identify(const RobotModel& robot,
+                   const Dataset& data,
+                   const std::vector<std::string>& effects,
+                   const IdentifyOptions& options = {});
+
+}  // namespace stiff

@@ -1,0 +1,219 @@
+/// \file effect.hpp
+/// The compliance model as a sum of physical-effect terms (docs/effects.md).
+///
+/// The displacement of the measured point P under the wrench W applied at the load point L is
+/// evaluated in stages; every effect may act in any of them:
+///  1. wrench:      the wrench and the points as the set-up really has them
+///                  (force-sensor frame, offsets of P and L from the flange axis);
+///  2. joint:       joint deflection dtheta from the external joint torques tau = J(L)^T W
+///                  (joint compliance, coupling, nonlinear reducer, backlash, compensator);
+///     (then d = J_p(P) dtheta, rot = J_r dtheta)
+///  3. cartesian:   displacement added in the base frame (link compliance, tool compliance);
+///  4. measurement: what the tracker reports (tracker frame rotation, drift).
+/// Each effect writes its stage functions once as templates on the scalar T (double or
+/// ceres::Jet) so that Ceres differentiates them automatically; EffectT instantiates them.
+#pragma once
+
+#include <ceres/jet.h>
+
+#include <memory>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "stiff/io/dataset.hpp"
+#include "stiff/kinematics/robot_model.hpp"
+
+namespace stiff {
+
+/// Jet used for automatic differentiation of the model (DynamicAutoDiffCostFunction stride).
+constexpr int kJetStride = 8;
+using Jet = ceres::Jet<double, kJetStride>;
+
+/// One parameter of an effect, SI units.
+struct ParameterSpec {
+  std::string name;     ///< unique within the effect, e.g. "c2"
+  std::string unit;     ///< e.g. "rad/(N*m)"
+  std::string meaning;  ///< one line of physics
+  double lower = -1e300;
+  double upper = 1e300;
+  double typical = 1.0;     ///< typical magnitude (for scaling and priors)
+  double null_value = 0.0;  ///< value at which the effect vanishes
+  double start = 0.0;       ///< start value of a fit
+};
+
+/// Data of one measurement that does not depend on the parameters (computed once).
+struct MeasurementContext {
+  ChainState chain;
+  Eigen::VectorXd tau_gravity;  ///< gravity torques [N*m] (zeros without a mass model)
+  int session = 0;              ///< index of the measurement's session (0..sessions-1)
+  double time = 0.0;            ///< time of the reading [s] (row index when the file has no t)
+};
+
+/// Evolving state of one evaluation (see the stages above). Sizes are the robot's dof.
+template <typename T>
+struct EvalState {
+  const RobotModel* robot = nullptr;
+  const Measurement* measurement = nullptr;
+  const MeasurementContext* context = nullptr;
+  Vector3<T> force;      ///< force at L, base frame [N]
+  Vector3<T> moment;     ///< moment about L, base frame [N*m]
+  Vector3<T> r_meas;     ///< measured point P in the flange frame [m]
+  Vector3<T> r_load;     ///< load point L in the flange frame [m]
+  Vector3<T> p_meas;     ///< P in the base frame [m] (after stage 1)
+  Vector3<T> p_load;     ///< L in the base frame [m] (after stage 1)
+  Matrix6X<T> jac_meas;  ///< geometric Jacobian at P (after stage 1)
+  Matrix6X<T> jac_load;  ///< geometric Jacobian at L (after stage 1)
+  VectorX<T> tau;        ///< external joint torques J(L)^T W [N*m] (after stage 1)
+  VectorX<T> dtheta;     ///< joint deflection [rad] (stage 2)
+  /// Diagonal joint compliances c_j [rad/(N*m)] as set by the `joint` effect in stage 2
+  /// (empty when the model has no joint effect); read by second-order effects in stage 3.
+  VectorX<T> compliance;
+  Vector3<T> d;    ///< displacement of P [m] (stages 3-4)
+  Vector3<T> rot;  ///< small rotation of the flange [rad] (stages 3-4)
+};
+
+/// What an effect needs from the robot file or the data.
+enum Requirement : unsigned {
+  kNeedsNothing = 0,
+  kNeedsMasses = 1u << 0,    ///< link masses (gravity torques)
+  kNeedsTime = 1u << 1,      ///< a `t` column or meaningful row order
+  kNeedsSessions = 1u << 2,  ///< a `session` column
+};
+
+/// The stages of an evaluation (Effect::stages).
+enum Stage : unsigned {
+  kWrenchStage = 1u << 0,
+  kJointStage = 1u << 1,
+  kCartesianStage = 1u << 2,
+  kMeasurementStage = 1u << 3,
+  kAllStages = 15u,
+};
+
+/// A physical effect configured for one robot (and, where it matters, one dataset).
+class Effect {
+ public:
+  virtual ~Effect() = default;
+  virtual const std::string& name() const = 0;
+  /// One-line physical explanation.
+  virtual std::string description() const = 0;
+  /// The model and its literature reference (docs).
+  virtual std::string reference() const = 0;
+  virtual unsigned requirements() const { return kNeedsNothing; }
+  /// True when a stage reads EvalState::jac_meas or jac_load (DeflectionModel::evaluate_jet
+  /// fills them only then).
+  virtual bool reads_jacobians() const { return false; }
+  /// True when the effect's contribution is linear in its parameters with coefficients that
+  /// no parameter changes as long as every effect of the model is linear (it only adds to
+  /// dtheta, d or rot, and moves neither the points nor the wrench). A model of linear effects
+  /// predicts d affine in theta (identify() then needs one Jacobian per measurement).
+  virtual bool linear() const { return false; }
+  /// Optional analytic derivatives of a linear effect (automatic differentiation otherwise):
+  /// true when displacement_derivatives is provided.
+  virtual bool has_displacement_derivatives() const { return false; }
+  /// dd/dp, the derivatives of the effect's additions to d with respect to its parameters (3 x
+  /// size(), column-major) at the state s of stage 1 (points, wrench, tau and the
+  /// translational rows of jac_meas); an addition to dtheta reaches d through jac_meas. Used
+  /// by DeflectionModel::analytic_columns when every other effect acts only in the wrench
+  /// stage.
+  virtual void displacement_derivatives(const EvalState<double>& /*s*/, double* /*out*/) const {}
+  /// The stages the effect acts in (Stage bits); EffectT finds them from the stage functions
+  /// the effect defines.
+  virtual unsigned stages() const { return kAllStages; }
+  /// Parameters, in the order of the parameter block.
+  virtual const std::vector<ParameterSpec>& parameters() const = 0;
+  int size() const { return static_cast<int>(parameters().size()); }
+  /// A representative true value of the effect on an arm whose joint compliances are
+  /// `joint_compliance` [rad/(N*m)], written over p (which holds the null values): the virtual
+  /// robot's example of the effect and the truth of the registry-driven tests. Parameters that
+  /// a flange-centred set-up cannot see stay null. False when the effect gives none.
+  virtual bool example_parameters(const Eigen::VectorXd& /*joint_compliance*/,
+                                  double* /*p*/) const {
+    return false;
+  }
+  /// Experiments that tell this effect from its look-alikes, one sentence each (the
+  /// diagnosis's advice when the data cannot decide).
+  virtual std::vector<std::string> experiment_hints() const { return {}; }
+  /// p[k] = value for the parameter called `name`; throws InvalidArgument when there is none.
+  void set_parameter(double* p, const std::string& name, double value) const;
+
+  virtual void wrench(const double* p, EvalState<double>& s) const = 0;
+  virtual void wrench(const Jet* p, EvalState<Jet>& s) const = 0;
+  virtual void joint(const double* p, EvalState<double>& s) const = 0;
+  virtual void joint(const Jet* p, EvalState<Jet>& s) const = 0;
+  virtual void cartesian(const double* p, EvalState<double>& s) const = 0;
+  virtual void cartesian(const Jet* p, EvalState<Jet>& s) const = 0;
+  virtual void measurement(const double* p, EvalState<double>& s) const = 0;
+  virtual void measurement(const Jet* p, EvalState<Jet>& s) const = 0;
+};
+
+/// CRTP helper: an effect defines any of
+///   template <typename T> void wrench_t(const T* p, EvalState<T>& s) const;
+///   ... joint_t, cartesian_t, measurement_t
+/// and this class instantiates them for double and Jet. Stages it does not define do nothing.
+template <typename Derived>
+class EffectT : public Effect {
+ public:
+  template <typename T>
+  void wrench_t(const T*, EvalState<T>&) const {}
+  template <typename T>
+  void joint_t(const T*, EvalState<T>&) const {}
+  template <typename T>
+  void cartesian_t(const T*, EvalState<T>&) const {}
+  template <typename T>
+  void measurement_t(const T*, EvalState<T>&) const {}
+
+  void wrench(const double* p, EvalState<double>& s) const final { self().wrench_t(p, s); }
+  void wrench(const Jet* p, EvalState<Jet>& s) const final { self().wrench_t(p, s); }
+  void joint(const double* p, EvalState<double>& s) const final { self().joint_t(p, s); }
+  void joint(const Jet* p, EvalState<Jet>& s) const final { self().joint_t(p, s); }
+  void cartesian(const double* p, EvalState<double>& s) const final { self().cartesian_t(p, s); }
+  void cartesian(const Jet* p, EvalState<Jet>& s) const final { self().cartesian_t(p, s); }
+  void measurement(const double* p, EvalState<double>& s) const final {
+    self().measurement_t(p, s);
+  }
+  void measurement(const Jet* p, EvalState<Jet>& s) const final { self().measurement_t(p, s); }
+  unsigned stages() const override {
+    // A stage function the effect does not define is this class's: its member pointer type
+    // names EffectT.
+    using Fn = void (EffectT::*)(const double*, EvalState<double>&) const;
+    using std::is_same;
+    return (is_same<decltype(&Derived::template wrench_t<double>), Fn>::value ? 0u : kWrenchStage) |
+           (is_same<decltype(&Derived::template joint_t<double>), Fn>::value ? 0u : kJointStage) |
+           (is_same<decltype(&Derived::template cartesian_t<double>), Fn>::value
+                ? 0u
+                : kCartesianStage) |
+           (is_same<decltype(&Derived::template measurement_t<double>), Fn>::value
+                ? 0u
+                : kMeasurementStage);
+  }
+
+ private:
+  const Derived& self() const { return static_cast<const Derived&>(*this); }
+};
+
+/// What a factory gets: the robot and, optionally, the data the model will be used with
+/// (sessions, time span).
+struct EffectSetup {
+  const RobotModel* robot = nullptr;
+  const Dataset* data = nullptr;  ///< may be null (prediction without data)
+  int sessions = 1;               ///< number of distinct sessions in the data
+};
+
+using EffectFactory = std::unique_ptr<Effect> (*)(const EffectSetup&);
+
+/// Registry entry.
+struct EffectEntry {
+  const char* name;
+  EffectFactory factory;
+};
+
+/// Every effect the library knows, in the registry's order.
+const std::vector<EffectEntry>& effect_registry();
+/// Names of every registered effect.
+std::vector<std::string> effect_names();
+/// Create an effect by name; throws InvalidArgument listing the known names if unknown, or if
+/// the robot or data lack what it needs (e.g. masses).
+std::unique_ptr<Effect> make_effect(const std::string& name, const EffectSetup& setup);
+
+}  // namespace stiff

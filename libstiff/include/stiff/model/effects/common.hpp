@@ -1,0 +1,82 @@
+/// \file effects/common.hpp
+/// What an effect source file includes. Generic code rules (style.md 3.3): literals as T(x),
+/// never cast T to double, maths functions unqualified after `using std::sin;`.
+#pragma once
+
+#include <ceres/rotation.h>
+
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "stiff/error.hpp"
+#include "stiff/model/effect.hpp"
+
+namespace stiff::effects {
+
+/// A parameter spec in one line: name, SI unit, one line of physics, bounds, typical
+/// magnitude, null value (effect off) and start value of a fit.
+inline ParameterSpec parameter(std::string name,
+                               std::string unit,
+                               std::string meaning,
+                               double lower,
+                               double upper,
+                               double typical,
+                               double null_value,
+                               double start) {
+  ParameterSpec p;
+  p.name = std::move(name);
+  p.unit = std::move(unit);
+  p.meaning = std::move(meaning);
+  p.lower = lower;
+  p.upper = upper;
+  p.typical = typical;
+  p.null_value = null_value;
+  p.start = start;
+  return p;
+}
+
+/// True when v carries no derivative (always for double): a pass of automatic
+/// differentiation that does not move it.
+inline bool constant(const Vector3<double>&) { return true; }
+inline bool constant(const Vector3<Jet>& v) {
+  // Exact zeros (a NaN is not one), as isZero(0.0) but without its per-element abs.
+  return (v(0).v.array() == 0.0).all() && (v(1).v.array() == 0.0).all() &&
+         (v(2).v.array() == 0.0).all();
+}
+/// The values of v.
+inline Eigen::Vector3d value(const Vector3<double>& v) { return v; }
+inline Eigen::Vector3d value(const Vector3<Jet>& v) { return {v(0).a, v(1).a, v(2).a}; }
+
+/// a . b for a constant vector b, and y += x b: one pass over a Jet's derivative part instead
+/// of a Jet temporary per product and sum.
+inline double dot(const Vector3<double>& a, const Eigen::Vector3d& b) { return a.dot(b); }
+inline Jet dot(const Vector3<Jet>& a, const Eigen::Vector3d& b) {
+  return Jet(a(0).a * b(0) + a(1).a * b(1) + a(2).a * b(2),
+             a(0).v * b(0) + a(1).v * b(1) + a(2).v * b(2));
+}
+inline void add_scaled(Vector3<double>& y, double x, const Eigen::Vector3d& b) { y += x * b; }
+inline void add_scaled(Vector3<Jet>& y, const Jet& x, const Eigen::Vector3d& b) {
+  for (int r = 0; r < 3; ++r) {
+    y(r).a += x.a * b(r);
+    y(r).v += x.v * b(r);
+  }
+}
+
+/// Flange rotation R_06 (flange frame -> base frame) of the measurement's configuration.
+template <typename T>
+Matrix3<T> flange_rotation(const EvalState<T>& s) {
+  return s.context->chain.flange.template block<3, 3>(0, 0).template cast<T>();
+}
+
+/// Rotation matrix of the rotation vector w (axis * angle) [rad]; exact, and differentiable at
+/// w = 0 (Ceres uses the Taylor expansion there).
+template <typename T>
+Matrix3<T> rotation_matrix(const T* w) {
+  Matrix3<T> r;  // column-major, as AngleAxisToRotationMatrix writes by default
+  ceres::AngleAxisToRotationMatrix(w, r.data());
+  return r;
+}
+
+}  // namespace stiff::effects

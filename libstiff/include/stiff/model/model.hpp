@@ -1,0 +1,135 @@
+/// \file model.hpp
+/// DeflectionModel: a robot plus a list of physical effects with one flat parameter vector
+/// theta (the effects' parameter blocks, concatenated in model order). Evaluates the predicted
+/// loaded-minus-unloaded displacement and rotation of the measured point.
+#pragma once
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "stiff/model/effect.hpp"
+
+namespace stiff {
+
+/// Split "joint+link+point_offset" into names; throws InvalidArgument on an empty or
+/// duplicated name (unknown names are caught when the model is built).
+std::vector<std::string> parse_model_string(const std::string& text);
+
+class DeflectionModel {
+ public:
+  /// Build from effect names. `data` (may be null) supplies sessions and time for effects that
+  /// need them. Throws InvalidArgument for unknown names or missing requirements.
+  DeflectionModel(const RobotModel& robot,
+                  const std::vector<std::string>& effects,
+                  const Dataset* data = nullptr);
+
+  const RobotModel& robot() const { return robot_; }
+  const std::vector<std::unique_ptr<Effect>>& effects() const { return effects_; }
+  std::vector<std::string> effect_names() const;
+  std::string model_string() const;  ///< "joint+link"
+  int parameter_count() const { return count_; }
+  /// Every effect is linear (Effect::linear): d is affine in theta.
+  bool linear() const { return linear_; }
+  /// The parameters whose derivatives need evaluate_jet passes: all of them, or, when the
+  /// model is analytic(), those of the effects without analytic derivatives.
+  const std::vector<int>& jet_parameters() const { return jet_parameters_; }
+  /// Some effects give their columns of dd/dtheta analytically (analytic_columns): each effect
+  /// is linear with Effect::displacement_derivatives or acts only in the wrench stage (so
+  /// that the linear effects' additions reach d unchanged).
+  bool analytic() const { return analytic_; }
+  /// The columns of dd/dtheta (3 x P, column-major, into `jac`) of the effects with analytic
+  /// derivatives at the state `js` an evaluate_jet pass at theta left (its values; the other
+  /// columns are left as they are). `ds` is scratch (one per thread).
+  void analytic_columns(const EvalState<Jet>& js, EvalState<double>& ds, double* jac) const;
+  /// Offset of effect e's block in theta.
+  int offset(int e) const { return offsets_[e]; }
+  /// Index of an effect by name, -1 if absent.
+  int find(const std::string& effect) const;
+  /// Spec of the k-th parameter of theta, and the effect it belongs to.
+  const ParameterSpec& spec(int k) const;
+  const Effect& owner(int k) const;
+  Eigen::VectorXd null_parameters() const;   ///< every effect switched off
+  Eigen::VectorXd start_parameters() const;  ///< fit start values
+
+  /// Data of one measurement that does not depend on theta. `row` is its index in the data set
+  /// (the time axis when the data has no `t` column).
+  MeasurementContext context(const Measurement& m, int row) const;
+  std::vector<MeasurementContext> contexts(const Dataset& data) const;
+
+  /// Predicted displacement d [m] and rotation [rad] of the measured point, base frame.
+  template <typename T>
+  void evaluate(const T* theta,
+                const Measurement& m,
+                const MeasurementContext& c,
+                Vector3<T>* d,
+                Vector3<T>* rot) const;
+  /// evaluate<Jet> for repeated derivative evaluations (identification): the same stages,
+  /// values and derivatives equal up to round-off, but the geometry stage (lever arms and
+  /// external joint torques) is computed in double with the derivative parts as 3 x
+  /// kJetStride arrays, skipped when no effect moved the points or the wrench in its wrench
+  /// stage, EvalState::jac_meas / jac_load filled only for effects that read them, and
+  /// `scratch` (reused between calls with this model, one per thread) avoids allocations.
+  /// Only the displacement d is produced.
+  void evaluate_jet(const Jet* theta,
+                    const Measurement& m,
+                    const MeasurementContext& c,
+                    EvalState<Jet>& scratch,
+                    Vector3<Jet>* d) const;
+  /// evaluate<double> of d reusing `scratch` (no allocation after the first call; one per
+  /// thread).
+  void evaluate_double(const double* theta,
+                       const Measurement& m,
+                       const MeasurementContext& c,
+                       EvalState<double>& scratch,
+                       Vector3<double>* d) const;
+  /// Same in double: (dx, dy, dz, rx, ry, rz).
+  Eigen::Matrix<double, 6, 1> predict(const Eigen::VectorXd& theta,
+                                      const Measurement& m,
+                                      const MeasurementContext& c) const;
+  /// Jacobian of the predicted displacement d (3 x P) with respect to theta at theta
+  /// (automatic differentiation).
+  Eigen::Matrix<double, 3, Eigen::Dynamic> displacement_jacobian(const Eigen::VectorXd& theta,
+                                                                 const Measurement& m,
+                                                                 const MeasurementContext& c) const;
+
+  /// Index of a session label (0 for unknown labels and for data without sessions).
+  int session_index(const std::string& label) const;
+
+ private:
+  template <typename T>
+  void evaluate_into(const T* theta,
+                     const Measurement& m,
+                     const MeasurementContext& c,
+                     EvalState<T>& s) const;
+  RobotModel robot_;
+  std::vector<std::unique_ptr<Effect>> effects_;
+  std::vector<int> offsets_;
+  int count_ = 0;
+  bool jet_jacobians_ = false;  ///< an effect reads EvalState::jac_meas / jac_load
+  bool linear_ = true;
+  bool analytic_ = false;
+  std::vector<int> jet_parameters_;
+  std::map<std::string, int> sessions_;
+};
+
+extern template void DeflectionModel::evaluate<double>(const double*,
+                                                       const Measurement&,
+                                                       const MeasurementContext&,
+                                                       Vector3<double>*,
+                                                       Vector3<double>*) const;
+extern template void DeflectionModel::evaluate<Jet>(
+    const Jet*, const Measurement&, const MeasurementContext&, Vector3<Jet>*, Vector3<Jet>*) const;
+
+/// The paper's observation block (method.md eq. 3): the 3 x n matrix with
+/// A[r, j] = Jp(P)[r, j] * (J(L)[:, j] . W), so that d = A c for joint compliances c.
+/// `jac_meas`, `jac_load`: 6 x n geometric Jacobians; `wrench` = (F, M) at L.
+Eigen::Matrix<double, 3, Eigen::Dynamic> observation_block(
+    const Matrix6X<double>& jac_meas,
+    const Matrix6X<double>& jac_load,
+    const Eigen::Matrix<double, 6, 1>& wrench);
+/// Stacked observation matrix A (3N x n) of a dataset for the joint-compliance model.
+Eigen::MatrixXd observation_matrix(const RobotModel& robot, const Dataset& data);
+
+}  // namespace stiff

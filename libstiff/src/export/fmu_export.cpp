@@ -1,0 +1,578 @@
+// Export of the identified model as an FMU (docs/fmu.md). The variable table is built once here
+// and written twice, as modelDescription.xml and as resources/model.txt for the generic binary.
+#include "stiff/export/fmu_export.hpp"
+
+#include <dlfcn.h>
+#include <sys/stat.h>
+
+#include <cctype>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include "stiff/error.hpp"
+#include "stiff/io/robot_io.hpp"
+#include "stiff/io/text_io.hpp"
+#include "stiff/model/model.hpp"
+
+#ifndef STIFF_FMU_DEFAULT_BINARIES
+#define STIFF_FMU_DEFAULT_BINARIES ""
+#endif
+
+namespace stiff {
+namespace {
+
+using fmu_format::Role;
+
+struct Var {
+  std::string name;
+  Role role;
+  int index = 0;
+  double start = 0.0;
+  double min = -1e300;
+  double max = 1e300;
+  std::string unit;
+  std::string description;
+  int size = 1;  // arrays: element count
+};
+
+bool is_identifier(const std::string& s) {
+  if (s.empty() || !(std::isalpha(static_cast<unsigned char>(s[0])) || s[0] == '_')) return false;
+  for (char c : s)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_')) return false;
+  return true;
+}
+
+std::string num(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
+
+std::string xml(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    switch (c) {
+      case '&':
+        o += "&amp;";
+        break;
+      case '<':
+        o += "&lt;";
+        break;
+      case '>':
+        o += "&gt;";
+        break;
+      case '"':
+        o += "&quot;";
+        break;
+      default:
+        if (static_cast<unsigned char>(c) >= 0x20 || c == '\t') o += c;
+    }
+  }
+  return o;
+}
+
+// Unit strings of the core ("rad/(N*m)") -> FMI unit names and SI base-unit exponents.
+struct UnitInfo {
+  const char* name;
+  const char* base;  // attributes of <BaseUnit>, "" for dimensionless/unknown
+};
+const UnitInfo kUnits[] = {
+    {"s", "s=\"1\""},
+    {"m", "m=\"1\""},
+    {"rad", "rad=\"1\""},
+    {"N", "kg=\"1\" m=\"1\" s=\"-2\""},
+    {"N.m", "kg=\"1\" m=\"2\" s=\"-2\""},
+    {"rad/(N.m)", "kg=\"-1\" m=\"-2\" s=\"2\" rad=\"1\""},
+    {"N.m/rad", "kg=\"1\" m=\"2\" s=\"-2\" rad=\"-1\""},
+    {"m/N", "kg=\"-1\" s=\"2\""},
+    {"rad/N", "kg=\"-1\" m=\"-1\" s=\"2\" rad=\"1\""},
+    {"m/(N.m)", "kg=\"-1\" m=\"-1\" s=\"2\""},
+    {"kg", "kg=\"1\""},
+};
+std::string fmi_unit(std::string u) {
+  for (char& c : u)
+    if (c == '*') c = '.';
+  if (u == "1" || u == "-") return "";
+  return u;
+}
+
+std::vector<Var> build_variables(const DeflectionModel& model, int fmi) {
+  const int n = model.robot().dof();
+  static const char* kWrench[6] = {"fx", "fy", "fz", "mx", "my", "mz"};
+  static const char* kDefl[6] = {"dx", "dy", "dz", "rx", "ry", "rz"};
+  static const char* kTool[3] = {"x_tool", "y_tool", "z_tool"};
+  std::vector<Var> v;
+  if (fmi == 3) v.push_back({"time", Role::time, 0, 0, -1e300, 1e300, "s", "simulation time", 1});
+  for (int j = 0; j < n; ++j)
+    v.push_back({"q" + std::to_string(j + 1), Role::q, j, 0.0, -1e300, 1e300, "rad",
+                 "commanded (unloaded) position of joint " + std::to_string(j + 1), 1});
+  for (int k = 0; k < 6; ++k)
+    v.push_back({kWrench[k], Role::wrench, k, 0.0, -1e300, 1e300, k < 3 ? "N" : "N.m",
+                 std::string(k < 3 ? "force" : "moment") + " on the tool at the load point, " +
+                     "frame selected by wrench_frame",
+                 1});
+  if (fmi == 3) {
+    v.push_back({"q", Role::q_array, 0, 0.0, -1e300, 1e300, "rad",
+                 "joint positions as an array (same storage as q1..qn)", n});
+    v.push_back({"wrench", Role::wrench_array, 0, 0.0, -1e300, 1e300, "",
+                 "(fx fy fz [N], mx my mz [N.m]) as an array (same storage as fx..mz)", 6});
+  }
+  v.push_back({"wrench_frame", Role::wrench_frame, 0, 0.0, 0, 1, "",
+               "frame of the wrench inputs: 0 = robot base, 1 = tool (flange orientation)", 1});
+  for (int k = 0; k < model.parameter_count(); ++k) {
+    const ParameterSpec& s = model.spec(k);
+    v.push_back({model.owner(k).name() + "_" + s.name, Role::parameter, k, 0.0, s.lower, s.upper,
+                 fmi_unit(s.unit), s.meaning, 1});
+  }
+  for (int k = 0; k < 6; ++k)
+    v.push_back({kDefl[k], Role::deflection, k, 0, -1e300, 1e300, k < 3 ? "m" : "rad",
+                 std::string(k < 3 ? "displacement" : "small rotation") +
+                     " of the tool point under the wrench, base frame",
+                 1});
+  for (int k = 0; k < 3; ++k)
+    v.push_back({kTool[k], Role::tool_position, k, 0, -1e300, 1e300, "m",
+                 "position of the loaded (deflected) tool point, base frame", 1});
+  for (int j = 0; j < n; ++j)
+    v.push_back({"q_cmd" + std::to_string(j + 1), Role::q_cmd, j, 0, -1e300, 1e300, "rad",
+                 "compensated target of joint " + std::to_string(j + 1) +
+                     ": puts the loaded tool where q puts the unloaded one",
+                 1});
+  std::set<std::string> names;
+  for (const auto& x : v)
+    if (!names.insert(x.name).second)
+      throw InvalidArgument("fmu export: two FMU variables would be named '" + x.name + "'");
+  return v;
+}
+
+bool has_bound(double x) { return std::isfinite(x) && std::fabs(x) < 1e299; }
+
+std::string model_file(const RobotModel& robot,
+                       const DeflectionModel& model,
+                       const std::vector<Var>& vars,
+                       int fmi,
+                       const std::string& guid) {
+  std::ostringstream o;
+  o << "# stiff FMU model (format in stiff/export/fmu_export.hpp), written by stiff fmu export and "
+       "read\n"
+       "# by the FMU binary at instantiation. SI units: m, rad, kg, N, N*m. Do not edit: the\n"
+       "# GUID in modelDescription.xml is a hash of this file.\n";
+  o << "stiff-fmu-model " << fmu_format::kVersion << "\n";
+  o << "guid " << guid << "\n";
+  o << "fmi " << fmi << "\n";
+  std::string name = robot.name;
+  for (char& c : name)
+    if (c == '\n' || c == '\r') c = ' ';
+  o << "robot " << (name.empty() ? "robot" : name) << "\n";
+  o << "dof " << robot.dof() << "\n";
+  for (const auto& j : robot.joints) {
+    o << "joint";
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) o << ' ' << num(j.pre(r, c));
+    for (int r = 0; r < 3; ++r) o << ' ' << num(j.axis(r));
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) o << ' ' << num(j.post(r, c));
+    o << ' ' << num(j.lower) << ' ' << num(j.upper) << ' ' << num(j.mass);
+    for (int r = 0; r < 3; ++r) o << ' ' << num(j.com(r));
+    o << "\n";
+  }
+  auto v3 = [&](const char* key, const Eigen::Vector3d& v) {
+    o << key << ' ' << num(v(0)) << ' ' << num(v(1)) << ' ' << num(v(2)) << "\n";
+  };
+  v3("measured_point", robot.measured_point);
+  v3("load_point", robot.load_point);
+  o << "tool " << num(robot.tool_mass) << ' ' << num(robot.tool_com(0)) << ' '
+    << num(robot.tool_com(1)) << ' ' << num(robot.tool_com(2)) << "\n";
+  v3("gravity", robot.gravity);
+  o << "effects " << model.effects().size();
+  for (const auto& e : model.effects()) o << ' ' << e->name();
+  o << "\nvariables " << vars.size() << "\n";
+  for (size_t k = 0; k < vars.size(); ++k) {
+    const Var& v = vars[k];
+    o << "var " << k << ' ' << v.name << ' ' << fmu_format::kRoleNames[static_cast<int>(v.role)]
+      << ' ' << v.index << ' ' << num(v.start) << ' ' << num(v.min) << ' ' << num(v.max) << "\n";
+  }
+  o << "end\n";
+  return o.str();
+}
+
+std::string model_description(const std::vector<Var>& vars,
+                              int fmi,
+                              const std::string& id,
+                              const std::string& robot_name,
+                              const std::string& model_string,
+                              const std::string& guid) {
+  const bool v3 = fmi == 3;
+  std::ostringstream o;
+  o << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n";
+  o << "<fmiModelDescription fmiVersion=\"" << (v3 ? "3.0" : "2.0") << "\" modelName=\"" << xml(id)
+    << "\" " << (v3 ? "instantiationToken" : "guid") << "=\"" << guid << "\"\n"
+    << "  description=\"Deflection of the tool of robot '" << xml(robot_name)
+    << "' under a wrench, identified model " << xml(model_string) << " (stiff)\"\n"
+    << "  generationTool=\"stiff fmu export\" variableNamingConvention=\"" << (v3 ? "flat" : "flat")
+    << "\"" << (v3 ? "" : " numberOfEventIndicators=\"0\"") << ">\n";
+  const char* state = v3 ? "FMUState" : "FMUstate";
+  o << "  <ModelExchange modelIdentifier=\"" << id << "\" canGetAndSet" << state
+    << "=\"true\" canSerialize" << state
+    << "=\"true\" canBeInstantiatedOnlyOncePerProcess=\"false\""
+    << (v3 ? " needsCompletedIntegratorStep=\"false\""
+           : " completedIntegratorStepNotNeeded=\"true\" "
+             "canNotUseMemoryManagementFunctions=\"true\"")
+    << "/>\n";
+  o << "  <CoSimulation modelIdentifier=\"" << id
+    << "\" canHandleVariableCommunicationStepSize=\"true\" canGetAndSet" << state
+    << "=\"true\" canSerialize" << state
+    << "=\"true\" canBeInstantiatedOnlyOncePerProcess=\"false\""
+    << (v3 ? " hasEventMode=\"false\"" : " canNotUseMemoryManagementFunctions=\"true\"") << "/>\n";
+  std::set<std::string> used;
+  for (const auto& v : vars)
+    if (!v.unit.empty()) used.insert(v.unit);
+  o << "  <UnitDefinitions>\n";
+  for (const auto& u : used) {
+    const char* base = "";
+    for (const auto& k : kUnits)
+      if (u == k.name) base = k.base;
+    o << "    <Unit name=\"" << xml(u) << "\">";
+    if (*base) o << "<BaseUnit " << base << "/>";
+    o << "</Unit>\n";
+  }
+  o << "  </UnitDefinitions>\n";
+  o << "  <LogCategories>\n"
+       "    <Category name=\"logStatusError\" description=\"errors: bad arguments, invalid "
+       "parameters, illegal call sequence\"/>\n"
+       "    <Category name=\"logStatusWarning\" description=\"warnings: compensation not "
+       "converged (singular pose)\"/>\n"
+       "    <Category name=\"logCalls\" description=\"every FMI function call\"/>\n"
+       "  </LogCategories>\n";
+  o << "  <DefaultExperiment startTime=\"0\" stopTime=\"1\" stepSize=\"0.01\"/>\n";
+  o << "  <ModelVariables>\n";
+  std::vector<size_t> inputs, outputs;
+  for (size_t k = 0; k < vars.size(); ++k) {
+    const Var& v = vars[k];
+    std::string causality, variability, initial, type = v3 ? "Float64" : "Real";
+    bool with_start = true;
+    switch (v.role) {
+      case Role::time:
+        causality = "independent";
+        variability = "continuous";
+        with_start = false;
+        break;
+      case Role::q:
+      case Role::wrench:
+      case Role::q_array:
+      case Role::wrench_array:
+        causality = "input";
+        variability = "continuous";
+        inputs.push_back(k);
+        break;
+      case Role::wrench_frame:
+        causality = "parameter";
+        variability = "tunable";
+        initial = v3 ? "" : "exact";
+        type = v3 ? "Int32" : "Integer";
+        break;
+      case Role::parameter:
+        causality = "parameter";
+        variability = "tunable";
+        initial = v3 ? "" : "exact";
+        break;
+      default:
+        causality = "output";
+        variability = "continuous";
+        with_start = false;
+        outputs.push_back(k);
+    }
+    std::string attrs;
+    if (!v.unit.empty() && type != "Integer" && type != "Int32")
+      attrs += " unit=\"" + xml(v.unit) + "\"";
+    if (has_bound(v.min) && v.role != Role::time) attrs += " min=\"" + num(v.min) + "\"";
+    if (has_bound(v.max) && v.role != Role::time) attrs += " max=\"" + num(v.max) + "\"";
+    std::string start;
+    if (with_start) {
+      for (int e = 0; e < v.size; ++e) start += (e ? " " : "") + num(v.start);
+      if (type == "Integer" || type == "Int32") start = std::to_string(static_cast<int>(v.start));
+      attrs += " start=\"" + start + "\"";
+    }
+    if (v3) {
+      o << "    <" << type << " name=\"" << xml(v.name) << "\" valueReference=\"" << k
+        << "\" causality=\"" << causality << "\" variability=\"" << variability << "\"";
+      if (!initial.empty()) o << " initial=\"" << initial << "\"";
+      o << " description=\"" << xml(v.description) << "\"" << attrs;
+      if (v.role == Role::q_array || v.role == Role::wrench_array)
+        o << ">\n      <Dimension start=\"" << v.size << "\"/>\n    </" << type << ">\n";
+      else
+        o << "/>\n";
+    } else {
+      o << "    <ScalarVariable name=\"" << xml(v.name) << "\" valueReference=\"" << k
+        << "\" causality=\"" << causality << "\" variability=\"" << variability << "\"";
+      if (!initial.empty()) o << " initial=\"" << initial << "\"";
+      o << " description=\"" << xml(v.description) << "\">\n      <" << type << attrs
+        << "/>\n    </ScalarVariable>\n";
+    }
+  }
+  o << "  </ModelVariables>\n  <ModelStructure>\n";
+  // FMI 2: 1-based indices of ScalarVariables; FMI 3: value references.
+  auto ref = [&](size_t k) { return std::to_string(v3 ? k : k + 1); };
+  std::string deps;
+  for (size_t i : inputs) deps += (deps.empty() ? "" : " ") + ref(i);
+  if (v3) {
+    for (size_t k : outputs)
+      o << "    <Output valueReference=\"" << k << "\" dependencies=\"" << deps << "\"/>\n";
+    for (size_t k : outputs) o << "    <InitialUnknown valueReference=\"" << k << "\"/>\n";
+  } else {
+    o << "    <Outputs>\n";
+    for (size_t k : outputs)
+      o << "      <Unknown index=\"" << ref(k) << "\" dependencies=\"" << deps << "\"/>\n";
+    o << "    </Outputs>\n    <InitialUnknowns>\n";
+    for (size_t k : outputs) o << "      <Unknown index=\"" << ref(k) << "\"/>\n";
+    o << "    </InitialUnknowns>\n";
+  }
+  o << "  </ModelStructure>\n</fmiModelDescription>\n";
+  return o.str();
+}
+
+// GUID: two FNV-1a 64-bit hashes of the XML and the model file (both written with the GUID
+// field empty), formatted as a UUID.
+std::string make_guid(const std::string& content) {
+  uint64_t h1 = 1469598103934665603ull, h2 = 0x84222325cbf29ce4ull;
+  for (unsigned char c : content) {
+    h1 = (h1 ^ c) * 1099511628211ull;
+    h2 = (h2 ^ c) * 0x100000001b3ull;
+    h2 ^= h2 >> 29;
+  }
+  char b[64];
+  std::snprintf(b, sizeof b, "{%08x-%04x-%04x-%04x-%012llx}", static_cast<unsigned>(h1 >> 32),
+                static_cast<unsigned>((h1 >> 16) & 0xffff), static_cast<unsigned>(h1 & 0xffff),
+                static_cast<unsigned>(h2 >> 48),
+                static_cast<unsigned long long>(h2 & 0xffffffffffffull));
+  return b;
+}
+
+void replace_all(std::string* s, const std::string& from, const std::string& to) {
+  for (size_t p = s->find(from); p != std::string::npos; p = s->find(from, p + to.size()))
+    s->replace(p, from.size(), to);
+}
+
+// Minimal zip writer (stored entries, CRC-32, no zip64), APPNOTE 6.3.
+uint32_t crc32(const std::string& data) {
+  static uint32_t table[256];
+  static bool init = false;
+  if (!init) {
+    for (uint32_t i = 0; i < 256; ++i) {
+      uint32_t c = i;
+      for (int k = 0; k < 8; ++k) c = c & 1 ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+      table[i] = c;
+    }
+    init = true;
+  }
+  uint32_t c = 0xFFFFFFFFu;
+  for (unsigned char b : data) c = table[(c ^ b) & 0xFF] ^ (c >> 8);
+  return c ^ 0xFFFFFFFFu;
+}
+
+struct ZipEntry {
+  std::string name;
+  std::string data;
+  bool executable = false;
+};
+
+std::string zip(const std::vector<ZipEntry>& entries) {
+  std::string out, central;
+  auto u16 = [](std::string* s, unsigned v) {
+    s->push_back(static_cast<char>(v & 0xff));
+    s->push_back(static_cast<char>((v >> 8) & 0xff));
+  };
+  auto u32 = [](std::string* s, uint32_t v) {
+    for (int i = 0; i < 4; ++i) s->push_back(static_cast<char>((v >> (8 * i)) & 0xff));
+  };
+  const unsigned dos_time = 0, dos_date = (0 << 9) | (1 << 5) | 1;  // 1980-01-01 (reproducible)
+  for (const auto& e : entries) {
+    if (e.data.size() >= 0xFFFFFFFFull || out.size() >= 0xFFFFFFFFull)
+      throw InvalidArgument("fmu export: file too large for a zip without zip64");
+    const uint32_t crc = crc32(e.data), size = static_cast<uint32_t>(e.data.size());
+    const uint32_t offset = static_cast<uint32_t>(out.size());
+    u32(&out, 0x04034b50);
+    u16(&out, 20), u16(&out, 0), u16(&out, 0), u16(&out, dos_time), u16(&out, dos_date);
+    u32(&out, crc), u32(&out, size), u32(&out, size);
+    u16(&out, static_cast<unsigned>(e.name.size())), u16(&out, 0);
+    out += e.name;
+    out += e.data;
+    u32(&central, 0x02014b50);
+    u16(&central, 0x031E), u16(&central, 20), u16(&central, 0), u16(&central, 0);
+    u16(&central, dos_time), u16(&central, dos_date);
+    u32(&central, crc), u32(&central, size), u32(&central, size);
+    u16(&central, static_cast<unsigned>(e.name.size())), u16(&central, 0), u16(&central, 0);
+    u16(&central, 0), u16(&central, 0);
+    u32(&central, (e.executable ? 0100755u : 0100644u) << 16);
+    u32(&central, offset);
+    central += e.name;
+  }
+  const uint32_t cd_offset = static_cast<uint32_t>(out.size());
+  out += central;
+  u32(&out, 0x06054b50);
+  u16(&out, 0), u16(&out, 0);
+  u16(&out, static_cast<unsigned>(entries.size())),
+      u16(&out, static_cast<unsigned>(entries.size()));
+  u32(&out, static_cast<uint32_t>(central.size())), u32(&out, cd_offset);
+  u16(&out, 0);
+  return out;
+}
+
+bool is_dir(const std::string& p) {
+  struct stat st;
+  return !p.empty() && ::stat(p.c_str(), &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+std::string read_binary(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw IoError("fmu export: cannot read '" + path + "'");
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+std::string documentation(const std::vector<Var>& vars,
+                          const std::string& robot,
+                          const std::string& model,
+                          int fmi) {
+  std::ostringstream o;
+  o << "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>stiff_arm</title></head>"
+       "<body>\n<h1>Compliant-arm deflection model (stiff)</h1>\n<p>Robot <b>"
+    << xml(robot) << "</b>, identified model <b>" << xml(model) << "</b>, FMI " << fmi
+    << ".0, Model Exchange and Co-Simulation. The FMU is algebraic (no states): the outputs "
+       "follow the inputs instantly. The deflection is the compliance model of the stiff "
+       "library (d = J C J<sup>T</sup> W for the joint model); q_cmd are the joint targets "
+       "that put the loaded tool where q puts the unloaded one (damped least-squares Newton "
+       "iteration, residual below 1e-12 m). The binary needs glibc 2.36 or newer "
+       "(Debian 12) on x86-64 Linux.</p>\n<table border=\"1\">\n"
+       "<tr><th>vr</th><th>name</th><th>unit</th><th>description</th></tr>\n";
+  for (size_t k = 0; k < vars.size(); ++k)
+    o << "<tr><td>" << k << "</td><td>" << xml(vars[k].name) << "</td><td>" << xml(vars[k].unit)
+      << "</td><td>" << xml(vars[k].description) << "</td></tr>\n";
+  o << "</table>\n<p>Licences: see licenses/ (FMI headers BSD-2-Clause, Eigen MPL-2.0).</p>\n"
+       "</body></html>\n";
+  return o.str();
+}
+
+const char* kFmiLicense =
+    "FMI 2.0 and FMI 3.0 C headers (fmi2Functions.h, fmi2FunctionTypes.h, fmi2TypesPlatform.h,\n"
+    "fmi3Functions.h, fmi3FunctionTypes.h, fmi3PlatformTypes.h), used unmodified to build the\n"
+    "binary of this FMU.\n\n"
+    "Copyright (C) 2008-2011 MODELISAR consortium,\n"
+    "              2012-2024 Modelica Association Project \"FMI\".\n"
+    "All rights reserved.\n\n"
+    "This file is licensed by the copyright holders under the 2-Clause BSD License\n"
+    "(https://opensource.org/licenses/BSD-2-Clause):\n\n"
+    "Redistribution and use in source and binary forms, with or without modification, are\n"
+    "permitted provided that the following conditions are met:\n\n"
+    "- Redistributions of source code must retain the above copyright notice, this list of\n"
+    "  conditions and the following disclaimer.\n"
+    "- Redistributions in binary form must reproduce the above copyright notice, this list of\n"
+    "  conditions and the following disclaimer in the documentation and/or other materials\n"
+    "  provided with the distribution.\n\n"
+    "THIS SOFTWARE IS PROVIDED BY THE COPYRIGHT HOLDERS AND CONTRIBUTORS \"AS IS\" AND ANY\n"
+    "EXPRESS OR IMPLIED WARRANTIES, INCLUDING, BUT NOT LIMITED TO, THE IMPLIED WARRANTIES OF\n"
+    "MERCHANTABILITY AND FITNESS FOR A PARTICULAR PURPOSE ARE DISCLAIMED. IN NO EVENT SHALL THE\n"
+    "COPYRIGHT HOLDER OR CONTRIBUTORS BE LIABLE FOR ANY DIRECT, INDIRECT, INCIDENTAL, SPECIAL,\n"
+    "EXEMPLARY, OR CONSEQUENTIAL DAMAGES (INCLUDING, BUT NOT LIMITED TO, PROCUREMENT OF\n"
+    "SUBSTITUTE GOODS OR SERVICES; LOSS OF USE, DATA, OR PROFITS; OR BUSINESS INTERRUPTION)\n"
+    "HOWEVER CAUSED AND ON ANY THEORY OF LIABILITY, WHETHER IN CONTRACT, STRICT LIABILITY, OR\n"
+    "TORT (INCLUDING NEGLIGENCE OR OTHERWISE) ARISING IN ANY WAY OUT OF THE USE OF THIS\n"
+    "SOFTWARE, EVEN IF ADVISED OF THE POSSIBILITY OF SUCH DAMAGE.\n";
+
+const char* kEigenLicense =
+    "Eigen (https://eigen.tuxfamily.org), a C++ template library for linear algebra, is compiled\n"
+    "into the binary of this FMU. Eigen is Free Software licensed under the Mozilla Public\n"
+    "License, version 2.0 (MPL-2.0). The source code of Eigen, and the full text of the licence,\n"
+    "are available at https://gitlab.com/libeigen/eigen and https://mozilla.org/MPL/2.0/.\n"
+    "Eigen was used unmodified.\n\n"
+    "The header ceres/jet.h of Ceres Solver (BSD-3-Clause, Copyright Google Inc.) is compiled\n"
+    "in for the automatic-differentiation scalar type; no Ceres library is linked.\n";
+
+}  // namespace
+
+std::string fmu_binaries_dir(const FmuExportOptions& options) {
+  if (!options.binaries_dir.empty()) return options.binaries_dir;
+  if (const char* env = std::getenv("STIFF_FMU_BINARIES"); env && *env) return env;
+  if (is_dir(STIFF_FMU_DEFAULT_BINARIES)) return STIFF_FMU_DEFAULT_BINARIES;
+  // The Python package ships the binaries as stiff/_lib/fmu next to libstiff_c.so.
+  Dl_info info;
+  if (dladdr(reinterpret_cast<void*>(&fmu_binaries_dir), &info) && info.dli_fname) {
+    std::string lib = info.dli_fname;
+    const size_t slash = lib.rfind('/');
+    const std::string dir = (slash == std::string::npos ? "." : lib.substr(0, slash)) + "/fmu";
+    if (is_dir(dir)) return dir;
+  }
+  return STIFF_FMU_DEFAULT_BINARIES;
+}
+
+void export_fmu(const RobotModel& robot,
+                const FitResult& fit,
+                const std::string& path,
+                const FmuExportOptions& options) {
+  if (options.fmi_version != 2 && options.fmi_version != 3)
+    throw InvalidArgument("fmu export: fmi_version must be 2 or 3, not " +
+                          std::to_string(options.fmi_version));
+  if (!is_identifier(options.model_identifier))
+    throw InvalidArgument("fmu export: model identifier '" + options.model_identifier +
+                          "' is not a C identifier");
+  if (path.empty()) throw InvalidArgument("fmu export: output path is empty");
+  const DeflectionModel model(robot, fit.model);
+  if (static_cast<int>(fit.parameters.size()) != model.parameter_count())
+    throw InvalidArgument("fmu export: the fit has " + std::to_string(fit.parameters.size()) +
+                          " parameters, model '" + model.model_string() + "' of robot '" +
+                          robot.name + "' has " + std::to_string(model.parameter_count()));
+  std::vector<Var> vars = build_variables(model, options.fmi_version);
+  for (auto& v : vars) {
+    if (v.role != Role::parameter) continue;
+    const FitParameter& p = fit.parameters[static_cast<size_t>(v.index)];
+    const ParameterSpec& s = model.spec(v.index);
+    if (p.effect != model.owner(v.index).name() || p.name != s.name)
+      throw InvalidArgument("fmu export: fit parameter " + std::to_string(v.index + 1) + " is " +
+                            p.effect + "." + p.name + ", the model expects " +
+                            model.owner(v.index).name() + "." + s.name);
+    if (!std::isfinite(p.value) || p.value < s.lower || p.value > s.upper)
+      throw InvalidArgument("fmu export: parameter " + v.name + " = " + num(p.value) +
+                            " is not finite or outside [" + num(s.lower) + ", " + num(s.upper) +
+                            "]");
+    v.start = p.value;
+  }
+
+  const std::string platform = options.fmi_version == 2 ? "linux64" : "x86_64-linux";
+  const std::string bin_dir = fmu_binaries_dir(options);
+  const std::string bin = bin_dir + "/" + platform + "/stiff_arm.so";
+  struct stat st;
+  if (bin_dir.empty() || ::stat(bin.c_str(), &st) != 0)
+    throw IoError("fmu export: FMU binary '" + bin +
+                  "' not found; build the target stiff_fmu (cmake -DSTIFF_BUILD_FMU=ON), set "
+                  "STIFF_FMU_BINARIES to the folder holding linux64/ and x86_64-linux/, or pass "
+                  "binaries_dir");
+
+  // One source of truth: the GUID hashes both generated files, written with it left empty.
+  const std::string placeholder = "@STIFF_GUID@";
+  std::string description = model_description(vars, options.fmi_version, options.model_identifier,
+                                              robot.name, model.model_string(), placeholder);
+  std::string model_txt = model_file(robot, model, vars, options.fmi_version, placeholder);
+  const std::string guid = make_guid(description + '\0' + model_txt);
+  replace_all(&description, placeholder, guid);
+  replace_all(&model_txt, placeholder, guid);
+
+  std::vector<ZipEntry> entries;
+  entries.push_back({"modelDescription.xml", description, false});
+  entries.push_back(
+      {"binaries/" + platform + "/" + options.model_identifier + ".so", read_binary(bin), true});
+  entries.push_back({"resources/model.txt", model_txt, false});
+  entries.push_back({"resources/robot.yaml", robot_to_yaml(robot), false});
+  entries.push_back({"documentation/index.html",
+                     documentation(vars, robot.name, model.model_string(), options.fmi_version),
+                     false});
+  entries.push_back({"documentation/licenses/FMI-headers-BSD-2-Clause.txt", kFmiLicense, false});
+  entries.push_back({"documentation/licenses/Eigen-MPL-2.0.txt", kEigenLicense, false});
+  write_text_file_atomic(path, zip(entries));
+}
+
+}  // namespace stiff

@@ -1,0 +1,215 @@
+#include "stiff/identify/fit.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "stiff/error.hpp"
+#include "stiff/io/text_io.hpp"
+
+namespace stiff {
+
+using nlohmann::json;
+
+namespace {
+json number_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+double number_from(const json& j) {
+  return j.is_number() ? j.get<double>() : std::numeric_limits<double>::quiet_NaN();
+}
+}  // namespace
+
+Eigen::VectorXd FitResult::theta() const {
+  Eigen::VectorXd t(parameters.size());
+  for (size_t k = 0; k < parameters.size(); ++k) t(k) = parameters[k].value;
+  return t;
+}
+
+Eigen::VectorXd FitResult::joint_stiffness() const {
+  std::vector<double> k;
+  for (const auto& p : parameters)
+    if (p.effect == "joint") k.push_back(p.value > 0 ? 1.0 / p.value : INFINITY);
+  return Eigen::Map<Eigen::VectorXd>(k.data(), k.size());
+}
+
+Eigen::VectorXd FitResult::joint_stiffness_se() const {
+  std::vector<double> k;
+  for (const auto& p : parameters)
+    if (p.effect == "joint")
+      k.push_back(p.identified && p.value != 0 ? p.standard_error / (p.value * p.value) : NAN);
+  return Eigen::Map<Eigen::VectorXd>(k.data(), k.size());
+}
+
+std::vector<bool> FitResult::joint_identified() const {
+  std::vector<bool> out;
+  for (const auto& p : parameters)
+    if (p.effect == "joint") out.push_back(p.identified);
+  return out;
+}
+
+std::string fit_to_json(const FitResult& f) {
+  json j;
+  j["format"] = "stiff-fit";
+  j["version"] = 1;
+  j["robot"] = {{"name", f.robot_name}, {"file", f.robot_path}};
+  j["model"] = f.model;
+  j["method"] = f.method;
+  j["loss"] = {{"name", f.loss}, {"scale_m", f.loss_scale_m}};
+  json params = json::array();
+  for (const auto& p : f.parameters)
+    params.push_back({{"effect", p.effect},
+                      {"name", p.name},
+                      {"unit", p.unit},
+                      {"meaning", p.meaning},
+                      {"value", number_or_null(p.value)},
+                      {"standard_error", number_or_null(p.standard_error)},
+                      {"identified", p.identified}});
+  j["parameters"] = params;
+  const Eigen::VectorXd k = f.joint_stiffness(), kse = f.joint_stiffness_se();
+  const auto ident = f.joint_identified();
+  json joints = json::array();
+  for (int i = 0; i < k.size(); ++i)
+    joints.push_back({{"joint", i + 1},
+                      {"stiffness_Nm_per_rad", number_or_null(ident[i] ? k(i) : NAN)},
+                      {"stiffness_se_Nm_per_rad", number_or_null(kse(i))},
+                      {"identified", static_cast<bool>(ident[i])}});
+  j["joints"] = joints;
+  j["fit"] = {{"measurements", f.measurements},
+              {"rank", f.rank},
+              {"dof", f.dof},
+              {"condition_number", number_or_null(f.condition_number)},
+              {"rms_m", f.rms_m},
+              {"sigma_hat_m", number_or_null(f.sigma_hat_m)},
+              {"noise_floor_m", f.noise_floor_m},
+              {"chi2", f.chi2}};
+  json cov = json::array();
+  for (int r = 0; r < f.covariance.rows(); ++r) {
+    json row = json::array();
+    for (int c = 0; c < f.covariance.cols(); ++c) row.push_back(number_or_null(f.covariance(r, c)));
+    cov.push_back(row);
+  }
+  j["covariance"] = cov;
+  json outl = json::array();
+  for (const auto& o : f.outliers)
+    outl.push_back({{"row", o.row},
+                    {"id", o.id},
+                    {"residual_m", o.residual_m},
+                    {"weight", o.weight},
+                    {"reason", o.reason}});
+  j["outliers"] = outl;
+  j["warnings"] = f.warnings;
+  return j.dump(2) + "\n";
+}
+
+FitResult fit_from_json(const std::string& text, const std::string& file) {
+  json j;
+  try {
+    j = json::parse(text);
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for number overflow
+    throw ParseError(file, 0, 0, std::string("not valid JSON: ") + e.what());
+  }
+  auto need = [&](const json& obj, const char* key) -> const json& {
+    if (!obj.is_object() || !obj.contains(key))
+      throw ParseError(file, 0, 0, std::string("fit file lacks '") + key + "'");
+    return obj.at(key);
+  };
+  try {
+    if (need(j, "format") != "stiff-fit")
+      throw ParseError(file, 0, 0, "not a stiff fit file (format is not 'stiff-fit')");
+    if (need(j, "version").get<int>() != 1)
+      throw ParseError(file, 0, 0, "unsupported fit file version");
+    FitResult f;
+    f.robot_name = need(j, "robot").value("name", "");
+    f.robot_path = need(j, "robot").value("file", "");
+    f.model = need(j, "model").get<std::vector<std::string>>();
+    if (f.model.empty()) throw ParseError(file, 0, 0, "fit file has an empty model");
+    f.method = j.value("method", "");
+    if (j.contains("loss")) {
+      f.loss = j["loss"].value("name", "none");
+      f.loss_scale_m = j["loss"].value("scale_m", 0.0);
+    }
+    for (const auto& p : need(j, "parameters")) {
+      FitParameter q;
+      q.effect = need(p, "effect").get<std::string>();
+      q.name = need(p, "name").get<std::string>();
+      q.unit = p.value("unit", "");
+      q.meaning = p.value("meaning", "");
+      q.value = number_from(need(p, "value"));
+      if (!std::isfinite(q.value))
+        throw ParseError(file, 0, 0,
+                         "parameter " + q.effect + "." + q.name + " is not a finite number");
+      q.standard_error = p.contains("standard_error") ? number_from(p["standard_error"]) : NAN;
+      q.identified = p.value("identified", true);
+      f.parameters.push_back(q);
+    }
+    if (j.contains("fit")) {
+      const auto& s = j["fit"];
+      f.measurements = s.value("measurements", 0);
+      f.rank = s.value("rank", 0);
+      f.dof = s.value("dof", 0);
+      f.condition_number =
+          s.contains("condition_number") ? number_from(s["condition_number"]) : NAN;
+      f.rms_m = s.value("rms_m", 0.0);
+      f.sigma_hat_m = s.contains("sigma_hat_m") ? number_from(s["sigma_hat_m"]) : NAN;
+      f.noise_floor_m = s.value("noise_floor_m", 0.0);
+      f.chi2 = s.value("chi2", 0.0);
+    }
+    const int p = static_cast<int>(f.parameters.size());
+    f.covariance = Eigen::MatrixXd::Constant(p, p, NAN);
+    if (j.contains("covariance") && j["covariance"].size() == static_cast<size_t>(p))
+      for (int r = 0; r < p; ++r)
+        for (int c = 0; c < p && c < static_cast<int>(j["covariance"][r].size()); ++c)
+          f.covariance(r, c) = number_from(j["covariance"][r][c]);
+    if (j.contains("warnings")) f.warnings = j["warnings"].get<std::vector<std::string>>();
+    return f;
+  } catch (const json::exception& e) {
+    throw ParseError(file, 0, 0, std::string("malformed fit file: ") + e.what());
+  }
+}
+
+FitResult read_fit(const std::string& path) { return fit_from_json(read_text_file(path), path); }
+
+void write_fit(const std::string& path, const FitResult& fit) {
+  write_text_file_atomic(path, fit_to_json(fit));
+}
+
+double stated_noise_m(const Dataset& data) {
+  if (data.has_sigma) {
+    std::vector<double> s;
+    for (const auto& m : data.rows) s.push_back(m.sigma_d);
+    std::nth_element(s.begin(), s.begin() + s.size() / 2, s.end());
+    return s[s.size() / 2];
+  }
+  const std::string meta = data.meta("tracker_sigma_m");
+  if (!meta.empty()) {
+    char* end = nullptr;
+    const double v = std::strtod(meta.c_str(), &end);
+    if (end != meta.c_str() && std::isfinite(v) && v > 0) return v;
+  }
+  return 0.0;
+}
+
+Eigen::MatrixXd predict_dataset(const RobotModel& robot,
+                                const FitResult& fit,
+                                const Dataset& data) {
+  validate_dataset(data, robot.dof(), false);
+  DeflectionModel model(robot, fit.model, &data);
+  if (model.parameter_count() != static_cast<int>(fit.parameters.size()))
+    throw InvalidArgument("fit has " + std::to_string(fit.parameters.size()) +
+                          " parameters but model '" + model.model_string() + "' on robot '" +
+                          robot.name + "' has " + std::to_string(model.parameter_count()) +
+                          " (was it identified for another robot?)");
+  for (int k = 0; k < model.parameter_count(); ++k)
+    if (model.spec(k).name != fit.parameters[k].name)
+      throw InvalidArgument("fit parameter " + std::to_string(k + 1) + " is '" +
+                            fit.parameters[k].name + "', the model expects '" + model.spec(k).name +
+                            "'");
+  const Eigen::VectorXd theta = fit.theta();
+  Eigen::MatrixXd out(data.rows.size(), 6);
+  for (size_t r = 0; r < data.rows.size(); ++r)
+    out.row(r) =
+        model.predict(theta, data.rows[r], model.context(data.rows[r], static_cast<int>(r)))
+            .transpose();
+  return out;
+}
+
+}  // namespace stiff

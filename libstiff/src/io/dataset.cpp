@@ -1,0 +1,448 @@
+#include "stiff/io/dataset.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "stiff/error.hpp"
+#include "stiff/io/text_io.hpp"
+
+namespace stiff {
+namespace {
+
+constexpr double kPi = 3.141592653589793238462643383279502884;
+
+// What a column holds; `index` is the component (0..2) or joint index.
+enum class Kind { id, session, q, force, moment, displacement, rotation, sigma, time, extra };
+
+struct Column {
+  Kind kind = Kind::extra;
+  int index = 0;
+  double scale = 1.0;  // multiply to get SI
+  std::string name;
+};
+
+struct Field {
+  std::string text;
+  int col;  // 1-based character column of the field start
+};
+
+// Split one CSV line (RFC 4180 quoting, no embedded newlines).
+std::vector<Field> split_line(const std::string& line, const std::string& file, int line_no) {
+  std::vector<Field> out;
+  size_t i = 0;
+  while (true) {
+    Field f{std::string(), static_cast<int>(i) + 1};
+    if (i < line.size() && line[i] == '"') {
+      ++i;
+      bool closed = false;
+      while (i < line.size()) {
+        if (line[i] == '"') {
+          if (i + 1 < line.size() && line[i + 1] == '"') {
+            f.text += '"';
+            i += 2;
+            continue;
+          }
+          closed = true;
+          ++i;
+          break;
+        }
+        f.text += line[i++];
+      }
+      if (!closed) throw ParseError(file, line_no, f.col, "unterminated quoted field");
+      if (i < line.size() && line[i] != ',')
+        throw ParseError(file, line_no, static_cast<int>(i) + 1, "text after a closing quote");
+    } else {
+      while (i < line.size() && line[i] != ',') f.text += line[i++];
+      // Surrounding blanks are not part of a value.
+      const auto b = f.text.find_first_not_of(" \t");
+      const auto e = f.text.find_last_not_of(" \t");
+      f.text = b == std::string::npos ? std::string() : f.text.substr(b, e - b + 1);
+    }
+    out.push_back(f);
+    if (i >= line.size()) break;
+    ++i;  // the comma
+    if (i == line.size()) {
+      out.push_back(Field{std::string(), static_cast<int>(i) + 1});
+      break;
+    }
+  }
+  return out;
+}
+
+bool lookup_unit(Kind kind, const std::string& unit, double* scale) {
+  static const std::map<std::string, double> angle{{"rad", 1.0}, {"deg", kPi / 180.0}};
+  static const std::map<std::string, double> force{{"N", 1.0}};
+  static const std::map<std::string, double> moment{{"Nm", 1.0}, {"Nmm", 1e-3}};
+  static const std::map<std::string, double> length{{"m", 1.0}, {"mm", 1e-3}, {"um", 1e-6}};
+  static const std::map<std::string, double> rotation{{"rad", 1.0}, {"mrad", 1e-3}};
+  static const std::map<std::string, double> time{{"s", 1.0}, {"min", 60.0}};
+  const std::map<std::string, double>* table = nullptr;
+  switch (kind) {
+    case Kind::q:
+      table = &angle;
+      break;
+    case Kind::force:
+      table = &force;
+      break;
+    case Kind::moment:
+      table = &moment;
+      break;
+    case Kind::displacement:
+    case Kind::sigma:
+      table = &length;
+      break;
+    case Kind::rotation:
+      table = &rotation;
+      break;
+    case Kind::time:
+      table = &time;
+      break;
+    default:
+      return false;
+  }
+  const auto it = table->find(unit);
+  if (it == table->end()) return false;
+  *scale = it->second;
+  return true;
+}
+
+std::string accepted_units(Kind kind) {
+  switch (kind) {
+    case Kind::q:
+      return "_rad, _deg";
+    case Kind::force:
+      return "_N";
+    case Kind::moment:
+      return "_Nm, _Nmm";
+    case Kind::displacement:
+    case Kind::sigma:
+      return "_m, _mm, _um";
+    case Kind::rotation:
+      return "_rad, _mrad";
+    case Kind::time:
+      return "_s, _min";
+    default:
+      return "";
+  }
+}
+
+// Classify a header name; throws on a known quantity with a missing or unknown unit.
+Column classify(const std::string& name, const std::string& file, int line, int col) {
+  Column c;
+  c.name = name;
+  if (name == "id") {
+    c.kind = Kind::id;
+    return c;
+  }
+  if (name == "session") {
+    c.kind = Kind::session;
+    return c;
+  }
+  struct Base {
+    std::string base;
+    Kind kind;
+    int index;
+  };
+  std::vector<Base> bases = {
+      {"fx", Kind::force, 0},        {"fy", Kind::force, 1},        {"fz", Kind::force, 2},
+      {"mx", Kind::moment, 0},       {"my", Kind::moment, 1},       {"mz", Kind::moment, 2},
+      {"dx", Kind::displacement, 0}, {"dy", Kind::displacement, 1}, {"dz", Kind::displacement, 2},
+      {"rx", Kind::rotation, 0},     {"ry", Kind::rotation, 1},     {"rz", Kind::rotation, 2},
+      {"sigma_d", Kind::sigma, 0},   {"t", Kind::time, 0}};
+  // q<k>: joint columns.
+  if (name.size() >= 2 && name[0] == 'q' && std::isdigit(static_cast<unsigned char>(name[1]))) {
+    size_t k = 1;
+    while (k < name.size() && std::isdigit(static_cast<unsigned char>(name[k]))) ++k;
+    const int joint = std::atoi(name.substr(1, k - 1).c_str());
+    if (joint >= 1) bases.push_back({name.substr(0, k), Kind::q, joint - 1});
+  }
+  for (const auto& b : bases) {
+    if (name == b.base)
+      throw ParseError(
+          file, line, col,
+          "column '" + name + "' has no unit suffix (use " + accepted_units(b.kind) + ")");
+    if (name.compare(0, b.base.size() + 1, b.base + "_") != 0) continue;
+    const std::string unit = name.substr(b.base.size() + 1);
+    if (unit.find('_') != std::string::npos) continue;  // e.g. fx_flange_N: an extra column
+    c.kind = b.kind;
+    c.index = b.index;
+    if (!lookup_unit(b.kind, unit, &c.scale))
+      throw ParseError(file, line, col,
+                       "column '" + name + "': unknown unit '" + unit +
+                           "' (accepted: " + accepted_units(b.kind) + ")");
+    return c;
+  }
+  c.kind = Kind::extra;
+  return c;
+}
+
+double parse_number(const Field& f, const Column& c, const std::string& file, int line) {
+  if (f.text.empty()) throw ParseError(file, line, f.col, "column '" + c.name + "': empty value");
+  char* end = nullptr;
+  const double v = std::strtod(f.text.c_str(), &end);
+  if (end != f.text.c_str() + f.text.size())
+    throw ParseError(file, line, f.col,
+                     "column '" + c.name + "': '" + f.text + "' is not a number");
+  if (!std::isfinite(v))
+    throw ParseError(file, line, f.col,
+                     "column '" + c.name + "': '" + f.text + "' is not a finite number");
+  return v * c.scale;
+}
+
+std::string quote_if_needed(const std::string& s) {
+  // Unquoted fields are trimmed on reading: quote anything whose blanks must survive.
+  const bool blank_edge =
+      !s.empty() && (s.front() == ' ' || s.front() == '\t' || s.back() == ' ' || s.back() == '\t');
+  if (!blank_edge && s.find_first_of(",\"\n\r#") == std::string::npos) return s;
+  std::string o = "\"";
+  for (char ch : s) o += ch == '"' ? std::string("\"\"") : std::string(1, ch);
+  return o + "\"";
+}
+
+std::string num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  return buf;
+}
+
+}  // namespace
+
+std::string Dataset::meta(const std::string& key, const std::string& fallback) const {
+  for (const auto& kv : metadata)
+    if (kv.first == key) return kv.second;
+  return fallback;
+}
+
+void Dataset::set_meta(const std::string& key, const std::string& value) {
+  for (auto& kv : metadata)
+    if (kv.first == key) {
+      kv.second = value;
+      return;
+    }
+  metadata.emplace_back(key, value);
+}
+
+int Dataset::extra_index(const std::string& name) const {
+  for (size_t i = 0; i < extra_columns.size(); ++i)
+    if (extra_columns[i] == name) return static_cast<int>(i);
+  return -1;
+}
+
+Dataset parse_measurements_csv(const std::string& text_in, const std::string& file, int dof) {
+  std::string text = text_in;
+  if (text.compare(0, 3, "\xEF\xBB\xBF") == 0) text.erase(0, 3);  // UTF-8 byte-order mark
+  Dataset data;
+  std::vector<Column> columns;
+  std::set<std::string> ids;
+  bool have_header = false;
+  std::istringstream in(text);
+  std::string line;
+  int line_no = 0;
+  int header_line = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.find('\0') != std::string::npos)
+      throw ParseError(file, line_no, 1, "binary data (NUL byte) in a text file");
+    const auto first = line.find_first_not_of(" \t");
+    if (first == std::string::npos) continue;
+    if (line[first] == '#') {
+      const std::string body = line.substr(first + 1);
+      const auto colon = body.find(':');
+      if (colon != std::string::npos) {
+        auto trim = [](std::string s) {
+          const auto b = s.find_first_not_of(" \t");
+          const auto e = s.find_last_not_of(" \t");
+          return b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
+        };
+        const std::string key = trim(body.substr(0, colon));
+        if (!key.empty() && key.find(' ') == std::string::npos)
+          data.set_meta(key, trim(body.substr(colon + 1)));
+      }
+      continue;
+    }
+    const auto fields = split_line(line, file, line_no);
+    if (!have_header) {
+      have_header = true;
+      header_line = line_no;
+      std::set<std::string> seen;
+      int max_q = 0;
+      std::set<int> qs;
+      for (const auto& f : fields) {
+        if (f.text.empty()) throw ParseError(file, line_no, f.col, "empty column name");
+        if (!seen.insert(f.text).second)
+          throw ParseError(file, line_no, f.col, "duplicate column '" + f.text + "'");
+        Column c = classify(f.text, file, line_no, f.col);
+        if (c.kind == Kind::q) {
+          if (!qs.insert(c.index).second)
+            throw ParseError(file, line_no, f.col,
+                             "joint q" + std::to_string(c.index + 1) + " given twice");
+          max_q = std::max(max_q, c.index + 1);
+          if (dof > 0 && c.index >= dof)
+            throw ParseError(file, line_no, f.col,
+                             "column '" + f.text + "': the robot has " + std::to_string(dof) +
+                                 " joints (joint count mismatch)");
+        }
+        if (c.kind == Kind::extra) {
+          c.index = static_cast<int>(data.extra_columns.size());
+          data.extra_columns.push_back(f.text);
+        }
+        columns.push_back(c);
+      }
+      const int n = dof > 0 ? dof : max_q;
+      if (n == 0) throw ParseError(file, line_no, 1, "missing joint columns q1.. (e.g. q1_deg)");
+      for (int j = 0; j < n; ++j)
+        if (!qs.count(j))
+          throw ParseError(file, line_no, 1,
+                           "missing required column q" + std::to_string(j + 1) +
+                               (dof > 0 ? " (the robot has " + std::to_string(dof) + " joints)"
+                                        : std::string()));
+      data.dof = n;
+      std::set<std::pair<Kind, int>> have;
+      for (const auto& c : columns) have.insert({c.kind, c.index});
+      auto group = [&](Kind k, const char* names, bool required) {
+        const int count = have.count({k, 0}) + have.count({k, 1}) + have.count({k, 2});
+        if (count == 3) return true;
+        if (count == 0 && !required) return false;
+        throw ParseError(file, line_no, 1,
+                         std::string("missing required column: ") + names + " must all be present");
+      };
+      group(Kind::force, "fx, fy, fz", true);
+      data.has_moment = group(Kind::moment, "mx, my, mz", false);
+      data.has_displacement = group(Kind::displacement, "dx, dy, dz", false);
+      data.has_rotation = group(Kind::rotation, "rx, ry, rz", false);
+      data.has_sigma = have.count({Kind::sigma, 0}) > 0;
+      data.has_time = have.count({Kind::time, 0}) > 0;
+      data.has_session = have.count({Kind::session, 0}) > 0;
+      data.has_id = have.count({Kind::id, 0}) > 0;
+      continue;
+    }
+    if (fields.size() != columns.size())
+      throw ParseError(file, line_no, fields.back().col,
+                       "wrong field count: " + std::to_string(fields.size()) +
+                           " fields, the header (line " + std::to_string(header_line) + ") has " +
+                           std::to_string(columns.size()));
+    Measurement m;
+    m.q = Eigen::VectorXd::Zero(data.dof);
+    m.extra.resize(data.extra_columns.size());
+    for (size_t k = 0; k < fields.size(); ++k) {
+      const Column& c = columns[k];
+      const Field& f = fields[k];
+      switch (c.kind) {
+        case Kind::id:
+          if (f.text.empty()) throw ParseError(file, line_no, f.col, "empty id");
+          if (!ids.insert(f.text).second)
+            throw ParseError(file, line_no, f.col, "duplicate id '" + f.text + "'");
+          m.id = f.text;
+          break;
+        case Kind::session:
+          m.session = f.text;
+          break;
+        case Kind::q:
+          m.q(c.index) = parse_number(f, c, file, line_no);
+          break;
+        case Kind::force:
+          m.force(c.index) = parse_number(f, c, file, line_no);
+          break;
+        case Kind::moment:
+          m.moment(c.index) = parse_number(f, c, file, line_no);
+          break;
+        case Kind::displacement:
+          m.displacement(c.index) = parse_number(f, c, file, line_no);
+          break;
+        case Kind::rotation:
+          m.rotation(c.index) = parse_number(f, c, file, line_no);
+          break;
+        case Kind::sigma:
+          m.sigma_d = parse_number(f, c, file, line_no);
+          if (m.sigma_d <= 0)
+            throw ParseError(file, line_no, f.col, "column '" + c.name + "': must be > 0");
+          break;
+        case Kind::time:
+          m.time = parse_number(f, c, file, line_no);
+          break;
+        case Kind::extra:
+          m.extra[c.index] = f.text;
+          break;
+      }
+    }
+    if (!data.has_id) m.id = std::to_string(data.rows.size() + 1);
+    data.rows.push_back(std::move(m));
+  }
+  if (!have_header) throw ParseError(file, line_no > 0 ? line_no : 1, 1, "no header row");
+  return data;
+}
+
+Dataset read_measurements_csv(const std::string& path, int dof) {
+  return parse_measurements_csv(read_text_file(path), path, dof);
+}
+
+std::string format_measurements_csv(const Dataset& data) {
+  std::ostringstream o;
+  for (const auto& kv : data.metadata) o << "# " << kv.first << ": " << kv.second << "\n";
+  std::vector<std::string> head;
+  head.push_back("id");
+  for (int j = 0; j < data.dof; ++j) head.push_back("q" + std::to_string(j + 1) + "_rad");
+  for (const char* s : {"fx_N", "fy_N", "fz_N"}) head.push_back(s);
+  if (data.has_moment)
+    for (const char* s : {"mx_Nm", "my_Nm", "mz_Nm"}) head.push_back(s);
+  if (data.has_displacement)
+    for (const char* s : {"dx_m", "dy_m", "dz_m"}) head.push_back(s);
+  if (data.has_rotation)
+    for (const char* s : {"rx_rad", "ry_rad", "rz_rad"}) head.push_back(s);
+  if (data.has_sigma) head.push_back("sigma_d_m");
+  if (data.has_time) head.push_back("t_s");
+  if (data.has_session) head.push_back("session");
+  for (const auto& e : data.extra_columns) head.push_back(quote_if_needed(e));
+  for (size_t k = 0; k < head.size(); ++k) o << (k ? "," : "") << head[k];
+  o << "\n";
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    const auto& m = data.rows[r];
+    o << quote_if_needed(m.id.empty() ? std::to_string(r + 1) : m.id);
+    for (int j = 0; j < data.dof; ++j) o << "," << num(j < m.q.size() ? m.q(j) : 0.0);
+    for (int k = 0; k < 3; ++k) o << "," << num(m.force(k));
+    if (data.has_moment)
+      for (int k = 0; k < 3; ++k) o << "," << num(m.moment(k));
+    if (data.has_displacement)
+      for (int k = 0; k < 3; ++k) o << "," << num(m.displacement(k));
+    if (data.has_rotation)
+      for (int k = 0; k < 3; ++k) o << "," << num(m.rotation(k));
+    if (data.has_sigma) o << "," << num(m.sigma_d);
+    if (data.has_time) o << "," << num(m.time);
+    if (data.has_session) o << "," << quote_if_needed(m.session);
+    for (size_t e = 0; e < data.extra_columns.size(); ++e)
+      o << "," << quote_if_needed(e < m.extra.size() ? m.extra[e] : std::string());
+    o << "\n";
+  }
+  return o.str();
+}
+
+void write_measurements_csv(const std::string& path, const Dataset& data) {
+  write_text_file_atomic(path, format_measurements_csv(data));
+}
+
+void validate_dataset(const Dataset& data, int dof, bool need_displacement) {
+  if (data.rows.empty()) throw InvalidArgument("dataset has no measurements");
+  if (need_displacement && !data.has_displacement)
+    throw InvalidArgument("dataset has no displacement columns dx, dy, dz (is it a plan file?)");
+  std::set<std::string> ids;
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    const auto& m = data.rows[r];
+    const std::string where = "measurement " + std::to_string(r + 1) + " (id '" + m.id + "')";
+    if (m.q.size() != dof)
+      throw InvalidArgument(where + ": " + std::to_string(m.q.size()) + " joint values for a " +
+                            std::to_string(dof) + "-joint robot");
+    if (!m.q.allFinite() || !m.force.allFinite() || !m.moment.allFinite() ||
+        !m.displacement.allFinite() || !m.rotation.allFinite() || !std::isfinite(m.sigma_d) ||
+        !std::isfinite(m.time))
+      throw InvalidArgument(where + ": a value is not finite");
+    if (m.sigma_d < 0) throw InvalidArgument(where + ": sigma_d must be >= 0");
+    if (!m.id.empty() && !ids.insert(m.id).second) throw InvalidArgument(where + ": duplicate id");
+  }
+}
+
+}  // namespace stiff

@@ -1,0 +1,410 @@
+#include "stiff/io/robot_io.hpp"
+
+#include <console_bridge/console.h>
+#include <urdf_model/model.h>
+#include <urdf_parser/urdf_parser.h>
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <map>
+#include <mutex>
+#include <set>
+#include <sstream>
+
+#include "stiff/error.hpp"
+#include "stiff/io/text_io.hpp"
+
+namespace stiff {
+namespace {
+
+constexpr double kPi = 3.141592653589793238462643383279502884;
+
+struct YamlReader {
+  std::string file;
+
+  [[noreturn]] void fail(const YAML::Node& node, const std::string& reason) const {
+    const auto m = node.Mark();
+    throw ParseError(file, m.is_null() ? 0 : m.line + 1, m.is_null() ? 0 : m.column + 1, reason);
+  }
+
+  double number(const YAML::Node& node, const std::string& what) const {
+    if (!node || !node.IsScalar()) fail(node, what + " must be a number");
+    double v = 0.0;
+    try {
+      v = node.as<double>();
+    } catch (const YAML::Exception&) {
+      fail(node, what + " must be a number, got '" + node.Scalar() + "'");
+    }
+    if (!std::isfinite(v)) fail(node, what + " is not a finite number");
+    return v;
+  }
+
+  Eigen::Vector3d vec3(const YAML::Node& node, const std::string& what, double scale) const {
+    if (!node.IsSequence() || node.size() != 3) fail(node, what + " must be a list of 3 numbers");
+    Eigen::Vector3d v;
+    for (int i = 0; i < 3; ++i) v(i) = number(node[i], what) * scale;
+    return v;
+  }
+
+  void check_keys(const YAML::Node& map,
+                  const std::set<std::string>& allowed,
+                  const std::string& where) const {
+    for (const auto& kv : map) {
+      const auto key = kv.first.as<std::string>();
+      if (!allowed.count(key)) fail(kv.first, "unknown key '" + key + "' in " + where);
+    }
+  }
+};
+
+double length_scale(const YamlReader& r, const YAML::Node& node) {
+  const auto u = node.as<std::string>();
+  if (u == "m") return 1.0;
+  if (u == "mm") return 1e-3;
+  r.fail(node, "unknown length unit '" + u + "' (use m or mm)");
+}
+
+double angle_scale(const YamlReader& r, const YAML::Node& node) {
+  const auto u = node.as<std::string>();
+  if (u == "rad") return 1.0;
+  if (u == "deg") return kPi / 180.0;
+  r.fail(node, "unknown angle unit '" + u + "' (use rad or deg)");
+}
+
+Eigen::Matrix4d matrix4(const YamlReader& r, const YAML::Node& node, const std::string& what) {
+  if (!node.IsSequence() || node.size() != 16)
+    r.fail(node, what + " must be a list of 16 numbers (row-major 4x4, m)");
+  Eigen::Matrix4d m;
+  for (int i = 0; i < 16; ++i) m(i / 4, i % 4) = r.number(node[i], what);
+  return m;
+}
+
+}  // namespace
+
+namespace {
+RobotModel parse_robot_yaml_unguarded(const std::string& text, const std::string& file);
+}  // namespace
+
+RobotModel parse_robot_yaml(const std::string& text, const std::string& file) {
+  // yaml-cpp throws on conversions the reader does not check itself (e.g. a key that is a
+  // list); it must never escape as anything but a ParseError with its location.
+  try {
+    return parse_robot_yaml_unguarded(text, file);
+  } catch (const YAML::Exception& e) {
+    throw ParseError(file, e.mark.is_null() ? 0 : e.mark.line + 1,
+                     e.mark.is_null() ? 0 : e.mark.column + 1, e.msg);
+  }
+}
+
+namespace {
+RobotModel parse_robot_yaml_unguarded(const std::string& text, const std::string& file) {
+  YamlReader r{file};
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::ParserException& e) {
+    throw ParseError(file, e.mark.line + 1, e.mark.column + 1, e.msg);
+  }
+  if (!root.IsMap()) throw ParseError(file, 1, 1, "a robot file must be a YAML mapping");
+  r.check_keys(root,
+               {"name", "convention", "units", "joints", "measured_point", "load_point", "tool",
+                "gravity", "description"},
+               "the robot file");
+
+  RobotModel robot;
+  robot.source_path = file;
+  robot.name = root["name"] ? root["name"].as<std::string>() : std::string("robot");
+
+  double ls = 1.0, as = 1.0;
+  if (const auto units = root["units"]) {
+    if (!units.IsMap()) r.fail(units, "units must be a mapping {length: mm|m, angle: deg|rad}");
+    r.check_keys(units, {"length", "angle"}, "units");
+    if (units["length"]) ls = length_scale(r, units["length"]);
+    if (units["angle"]) as = angle_scale(r, units["angle"]);
+  }
+
+  if (!root["convention"]) throw ParseError(file, 1, 1, "missing key 'convention'");
+  const auto conv_node = root["convention"];
+  const auto conv = conv_node.as<std::string>();
+  if (conv == "modified_dh")
+    robot.convention = Convention::modified_dh;
+  else if (conv == "standard_dh")
+    robot.convention = Convention::standard_dh;
+  else if (conv == "general" || conv == "urdf")
+    robot.convention = Convention::urdf;
+  else
+    r.fail(conv_node,
+           "unknown convention '" + conv + "' (use modified_dh, standard_dh or general)");
+
+  const auto joints = root["joints"];
+  if (!joints || !joints.IsSequence() || joints.size() == 0)
+    throw ParseError(file, joints ? joints.Mark().line + 1 : 1, 1,
+                     "'joints' must be a non-empty list");
+  int index = 0;
+  for (const auto& jn : joints) {
+    ++index;
+    const std::string where = "joint " + std::to_string(index);
+    if (!jn.IsMap()) r.fail(jn, where + " must be a mapping");
+    Joint j;
+    if (robot.convention == Convention::urdf) {
+      r.check_keys(jn, {"name", "pre", "axis", "post", "limits", "mass", "com"}, where);
+      if (!jn["pre"] || !jn["axis"]) r.fail(jn, where + " needs 'pre' and 'axis'");
+      j.pre = matrix4(r, jn["pre"], where + " pre");
+      j.pre.block<3, 1>(0, 3) *= ls;
+      j.axis = r.vec3(jn["axis"], where + " axis", 1.0);
+      if (j.axis.norm() < 1e-9) r.fail(jn["axis"], where + " axis has zero length");
+      j.axis.normalize();
+      if (jn["post"]) {
+        j.post = matrix4(r, jn["post"], where + " post");
+        j.post.block<3, 1>(0, 3) *= ls;
+      }
+      for (double& v : j.dh) v = NAN;
+    } else {
+      r.check_keys(jn, {"name", "alpha", "a", "d", "theta_offset", "limits", "mass", "com"}, where);
+      for (const char* key : {"alpha", "a", "d"})
+        if (!jn[key]) r.fail(jn, where + " is missing '" + key + "'");
+      const double alpha = r.number(jn["alpha"], where + " alpha") * as;
+      const double a = r.number(jn["a"], where + " a") * ls;
+      const double d = r.number(jn["d"], where + " d") * ls;
+      const double off =
+          jn["theta_offset"] ? r.number(jn["theta_offset"], where + " theta_offset") * as : 0.0;
+      j = robot.convention == Convention::modified_dh ? modified_dh_joint(alpha, a, d, off)
+                                                      : standard_dh_joint(alpha, a, d, off);
+    }
+    j.name = jn["name"] ? jn["name"].as<std::string>() : "joint" + std::to_string(index);
+    if (const auto lim = jn["limits"]) {
+      if (!lim.IsSequence() || lim.size() != 2)
+        r.fail(lim, where + " limits must be [lower, upper]");
+      j.lower = r.number(lim[0], where + " lower limit") * as;
+      j.upper = r.number(lim[1], where + " upper limit") * as;
+      if (!(j.lower < j.upper))
+        r.fail(lim,
+               where + " limits: lower must be less than upper (got an empty or negative range)");
+    }
+    if (jn["mass"]) {
+      j.mass = r.number(jn["mass"], where + " mass");
+      if (j.mass < 0) r.fail(jn["mass"], where + " mass must be >= 0 kg");
+    }
+    if (jn["com"]) j.com = r.vec3(jn["com"], where + " com", ls);
+    robot.joints.push_back(j);
+  }
+
+  if (const auto mp = root["measured_point"])
+    robot.measured_point = r.vec3(mp, "measured_point", ls);
+  robot.load_point = robot.measured_point;
+  if (const auto lp = root["load_point"]) robot.load_point = r.vec3(lp, "load_point", ls);
+  if (const auto tool = root["tool"]) {
+    if (!tool.IsMap()) r.fail(tool, "tool must be a mapping {mass: kg, com: [x, y, z]}");
+    r.check_keys(tool, {"mass", "com"}, "tool");
+    if (tool["mass"]) robot.tool_mass = r.number(tool["mass"], "tool mass");
+    if (robot.tool_mass < 0) r.fail(tool["mass"], "tool mass must be >= 0 kg");
+    if (tool["com"]) robot.tool_com = r.vec3(tool["com"], "tool com", ls);
+  }
+  if (const auto g = root["gravity"]) robot.gravity = r.vec3(g, "gravity", 1.0);
+  return robot;
+}
+
+Eigen::Matrix4d urdf_pose(const urdf::Pose& p) {
+  Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
+  const Eigen::Quaterniond qr(p.rotation.w, p.rotation.x, p.rotation.y, p.rotation.z);
+  t.block<3, 3>(0, 0) = qr.normalized().toRotationMatrix();
+  t.block<3, 1>(0, 3) = Eigen::Vector3d(p.position.x, p.position.y, p.position.z);
+  return t;
+}
+
+}  // namespace
+
+RobotModel parse_robot_urdf(const std::string& text,
+                            const std::string& file,
+                            const std::string& tip_link) {
+  // urdfdom reports problems through console_bridge, which prints to stderr by default; the
+  // library never prints (stiff.h): capture them for the error message instead.
+  struct Capture : console_bridge::OutputHandler {
+    std::string first_error;
+    void log(const std::string& text, console_bridge::LogLevel level, const char*, int) override {
+      if (level >= console_bridge::CONSOLE_BRIDGE_LOG_ERROR && first_error.empty())
+        first_error = text;
+    }
+  } capture;
+  urdf::ModelInterfaceSharedPtr model;
+  {
+    static std::mutex handler_mutex;  // the output handler is process-wide
+    std::lock_guard<std::mutex> lock(handler_mutex);
+    console_bridge::OutputHandler* previous = console_bridge::getOutputHandler();
+    console_bridge::useOutputHandler(&capture);
+    try {
+      model = urdf::parseURDF(text);
+    } catch (...) {
+      console_bridge::useOutputHandler(previous);
+      throw;
+    }
+    console_bridge::useOutputHandler(previous);
+  }
+  if (!model)
+    throw ParseError(
+        file, 0, 0,
+        "not a valid URDF document" +
+            (capture.first_error.empty() ? std::string() : " (" + capture.first_error + ")"));
+  auto root = model->getRoot();
+  if (!root) throw ParseError(file, 0, 0, "URDF has no root link");
+
+  // Walk from the root to the tip: the unique leaf, or the named link.
+  std::vector<urdf::LinkConstSharedPtr> chain{root};
+  while (true) {
+    const auto& link = chain.back();
+    if (link->name == tip_link) break;
+    if (link->child_links.empty()) break;
+    if (link->child_links.size() > 1 && tip_link.empty())
+      throw ParseError(file, 0, 0,
+                       "URDF link '" + link->name + "' branches; name the tip link of the chain");
+    urdf::LinkConstSharedPtr next = link->child_links.front();
+    if (link->child_links.size() > 1) {
+      next = nullptr;
+      for (const auto& c : link->child_links) {
+        // choose the child whose subtree contains the tip
+        std::vector<urdf::LinkConstSharedPtr> stack{c};
+        bool found = false;
+        while (!stack.empty() && !found) {
+          auto l = stack.back();
+          stack.pop_back();
+          if (l->name == tip_link) found = true;
+          for (const auto& cc : l->child_links) stack.push_back(cc);
+        }
+        if (found) next = c;
+      }
+      if (!next) throw ParseError(file, 0, 0, "URDF has no link named '" + tip_link + "'");
+    }
+    chain.push_back(next);
+  }
+  if (!tip_link.empty() && chain.back()->name != tip_link)
+    throw ParseError(file, 0, 0, "URDF has no link named '" + tip_link + "' below the root");
+
+  RobotModel robot;
+  robot.name = model->getName();
+  robot.convention = Convention::urdf;
+  robot.source_path = file;
+  Eigen::Matrix4d pending = Eigen::Matrix4d::Identity();  // fixed transforms not yet assigned
+  for (size_t i = 1; i < chain.size(); ++i) {
+    const auto& joint = chain[i]->parent_joint;
+    const Eigen::Matrix4d origin = urdf_pose(joint->parent_to_joint_origin_transform);
+    if (joint->type == urdf::Joint::FIXED) {
+      pending = pending * origin;
+    } else if (joint->type == urdf::Joint::REVOLUTE || joint->type == urdf::Joint::CONTINUOUS) {
+      Joint j;
+      j.name = joint->name;
+      j.pre = pending * origin;
+      pending.setIdentity();
+      j.axis = Eigen::Vector3d(joint->axis.x, joint->axis.y, joint->axis.z);
+      if (j.axis.norm() < 1e-12)
+        throw ParseError(file, 0, 0, "URDF joint '" + joint->name + "' has a zero axis");
+      j.axis.normalize();
+      if (joint->type == urdf::Joint::REVOLUTE && joint->limits) {
+        j.lower = joint->limits->lower;
+        j.upper = joint->limits->upper;
+        if (!(j.lower < j.upper))
+          throw ParseError(file, 0, 0, "URDF joint '" + joint->name + "' has an empty limit range");
+      }
+      for (double& v : j.dh) v = NAN;
+      robot.joints.push_back(j);
+    } else {
+      throw ParseError(file, 0, 0,
+                       "URDF joint '" + joint->name +
+                           "' is not revolute, continuous or fixed; only serial "
+                           "revolute chains are supported");
+    }
+    if (const auto& inertial = chain[i]->inertial; inertial && !robot.joints.empty()) {
+      // Express the link's centre of mass in the frame of the last moving joint.
+      const Eigen::Matrix4d com = pending * urdf_pose(inertial->origin);
+      auto& j = robot.joints.back();
+      const double m = inertial->mass;
+      if (m > 0) {
+        j.com = (j.mass * j.com + m * com.block<3, 1>(0, 3)) / (j.mass + m);
+        j.mass += m;
+      }
+    }
+  }
+  if (robot.joints.empty()) throw ParseError(file, 0, 0, "URDF chain has no revolute joint");
+  // Fixed transforms after the last joint define the flange: fold them into its `post`.
+  auto& last = robot.joints.back();
+  last.post = last.post * pending;
+  if (last.mass > 0) {
+    const Eigen::Vector4d c = pending.inverse() * last.com.homogeneous();
+    last.com = c.head<3>();
+  }
+  return robot;
+}
+
+RobotModel load_robot(const std::string& path) {
+  const std::string text = read_text_file(path);
+  const bool urdf_file = path.size() > 5 && path.substr(path.size() - 5) == ".urdf";
+  return urdf_file ? parse_robot_urdf(text, path) : parse_robot_yaml(text, path);
+}
+
+namespace {
+/// A YAML double-quoted scalar: names may hold quotes, backslashes or control characters
+/// (anything the reader accepted must be written back readable).
+std::string yaml_quoted(const std::string& s) {
+  std::string q = "\"";
+  for (const unsigned char c : s) {
+    if (c == '"' || c == '\\') {
+      q += '\\';
+      q += static_cast<char>(c);
+    } else if (c < 0x20 || c == 0x7f) {
+      static const char hex[] = "0123456789abcdef";
+      q += "\\x";
+      q += hex[c >> 4];
+      q += hex[c & 0xf];
+    } else {
+      q += static_cast<char>(c);
+    }
+  }
+  return q + "\"";
+}
+}  // namespace
+
+std::string robot_to_yaml(const RobotModel& robot) {
+  std::ostringstream o;
+  o << std::setprecision(17);
+  auto vec = [&](const Eigen::Vector3d& v) {
+    o << "[" << v(0) << ", " << v(1) << ", " << v(2) << "]";
+  };
+  o << "name: " << yaml_quoted(robot.name) << "\n";
+  o << "units: {length: m, angle: rad}\n";
+  const bool dh = robot.convention != Convention::urdf;
+  o << "convention: " << (dh ? to_string(robot.convention) : "general") << "\n";
+  o << "joints:\n";
+  for (const auto& j : robot.joints) {
+    o << "  - name: " << yaml_quoted(j.name) << "\n";
+    if (dh) {
+      o << "    alpha: " << j.dh[0] << "\n    a: " << j.dh[1] << "\n    d: " << j.dh[2]
+        << "\n    theta_offset: " << j.dh[3] << "\n";
+    } else {
+      o << "    pre: [";
+      for (int k = 0; k < 16; ++k) o << (k ? ", " : "") << j.pre(k / 4, k % 4);
+      o << "]\n    axis: ";
+      vec(j.axis);
+      o << "\n    post: [";
+      for (int k = 0; k < 16; ++k) o << (k ? ", " : "") << j.post(k / 4, k % 4);
+      o << "]\n";
+    }
+    o << "    limits: [" << j.lower << ", " << j.upper << "]\n";
+    if (j.mass > 0) {
+      o << "    mass: " << j.mass << "\n    com: ";
+      vec(j.com);
+      o << "\n";
+    }
+  }
+  o << "measured_point: ";
+  vec(robot.measured_point);
+  o << "\nload_point: ";
+  vec(robot.load_point);
+  o << "\ntool: {mass: " << robot.tool_mass << ", com: ";
+  vec(robot.tool_com);
+  o << "}\ngravity: ";
+  vec(robot.gravity);
+  o << "\n";
+  return o.str();
+}
+
+}  // namespace stiff

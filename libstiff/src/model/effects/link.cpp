@@ -1,0 +1,150 @@
+// link: link compliance by the virtual joint method (VJM), reduced to the rotational springs
+// the joint compliances cannot absorb (effects-and-diagnosis.md 1.2).
+#include "stiff/model/effects/common.hpp"
+
+namespace stiff {
+namespace {
+
+/// A virtual rotational spring at the root of link i (on joint axis i), about a unit axis u
+/// fixed in link frame i and perpendicular to joint axis i. It acts like an extra revolute
+/// joint between joints i and i+1: d += c (u x (P - o)) (u x (L - o) . F + u . M).
+/// Candidates per link are the two axes perpendicular to joint axis i (bending out of the
+/// link's plane and torsion); a candidate parallel to joint axis i+1 is dropped because that
+/// joint's compliance absorbs it (Klimchik's model reduction). Links 2 and 3 (upper arm and
+/// forearm) carry springs.
+class LinkCompliance : public EffectT<LinkCompliance> {
+ public:
+  explicit LinkCompliance(const EffectSetup& s) {
+    const RobotModel& robot = *s.robot;
+    const int n = robot.dof();
+    const ChainState c0 = robot.chain(Eigen::VectorXd::Zero(n));
+    for (int link = 2; link <= std::min(3, n - 1); ++link) {
+      const Eigen::Matrix3d r = c0.link[link - 1].block<3, 3>(0, 0);
+      const Eigen::Vector3d a = r.transpose() * c0.axis.col(link - 1);  // axis i, link frame
+      const Eigen::Vector3d next = r.transpose() * c0.axis.col(link);   // axis i+1
+      Eigen::Vector3d u1 = Eigen::Vector3d::UnitX() - a.x() * a;
+      if (u1.norm() < 0.3) u1 = Eigen::Vector3d::UnitY() - a.y() * a;
+      u1.normalize();
+      const Eigen::Vector3d u2 = a.cross(u1).normalized();
+      const Eigen::Vector3d cand[2] = {u1, u2};
+      const char* label[2] = {"x", "y"};
+      for (int k = 0; k < 2; ++k) {
+        if (std::abs(cand[k].dot(next)) > 0.95) continue;  // collinear with joint i+1
+        springs_.push_back({link - 1, cand[k]});
+        params_.push_back(
+            effects::parameter("c_link" + std::to_string(link) + "_" + label[k], "rad/(N*m)",
+                               "compliance of a virtual rotational spring at the root of link " +
+                                   std::to_string(link) + " about its frame's " + label[k] +
+                                   " axis (bending or torsion of the link)",
+                               0.0, 1e-2, 3e-6, 0.0, 1e-6));
+      }
+    }
+  }
+  const std::string& name() const override { return name_; }
+  bool example_parameters(const Eigen::VectorXd& /*c*/, double* p) const override {
+    for (int k = 0; k < size(); ++k) p[k] = 1.0 / 3e5;  // k = 3e5 N*m/rad, a stiff casting
+    return true;
+  }
+  std::string description() const override {
+    return "link compliance (virtual joint method): rotational springs in links 2 and 3 about "
+           "the axes the joints cannot absorb, d += c_v (u x (P-o)) (u x (L-o) . F)";
+  }
+  std::string reference() const override {
+    return "Pashkevich, Chablat & Wenger, Mech. Mach. Theory 44(5), 2009; Klimchik et al., "
+           "Robotics Comput.-Integr. Manuf. 2014 (model reduction)";
+  }
+  const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  bool linear() const override { return true; }
+  bool has_displacement_derivatives() const override { return true; }
+  void displacement_derivatives(const EvalState<double>& s, double* out) const override {
+    Eigen::Vector3d u, o;
+    for (size_t k = 0; k < springs_.size(); ++k) {
+      axis(s.context->chain, k, u, o);
+      Eigen::Map<Eigen::Vector3d>(out + 3 * k) =
+          torque(u, o, s.p_load, s.force, s.moment) * cross(u, s.p_meas, o);
+    }
+  }
+
+  template <typename T>
+  void cartesian_t(const T* p, EvalState<T>& s) const {
+    const auto& chain = s.context->chain;
+    Eigen::Vector3d u, o;
+    const bool wrench_fixed = effects::constant(s.force) && effects::constant(s.moment);
+    if (wrench_fixed && effects::constant(s.p_load) && effects::constant(s.p_meas)) {
+      // Points and wrench without derivatives (a pass that differentiates other parameters):
+      // torques and lever arms are plain numbers.
+      const Eigen::Vector3d f = effects::value(s.force), m = effects::value(s.moment);
+      const Eigen::Vector3d pl = effects::value(s.p_load), pm = effects::value(s.p_meas);
+      for (size_t k = 0; k < springs_.size(); ++k) {
+        axis(chain, k, u, o);
+        const T angle = p[k] * torque(u, o, pl, f, m);
+        effects::add_scaled(s.d, angle, cross(u, pm, o));
+        effects::add_scaled(s.rot, angle, u);
+      }
+      return;
+    }
+    // The springs' sum c_v t_v (u_v x (P - o_v)) is w x P - sum c_v t_v (u_v x o_v) with
+    // w = sum c_v t_v u_v (their rotation): one product with P for all springs.
+    Vector3<T> w = Vector3<T>::Zero(), wo = Vector3<T>::Zero();
+    for (size_t k = 0; k < springs_.size(); ++k) {
+      axis(chain, k, u, o);
+      T tk;  // the spring's torque
+      if (wrench_fixed) {
+        // (u x (L - o)) . F = L . (F x u) - o . (F x u): derivatives only through L.
+        const Eigen::Vector3d f = effects::value(s.force), m = effects::value(s.moment);
+        const Eigen::Vector3d a = f.cross(u);
+        tk = effects::dot(s.p_load, a) + (m.dot(u) - o.dot(a));
+      } else {
+        tk = cross(u, s.p_load, o).dot(s.force) +
+             (s.moment(0) * u(0) + s.moment(1) * u(1) + s.moment(2) * u(2));
+      }
+      const T angle = p[k] * tk;
+      effects::add_scaled(w, angle, u);
+      effects::add_scaled(wo, angle, u.cross(o));
+    }
+    const Vector3<T>& pm = s.p_meas;
+    s.d(0) += w(1) * pm(2) - w(2) * pm(1) - wo(0);
+    s.d(1) += w(2) * pm(0) - w(0) * pm(2) - wo(1);
+    s.d(2) += w(0) * pm(1) - w(1) * pm(0) - wo(2);
+    s.rot += w;
+  }
+
+ private:
+  // The spring axis u and origin o do not depend on the parameters: kept in double so that
+  // automatic differentiation only carries derivatives where they can be non-zero.
+  void axis(const ChainState& chain, size_t k, Eigen::Vector3d& u, Eigen::Vector3d& o) const {
+    const int i = springs_[k].link;
+    u = chain.link[i].block<3, 3>(0, 0) * springs_[k].axis;
+    o = chain.origin.col(i);
+  }
+  // Torque (u x (L - o)) . F + u . M about the spring's axis [N*m].
+  static double torque(const Eigen::Vector3d& u,
+                       const Eigen::Vector3d& o,
+                       const Eigen::Vector3d& l,
+                       const Eigen::Vector3d& f,
+                       const Eigen::Vector3d& m) {
+    return cross(u, l, o).dot(f) + m.dot(u);
+  }
+  // u x (p - o) with a constant axis u and origin o.
+  template <typename T>
+  static Vector3<T> cross(const Eigen::Vector3d& u, const Vector3<T>& p, const Eigen::Vector3d& o) {
+    const Vector3<T> r(p(0) - o(0), p(1) - o(1), p(2) - o(2));
+    return Vector3<T>(u(1) * r(2) - u(2) * r(1), u(2) * r(0) - u(0) * r(2),
+                      u(0) * r(1) - u(1) * r(0));
+  }
+  struct Spring {
+    int link;              ///< 0-based link index
+    Eigen::Vector3d axis;  ///< unit axis in the link frame
+  };
+  std::string name_ = "link";
+  std::vector<Spring> springs_;
+  std::vector<ParameterSpec> params_;
+};
+
+}  // namespace
+
+std::unique_ptr<Effect> make_link_effect(const EffectSetup& s) {
+  return std::make_unique<LinkCompliance>(s);
+}
+
+}  // namespace stiff

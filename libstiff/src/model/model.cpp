@@ -1,0 +1,504 @@
+#include "stiff/model/model.hpp"
+
+#include <cstdint>
+#include <cstring>
+#include <set>
+
+#include "kinematics/fast_chain.hpp"
+#include "stiff/error.hpp"
+#include "stiff/kinematics/joint_torque.hpp"
+
+namespace stiff {
+
+std::vector<std::string> parse_model_string(const std::string& text) {
+  std::vector<std::string> names;
+  std::set<std::string> seen;
+  size_t start = 0;
+  while (true) {
+    const size_t plus = text.find('+', start);
+    std::string name =
+        text.substr(start, plus == std::string::npos ? std::string::npos : plus - start);
+    const auto b = name.find_first_not_of(" \t");
+    const auto e = name.find_last_not_of(" \t");
+    name = b == std::string::npos ? std::string() : name.substr(b, e - b + 1);
+    if (name.empty()) throw InvalidArgument("model '" + text + "': empty effect name");
+    if (!seen.insert(name).second)
+      throw InvalidArgument("model '" + text + "': effect '" + name + "' given twice");
+    names.push_back(name);
+    if (plus == std::string::npos) break;
+    start = plus + 1;
+  }
+  return names;
+}
+
+DeflectionModel::DeflectionModel(const RobotModel& robot,
+                                 const std::vector<std::string>& effects,
+                                 const Dataset* data)
+    : robot_(robot) {
+  if (robot.dof() == 0) throw InvalidArgument("robot has no joints");
+  if (effects.empty()) throw InvalidArgument("model has no effect (e.g. 'joint')");
+  if (data) {
+    for (const auto& m : data->rows)
+      if (!sessions_.count(m.session)) {
+        const int k = static_cast<int>(sessions_.size());
+        sessions_[m.session] = k;
+      }
+  }
+  EffectSetup setup;
+  setup.robot = &robot_;
+  setup.data = data;
+  setup.sessions = std::max<int>(1, static_cast<int>(sessions_.size()));
+  std::set<std::string> seen;
+  for (const auto& name : effects) {
+    if (!seen.insert(name).second)
+      throw InvalidArgument("model: effect '" + name + "' given twice");
+    auto e = make_effect(name, setup);
+    jet_jacobians_ = jet_jacobians_ || e->reads_jacobians();
+    linear_ = linear_ && e->linear();
+    offsets_.push_back(count_);
+    count_ += e->size();
+    effects_.push_back(std::move(e));
+  }
+  bool derivatives = false, wrench_only = true;
+  for (const auto& e : effects_) {
+    if (e->has_displacement_derivatives())
+      derivatives = true;
+    else
+      wrench_only = wrench_only && (e->stages() & ~unsigned{kWrenchStage}) == 0;
+  }
+  analytic_ = derivatives && wrench_only;
+  for (size_t e = 0; e < effects_.size(); ++e)
+    if (!analytic_ || !effects_[e]->has_displacement_derivatives())
+      for (int k = 0; k < effects_[e]->size(); ++k) jet_parameters_.push_back(offsets_[e] + k);
+}
+
+std::vector<std::string> DeflectionModel::effect_names() const {
+  std::vector<std::string> n;
+  for (const auto& e : effects_) n.push_back(e->name());
+  return n;
+}
+
+std::string DeflectionModel::model_string() const {
+  std::string s;
+  for (const auto& e : effects_) s += (s.empty() ? "" : "+") + e->name();
+  return s;
+}
+
+int DeflectionModel::find(const std::string& effect) const {
+  for (size_t i = 0; i < effects_.size(); ++i)
+    if (effects_[i]->name() == effect) return static_cast<int>(i);
+  return -1;
+}
+
+const Effect& DeflectionModel::owner(int k) const {
+  for (size_t e = effects_.size(); e-- > 0;)
+    if (k >= offsets_[e]) return *effects_[e];
+  throw InvalidArgument("parameter index out of range");
+}
+
+const ParameterSpec& DeflectionModel::spec(int k) const {
+  for (size_t e = effects_.size(); e-- > 0;)
+    if (k >= offsets_[e]) return effects_[e]->parameters()[k - offsets_[e]];
+  throw InvalidArgument("parameter index out of range");
+}
+
+Eigen::VectorXd DeflectionModel::null_parameters() const {
+  Eigen::VectorXd t(count_);
+  for (int k = 0; k < count_; ++k) t(k) = spec(k).null_value;
+  return t;
+}
+
+Eigen::VectorXd DeflectionModel::start_parameters() const {
+  Eigen::VectorXd t(count_);
+  for (int k = 0; k < count_; ++k) t(k) = spec(k).start;
+  return t;
+}
+
+int DeflectionModel::session_index(const std::string& label) const {
+  const auto it = sessions_.find(label);
+  return it == sessions_.end() ? 0 : it->second;
+}
+
+MeasurementContext DeflectionModel::context(const Measurement& m, int row) const {
+  check_joint_vector(robot_, m.q, "measurement '" + m.id + "'");
+  MeasurementContext c;
+  c.chain = robot_.chain(m.q);
+  c.tau_gravity = gravity_torques(robot_, c.chain);
+  c.session = session_index(m.session);
+  c.time = m.time != 0.0 ? m.time : static_cast<double>(row);
+  return c;
+}
+
+std::vector<MeasurementContext> DeflectionModel::contexts(const Dataset& data) const {
+  // context() of every row, the kinematics by a chain specialised once (equal to
+  // RobotModel::chain up to round-off).
+  const int n = robot_.dof();
+  const detail::FastChain fk(robot_);
+  std::vector<Eigen::Matrix4d> links(n);
+  Eigen::Matrix3d rf;
+  Eigen::Vector3d pf;
+  std::vector<MeasurementContext> out(data.rows.size());
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    const Measurement& m = data.rows[r];
+    if (m.q.size() != n || !m.q.allFinite())
+      check_joint_vector(robot_, m.q, "measurement '" + m.id + "'");  // throws
+    MeasurementContext& c = out[r];
+    c.chain.axis.resize(3, n);
+    c.chain.origin.resize(3, n);
+    fk(m.q, c.chain.axis, c.chain.origin, rf, pf, links.data());
+    c.chain.link = links;
+    c.chain.flange.setIdentity();
+    c.chain.flange.topLeftCorner<3, 3>() = rf;
+    c.chain.flange.topRightCorner<3, 1>() = pf;
+    c.tau_gravity = gravity_torques(robot_, c.chain);
+    c.session = session_index(m.session);
+    c.time = data.has_time && m.time != 0.0 ? m.time : static_cast<double>(r);
+  }
+  return out;
+}
+
+template <typename T>
+void DeflectionModel::evaluate(const T* theta,
+                               const Measurement& m,
+                               const MeasurementContext& c,
+                               Vector3<T>* d,
+                               Vector3<T>* rot) const {
+  EvalState<T> s;
+  evaluate_into(theta, m, c, s);
+  *d = s.d;
+  if (rot) *rot = s.rot;
+}
+
+void DeflectionModel::evaluate_double(const double* theta,
+                                      const Measurement& m,
+                                      const MeasurementContext& c,
+                                      EvalState<double>& s,
+                                      Vector3<double>* d) const {
+  constexpr int kMax = 32;
+  const int n = robot_.dof();
+  if (n > kMax || jet_jacobians_) {
+    evaluate_into(theta, m, c, s);
+    *d = s.d;
+    return;
+  }
+  // evaluate_into without the 6 x n Jacobians that no effect of this model reads.
+  s.robot = &robot_;
+  s.measurement = &m;
+  s.context = &c;
+  s.force = m.force;
+  s.moment = m.moment;
+  s.r_meas = robot_.measured_point;
+  s.r_load = robot_.load_point;
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->wrench(theta + offsets_[e], s);
+  const Eigen::Matrix4d& fl = c.chain.flange;
+  for (int k = 0; k < 3; ++k) {
+    s.p_meas(k) =
+        fl(k, 0) * s.r_meas(0) + fl(k, 1) * s.r_meas(1) + fl(k, 2) * s.r_meas(2) + fl(k, 3);
+    s.p_load(k) =
+        fl(k, 0) * s.r_load(0) + fl(k, 1) * s.r_load(1) + fl(k, 2) * s.r_load(2) + fl(k, 3);
+  }
+  s.jac_meas.resize(6, 0);
+  s.jac_load.resize(6, 0);
+  s.tau.resize(n);
+  double jm[kMax][3];
+  for (int j = 0; j < n; ++j) {
+    const double* z = c.chain.axis.data() + 3 * j;
+    const double* o = c.chain.origin.data() + 3 * j;
+    lever_arm(z, o, s.p_meas, jm[j]);
+    double wl[3];
+    lever_arm(z, o, s.p_load, wl);
+    s.tau(j) = joint_torque(wl, z, s.force, s.moment);
+  }
+  s.dtheta.setZero(n);
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->joint(theta + offsets_[e], s);
+  s.d.setZero();
+  s.rot.setZero();
+  for (int j = 0; j < n; ++j) {
+    const double* z = c.chain.axis.data() + 3 * j;
+    for (int k = 0; k < 3; ++k) {
+      s.d(k) += jm[j][k] * s.dtheta(j);
+      s.rot(k) += z[k] * s.dtheta(j);
+    }
+  }
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->cartesian(theta + offsets_[e], s);
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
+  *d = s.d;
+}
+
+template <typename T>
+void DeflectionModel::evaluate_into(const T* theta,
+                                    const Measurement& m,
+                                    const MeasurementContext& c,
+                                    EvalState<T>& s) const {
+  const int n = robot_.dof();
+  s.robot = &robot_;
+  s.measurement = &m;
+  s.context = &c;
+  s.force = m.force.cast<T>();
+  s.moment = m.moment.cast<T>();
+  s.r_meas = robot_.measured_point.cast<T>();
+  s.r_load = robot_.load_point.cast<T>();
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->wrench(theta + offsets_[e], s);
+
+  // Stage 1 geometry: Jacobians at the (possibly offset) measured and load points.
+  const Matrix3<T> rf = c.chain.flange.block<3, 3>(0, 0).cast<T>();
+  const Vector3<T> pf = c.chain.flange.block<3, 1>(0, 3).cast<T>();
+  s.p_meas = rf * s.r_meas + pf;
+  s.p_load = rf * s.r_load + pf;
+  s.jac_meas.resize(6, n);
+  s.jac_load.resize(6, n);
+  s.tau.resize(n);
+  for (int j = 0; j < n; ++j) {
+    const Vector3<T> z = c.chain.axis.col(j).cast<T>();
+    const Vector3<T> o = c.chain.origin.col(j).cast<T>();
+    Vector3<T> wm, wl;
+    lever_arm(z, o, s.p_meas, wm);
+    lever_arm(z, o, s.p_load, wl);
+    s.jac_meas.template block<3, 1>(0, j) = wm;
+    s.jac_meas.template block<3, 1>(3, j) = z;
+    s.jac_load.template block<3, 1>(0, j) = wl;
+    s.jac_load.template block<3, 1>(3, j) = z;
+    s.tau(j) = joint_torque(wl, z, s.force, s.moment);
+  }
+  s.dtheta = VectorX<T>::Zero(n);
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->joint(theta + offsets_[e], s);
+  s.d = s.jac_meas.template topRows<3>() * s.dtheta;
+  s.rot = s.jac_meas.template bottomRows<3>() * s.dtheta;
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->cartesian(theta + offsets_[e], s);
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
+}
+
+template void DeflectionModel::evaluate<double>(const double*,
+                                                const Measurement&,
+                                                const MeasurementContext&,
+                                                Vector3<double>*,
+                                                Vector3<double>*) const;
+template void DeflectionModel::evaluate<Jet>(
+    const Jet*, const Measurement&, const MeasurementContext&, Vector3<Jet>*, Vector3<Jet>*) const;
+
+void DeflectionModel::evaluate_jet(const Jet* theta,
+                                   const Measurement& m,
+                                   const MeasurementContext& c,
+                                   EvalState<Jet>& s,
+                                   Vector3<Jet>* d) const {
+  constexpr int S = kJetStride;
+  constexpr int kMax = 32;  // joints held in fixed-capacity buffers (no allocation)
+  using Vec = Eigen::Matrix<double, S, 1>;
+  const int n = robot_.dof();
+  if (n > kMax) {
+    evaluate_into(theta, m, c, s);
+    *d = s.d;
+    return;
+  }
+  s.robot = &robot_;
+  s.measurement = &m;
+  s.context = &c;
+  for (int k = 0; k < 3; ++k) {
+    s.force(k) = Jet(m.force(k));
+    s.moment(k) = Jet(m.moment(k));
+    s.r_meas(k) = Jet(robot_.measured_point(k));
+    s.r_load(k) = Jet(robot_.load_point(k));
+  }
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->wrench(theta + offsets_[e], s);
+
+  // Stage 1 geometry in double, derivative parts as [3][S] arrays (plain loops over S that
+  // vectorise); the derivative work only when the wrench stage moved the points or the wrench.
+  double rm[3], rl[3], f[3], mo[3];
+  double rmv[3][S], rlv[3][S], fv[3][S], mv[3][S];
+  std::uint64_t points_nz = 0, wrench_nz = 0;  // OR of the bits without the sign: 0 iff all zero
+  for (int k = 0; k < 3; ++k) {
+    rm[k] = s.r_meas(k).a;
+    rl[k] = s.r_load(k).a;
+    f[k] = s.force(k).a;
+    mo[k] = s.moment(k).a;
+    std::memcpy(rmv[k], s.r_meas(k).v.data(), sizeof rmv[k]);
+    std::memcpy(rlv[k], s.r_load(k).v.data(), sizeof rlv[k]);
+    std::memcpy(fv[k], s.force(k).v.data(), sizeof fv[k]);
+    std::memcpy(mv[k], s.moment(k).v.data(), sizeof mv[k]);
+  }
+  {
+    std::uint64_t b[4][3 * S];
+    std::memcpy(b[0], rmv, sizeof b[0]);
+    std::memcpy(b[1], rlv, sizeof b[1]);
+    std::memcpy(b[2], fv, sizeof b[2]);
+    std::memcpy(b[3], mv, sizeof b[3]);
+    for (int i = 0; i < 3 * S; ++i) {
+      points_nz |= (b[0][i] | b[1][i]) << 1;
+      wrench_nz |= (b[2][i] | b[3][i]) << 1;
+    }
+  }
+  const bool moved = points_nz != 0, wrench_moved = wrench_nz != 0;
+  const Eigen::Matrix4d& fl = c.chain.flange;
+  double pm[3], pl[3], pmv[3][S], plv[3][S];
+  for (int k = 0; k < 3; ++k) {
+    pm[k] = fl(k, 0) * rm[0] + fl(k, 1) * rm[1] + fl(k, 2) * rm[2] + fl(k, 3);
+    pl[k] = fl(k, 0) * rl[0] + fl(k, 1) * rl[1] + fl(k, 2) * rl[2] + fl(k, 3);
+    for (int i = 0; i < S; ++i) {
+      pmv[k][i] = moved ? fl(k, 0) * rmv[0][i] + fl(k, 1) * rmv[1][i] + fl(k, 2) * rmv[2][i] : 0.0;
+      plv[k][i] = moved ? fl(k, 0) * rlv[0][i] + fl(k, 1) * rlv[1][i] + fl(k, 2) * rlv[2][i] : 0.0;
+    }
+    s.p_meas(k) = Jet(pm[k], Eigen::Map<const Vec>(pmv[k]));
+    s.p_load(k) = Jet(pl[k], Eigen::Map<const Vec>(plv[k]));
+  }
+  // The Jacobians at P and L as Jets only for effects that read them (complementary).
+  if (jet_jacobians_) {
+    s.jac_meas.resize(6, n);
+    s.jac_load.resize(6, n);
+  } else {
+    s.jac_meas.resize(6, 0);
+    s.jac_load.resize(6, 0);
+  }
+  s.tau.resize(n);
+  double jm[kMax][3];  // J_p(P) translational columns
+  for (int j = 0; j < n; ++j) {
+    const double* z = c.chain.axis.data() + 3 * j;
+    const double* o = c.chain.origin.data() + 3 * j;
+    double wm[3], wl[3];
+    lever_arm(z, o, pm, wm);
+    lever_arm(z, o, pl, wl);
+    for (int k = 0; k < 3; ++k) jm[j][k] = wm[k];
+    const double tau = joint_torque(wl, z, f, mo);
+    Vec tv = Vec::Zero();
+    if (moved) {
+      // (z x L') . F = L' . (F x z): one dot product per derivative instead of a cross product.
+      const double fz[3] = {f[1] * z[2] - f[2] * z[1], f[2] * z[0] - f[0] * z[2],
+                            f[0] * z[1] - f[1] * z[0]};
+      tv = fz[0] * Eigen::Map<const Vec>(plv[0]) + fz[1] * Eigen::Map<const Vec>(plv[1]) +
+           fz[2] * Eigen::Map<const Vec>(plv[2]);
+    }
+    if (wrench_moved)
+      for (int i = 0; i < S; ++i) tv[i] += joint_torque(wl, z, Lane<S>{fv, i}, Lane<S>{mv, i});
+    if (jet_jacobians_) {
+      for (int k = 0; k < 3; ++k) {
+        const int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        Vec wmv, wlv;  // derivative parts of z x P and z x L
+        for (int i = 0; i < S; ++i) {
+          wmv(i) = z[k1] * pmv[k2][i] - z[k2] * pmv[k1][i];
+          wlv(i) = z[k1] * plv[k2][i] - z[k2] * plv[k1][i];
+        }
+        s.jac_meas(k, j) = Jet(wm[k], wmv);
+        s.jac_load(k, j) = Jet(wl[k], wlv);
+        s.jac_meas(3 + k, j) = Jet(z[k]);
+        s.jac_load(3 + k, j) = Jet(z[k]);
+      }
+    }
+    s.tau(j) = Jet(tau, tv);
+  }
+  s.dtheta.resize(n);
+  for (int j = 0; j < n; ++j) s.dtheta(j) = Jet(0.0);
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->joint(theta + offsets_[e], s);
+  // d = J_p dtheta, rot = J_r dtheta as small products of the values and derivative parts
+  // (fixed-size vectors: GCC left the same loops over [3][S] arrays scalar).
+  double da[3] = {0, 0, 0}, ra[3] = {0, 0, 0};
+  Vec dv[3], rv[3];
+  for (int k = 0; k < 3; ++k) {
+    dv[k].setZero();
+    rv[k].setZero();
+  }
+  for (int j = 0; j < n; ++j) {
+    const double dt = s.dtheta(j).a;
+    const Vec& dtv = s.dtheta(j).v;
+    const double* z = c.chain.axis.data() + 3 * j;
+    for (int k = 0; k < 3; ++k) {
+      da[k] += jm[j][k] * dt;
+      ra[k] += z[k] * dt;
+      dv[k] += jm[j][k] * dtv;
+      rv[k] += z[k] * dtv;
+    }
+  }
+  if (moved) {
+    // Moving P adds sum_j dtheta_j (z_j x P') = rot x P': one cross product for all joints.
+    const Eigen::Map<const Vec> p0(pmv[0]), p1(pmv[1]), p2(pmv[2]);
+    dv[0] += ra[1] * p2 - ra[2] * p1;
+    dv[1] += ra[2] * p0 - ra[0] * p2;
+    dv[2] += ra[0] * p1 - ra[1] * p0;
+  }
+  for (int k = 0; k < 3; ++k) {
+    s.d(k) = Jet(da[k], dv[k]);
+    s.rot(k) = Jet(ra[k], rv[k]);
+  }
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->cartesian(theta + offsets_[e], s);
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
+  *d = s.d;
+}
+
+void DeflectionModel::analytic_columns(const EvalState<Jet>& js,
+                                       EvalState<double>& ds,
+                                       double* jac) const {
+  if (!analytic_) return;
+  const int n = robot_.dof();
+  ds.robot = js.robot;
+  ds.measurement = js.measurement;
+  ds.context = js.context;
+  for (int k = 0; k < 3; ++k) {
+    ds.force(k) = js.force(k).a;
+    ds.moment(k) = js.moment(k).a;
+    ds.r_meas(k) = js.r_meas(k).a;
+    ds.r_load(k) = js.r_load(k).a;
+    ds.p_meas(k) = js.p_meas(k).a;
+    ds.p_load(k) = js.p_load(k).a;
+  }
+  ds.jac_meas = robot_.jacobian_at(js.context->chain, ds.p_meas);
+  ds.tau.resize(n);
+  for (int j = 0; j < n; ++j) ds.tau(j) = js.tau(j).a;
+  for (size_t e = 0; e < effects_.size(); ++e)
+    if (effects_[e]->has_displacement_derivatives())
+      effects_[e]->displacement_derivatives(ds, jac + 3 * offsets_[e]);
+}
+
+Eigen::Matrix<double, 6, 1> DeflectionModel::predict(const Eigen::VectorXd& theta,
+                                                     const Measurement& m,
+                                                     const MeasurementContext& c) const {
+  if (theta.size() != count_)
+    throw InvalidArgument("predict: " + std::to_string(theta.size()) +
+                          " parameters for a model with " + std::to_string(count_));
+  Vector3<double> d, rot;
+  evaluate<double>(theta.data(), m, c, &d, &rot);
+  Eigen::Matrix<double, 6, 1> out;
+  out << d, rot;
+  return out;
+}
+
+Eigen::Matrix<double, 3, Eigen::Dynamic> DeflectionModel::displacement_jacobian(
+    const Eigen::VectorXd& theta, const Measurement& m, const MeasurementContext& c) const {
+  Eigen::Matrix<double, 3, Eigen::Dynamic> out(3, count_);
+  std::vector<Jet> t(count_);
+  for (int k = 0; k < count_; ++k) t[k] = Jet(theta(k));
+  // Differentiate kJetStride parameters per pass.
+  for (int first = 0; first < count_; first += kJetStride) {
+    for (int k = 0; k < count_; ++k) t[k].v.setZero();
+    const int last = std::min(count_, first + kJetStride);
+    for (int k = first; k < last; ++k) t[k].v(k - first) = 1.0;
+    Vector3<Jet> d;
+    evaluate<Jet>(t.data(), m, c, &d, nullptr);
+    for (int k = first; k < last; ++k)
+      for (int r = 0; r < 3; ++r) out(r, k) = d(r).v(k - first);
+  }
+  return out;
+}
+
+Eigen::Matrix<double, 3, Eigen::Dynamic> observation_block(
+    const Matrix6X<double>& jac_meas,
+    const Matrix6X<double>& jac_load,
+    const Eigen::Matrix<double, 6, 1>& wrench) {
+  const Eigen::VectorXd tau = jac_load.transpose() * wrench;
+  return jac_meas.topRows<3>() * tau.asDiagonal();
+}
+
+Eigen::MatrixXd observation_matrix(const RobotModel& robot, const Dataset& data) {
+  const int n = robot.dof();
+  Eigen::MatrixXd a(3 * data.rows.size(), n);
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    const auto& m = data.rows[r];
+    check_joint_vector(robot, m.q, "measurement '" + m.id + "'");
+    const ChainState s = robot.chain(m.q);
+    const Matrix6X<double> jm = robot.jacobian_at(s, robot.point_position(s, robot.measured_point));
+    const Matrix6X<double> jl = robot.jacobian_at(s, robot.point_position(s, robot.load_point));
+    Eigen::Matrix<double, 6, 1> w;
+    w << m.force, m.moment;
+    a.block(3 * r, 0, 3, n) = observation_block(jm, jl, w);
+  }
+  return a;
+}
+
+}  // namespace stiff

@@ -1,0 +1,293 @@
+#include "stiff/sim/simulate.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <set>
+#include <sstream>
+
+#include "stiff/error.hpp"
+#include "stiff/io/text_io.hpp"
+#include "stiff/random.hpp"
+
+namespace stiff {
+namespace {
+
+[[noreturn]] void fail_at(const std::string& file, const YAML::Node& n, const std::string& why) {
+  const auto m = n.Mark();
+  throw ParseError(file, m.is_null() ? 0 : m.line + 1, m.is_null() ? 0 : m.column + 1, why);
+}
+
+double yaml_number(const std::string& file, const YAML::Node& n, const std::string& what) {
+  double v = 0;
+  try {
+    v = n.as<double>();
+  } catch (const YAML::Exception&) {
+    fail_at(file, n, what + " must be a number");
+  }
+  if (!std::isfinite(v)) fail_at(file, n, what + " is not finite");
+  return v;
+}
+
+YAML::Node load_yaml(const std::string& text, const std::string& file) {
+  try {
+    YAML::Node root = YAML::Load(text);
+    if (!root.IsMap()) throw ParseError(file, 1, 1, "expected a YAML mapping");
+    return root;
+  } catch (const YAML::ParserException& e) {
+    throw ParseError(file, e.mark.line + 1, e.mark.column + 1, e.msg);
+  }
+}
+
+std::string fmt(double v) {
+  std::ostringstream o;
+  o.precision(6);
+  o << v;
+  return o.str();
+}
+
+}  // namespace
+
+double NoiseModel::tracker_sigma_at(const Eigen::Vector3d& p) const {
+  return tracker_sigma_m + tracker_ppm * 1e-6 * (p - tracker_position_m).norm();
+}
+
+Truth joint_truth(const Eigen::VectorXd& k) {
+  Truth t;
+  t.effects = {"joint"};
+  t.theta = k.cwiseInverse();
+  return t;
+}
+
+static Truth parse_truth_yaml_unguarded(const std::string& text,
+                                        const std::string& file,
+                                        const RobotModel& robot) {
+  const YAML::Node root = load_yaml(text, file);
+  for (const auto& kv : root) {
+    const auto key = kv.first.as<std::string>();
+    if (key != "stiffness_Nm_per_rad" && key != "effects")
+      fail_at(file, kv.first, "unknown key '" + key + "' (use stiffness_Nm_per_rad, effects)");
+  }
+  const auto ks = root["stiffness_Nm_per_rad"];
+  if (!ks || !ks.IsSequence())
+    throw ParseError(file, 1, 1, "missing 'stiffness_Nm_per_rad: [k1, ..., kn]'");
+  if (static_cast<int>(ks.size()) != robot.dof())
+    fail_at(file, ks,
+            "stiffness_Nm_per_rad has " + std::to_string(ks.size()) + " values for a " +
+                std::to_string(robot.dof()) + "-joint robot");
+  std::vector<std::string> names{"joint"};
+  std::map<std::string, std::map<std::string, std::pair<double, YAML::Node>>> values;
+  if (const auto eff = root["effects"]) {
+    if (!eff.IsMap()) fail_at(file, eff, "'effects' must map effect names to parameters");
+    for (const auto& kv : eff) {
+      const auto ename = kv.first.as<std::string>();
+      if (ename == "joint") fail_at(file, kv.first, "give joint stiffness in stiffness_Nm_per_rad");
+      names.push_back(ename);
+      if (kv.second.IsNull()) continue;
+      if (!kv.second.IsMap())
+        fail_at(file, kv.second, "parameters of '" + ename + "' must be a mapping");
+      for (const auto& pv : kv.second)
+        values[ename][pv.first.as<std::string>()] = {
+            yaml_number(file, pv.second, ename + "." + pv.first.as<std::string>()), pv.first};
+    }
+  }
+  DeflectionModel model(robot, names);
+  Truth t;
+  t.effects = names;
+  t.theta = model.null_parameters();
+  for (int j = 0; j < robot.dof(); ++j) {
+    const double k = yaml_number(file, ks[j], "stiffness of joint " + std::to_string(j + 1));
+    if (!(k > 0))
+      fail_at(file, ks[j], "stiffness of joint " + std::to_string(j + 1) + " must be > 0");
+    t.theta(j) = 1.0 / k;
+  }
+  for (size_t e = 1; e < names.size(); ++e) {
+    const auto& effect = *model.effects()[e];
+    auto& given = values[names[e]];
+    for (int k = 0; k < effect.size(); ++k) {
+      const auto& spec = effect.parameters()[k];
+      const auto it = given.find(spec.name);
+      if (it == given.end()) continue;
+      if (it->second.first < spec.lower || it->second.first > spec.upper)
+        fail_at(file, it->second.second,
+                names[e] + "." + spec.name + " = " + fmt(it->second.first) +
+                    " is outside its physical range [" + fmt(spec.lower) + ", " + fmt(spec.upper) +
+                    "] " + spec.unit);
+      t.theta(model.offset(static_cast<int>(e)) + k) = it->second.first;
+      given.erase(it);
+    }
+    if (!given.empty())
+      fail_at(file, given.begin()->second.second,
+              "effect '" + names[e] + "' has no parameter '" + given.begin()->first + "'");
+  }
+  return t;
+}
+
+// yaml-cpp throws on conversions the readers do not check themselves (e.g. a key that is a
+// list); it must never escape as anything but a ParseError with its location.
+static ParseError yaml_parse_error(const std::string& file, const YAML::Exception& e) {
+  return ParseError(file, e.mark.is_null() ? 0 : e.mark.line + 1,
+                    e.mark.is_null() ? 0 : e.mark.column + 1, e.msg);
+}
+
+Truth parse_truth_yaml(const std::string& text, const std::string& file, const RobotModel& robot) {
+  try {
+    return parse_truth_yaml_unguarded(text, file, robot);
+  } catch (const YAML::Exception& e) {
+    throw yaml_parse_error(file, e);
+  }
+}
+
+Truth read_truth(const std::string& path, const RobotModel& robot) {
+  return parse_truth_yaml(read_text_file(path), path, robot);
+}
+
+static NoiseModel parse_noise_yaml_unguarded(const std::string& text, const std::string& file) {
+  const YAML::Node root = load_yaml(text, file);
+  NoiseModel n;
+  for (const auto& kv : root) {
+    const auto key = kv.first.as<std::string>();
+    const auto& v = kv.second;
+    auto nonneg = [&](double x) {
+      if (x < 0) fail_at(file, v, key + " must be >= 0");
+      return x;
+    };
+    if (key == "tracker_sigma_m")
+      n.tracker_sigma_m = nonneg(yaml_number(file, v, key));
+    else if (key == "tracker_sigma_um")
+      n.tracker_sigma_m = nonneg(yaml_number(file, v, key)) * 1e-6;
+    else if (key == "tracker_ppm")
+      n.tracker_ppm = nonneg(yaml_number(file, v, key));
+    else if (key == "tracker_position_m") {
+      if (!v.IsSequence() || v.size() != 3) fail_at(file, v, key + " must be [x, y, z]");
+      for (int i = 0; i < 3; ++i) n.tracker_position_m(i) = yaml_number(file, v[i], key);
+    } else if (key == "force_relative")
+      n.force_relative = nonneg(yaml_number(file, v, key));
+    else if (key == "force_absolute_N")
+      n.force_absolute_N = nonneg(yaml_number(file, v, key));
+    else if (key == "joint_sigma_rad")
+      n.joint_sigma_rad = nonneg(yaml_number(file, v, key));
+    else if (key == "joint_sigma_deg")
+      n.joint_sigma_rad = nonneg(yaml_number(file, v, key)) * M_PI / 180.0;
+    else if (key == "outlier_rate") {
+      n.outlier_rate = nonneg(yaml_number(file, v, key));
+      if (n.outlier_rate > 0.5) fail_at(file, v, "outlier_rate must be <= 0.5");
+    } else if (key == "outlier_size_m")
+      n.outlier_size_m = nonneg(yaml_number(file, v, key));
+    else if (key == "seed")
+      n.seed = static_cast<uint64_t>(nonneg(yaml_number(file, v, key)));
+    else
+      fail_at(file, kv.first,
+              "unknown key '" + key +
+                  "' (known: tracker_sigma_m, tracker_sigma_um, tracker_ppm, tracker_position_m, "
+                  "force_relative, force_absolute_N, joint_sigma_rad, joint_sigma_deg, "
+                  "outlier_rate, outlier_size_m, seed)");
+  }
+  return n;
+}
+
+NoiseModel parse_noise_yaml(const std::string& text, const std::string& file) {
+  try {
+    return parse_noise_yaml_unguarded(text, file);
+  } catch (const YAML::Exception& e) {
+    throw yaml_parse_error(file, e);
+  }
+}
+
+NoiseModel read_noise(const std::string& path) {
+  return parse_noise_yaml(read_text_file(path), path);
+}
+
+Dataset random_design(const RobotModel& robot, const RandomDesignOptions& o) {
+  const int n = robot.dof();
+  if (o.count <= 0) throw InvalidArgument("random design: count must be > 0");
+  if (!(o.range_fraction > 0 && o.range_fraction <= 1))
+    throw InvalidArgument("random design: range fraction must be in (0, 1]");
+  if (!(o.load_min_N >= 0 && o.load_max_N >= o.load_min_N && o.load_max_N > 0))
+    throw InvalidArgument("random design: empty load range");
+  if (!o.q_fixed.empty() && static_cast<int>(o.q_fixed.size()) != n)
+    throw InvalidArgument("random design: q_fixed needs one value per joint");
+  Rng rng(o.seed);
+  Dataset d;
+  d.dof = n;
+  d.has_id = true;
+  int tries = 0;
+  while (static_cast<int>(d.rows.size()) < o.count) {
+    if (++tries > 1000 * o.count)
+      throw NumericalError("random design: almost every pose is near-singular");
+    Measurement m;
+    m.q.resize(n);
+    for (int j = 0; j < n; ++j) {
+      const auto& jt = robot.joints[j];
+      const double mid = 0.5 * (jt.lower + jt.upper),
+                   half = 0.5 * (jt.upper - jt.lower) * o.range_fraction;
+      const double fixed = o.q_fixed.empty() ? NAN : o.q_fixed[j];
+      m.q(j) = std::isnan(fixed) ? rng.uniform(mid - half, mid + half) : fixed;
+    }
+    for (int k = 0; k < 3; ++k)
+      m.force(k) = rng.uniform(o.load_min_N, o.load_max_N) * (rng.uniform() < 0.5 ? -1.0 : 1.0);
+    if (translational_conditioning(robot, m.q).sigma_min < o.min_sigma) continue;
+    char id[32];
+    std::snprintf(id, sizeof id, "r%03d", static_cast<int>(d.rows.size()) + 1);
+    m.id = id;
+    d.rows.push_back(m);
+  }
+  d.set_meta("robot", robot.name);
+  d.set_meta("source", "stiff random design, seed " + std::to_string(o.seed));
+  return d;
+}
+
+Dataset simulate(const RobotModel& robot,
+                 const Truth& truth,
+                 const Dataset& design,
+                 const NoiseModel& noise,
+                 std::vector<int>* outlier_rows) {
+  validate_dataset(design, robot.dof(), false);
+  DeflectionModel model(robot, truth.effects, &design);
+  if (truth.theta.size() != model.parameter_count())
+    throw InvalidArgument("simulate: truth has " + std::to_string(truth.theta.size()) +
+                          " parameters, model '" + model.model_string() + "' needs " +
+                          std::to_string(model.parameter_count()));
+  if (!truth.theta.allFinite()) throw InvalidArgument("simulate: truth parameters must be finite");
+  Rng rng(noise.seed);
+  Dataset out = design;
+  out.has_displacement = true;
+  out.has_id = true;
+  if (outlier_rows) outlier_rows->clear();
+  const auto ctx = model.contexts(design);
+  for (size_t r = 0; r < out.rows.size(); ++r) {
+    auto& m = out.rows[r];
+    const Eigen::Matrix<double, 6, 1> pred = model.predict(truth.theta, design.rows[r], ctx[r]);
+    const Eigen::Vector3d p = robot.tool_pose(design.rows[r].q).block<3, 1>(0, 3);
+    const double sigma = noise.tracker_sigma_at(p);
+    for (int k = 0; k < 3; ++k) m.displacement(k) = pred(k) + sigma * rng.normal();
+    if (noise.outlier_rate > 0 && rng.uniform() < noise.outlier_rate) {
+      Eigen::Vector3d u(rng.normal(), rng.normal(), rng.normal());
+      m.displacement += noise.outlier_size_m * u.normalized();
+      if (outlier_rows) outlier_rows->push_back(static_cast<int>(r));
+    }
+    m.sigma_d = sigma;
+    out.has_sigma = out.has_sigma || sigma > 0;
+    // What the force sensor and the encoders report, not what acted.
+    for (int k = 0; k < 3; ++k)
+      m.force(k) +=
+          noise.force_relative * m.force(k) * rng.normal() + noise.force_absolute_N * rng.normal();
+    for (int j = 0; j < m.q.size(); ++j) m.q(j) += noise.joint_sigma_rad * rng.normal();
+    if (m.id.empty()) m.id = std::to_string(r + 1);
+  }
+  out.set_meta("robot", robot.name);
+  out.set_meta("source", "stiff virtual robot");
+  std::string model_str;
+  for (const auto& e : truth.effects) model_str += (model_str.empty() ? "" : "+") + e;
+  out.set_meta("truth_model", model_str);
+  out.set_meta("tracker_sigma_m", fmt(noise.tracker_sigma_m));
+  out.set_meta("tracker_ppm", fmt(noise.tracker_ppm));
+  out.set_meta("force_relative", fmt(noise.force_relative));
+  out.set_meta("force_absolute_N", fmt(noise.force_absolute_N));
+  out.set_meta("joint_sigma_rad", fmt(noise.joint_sigma_rad));
+  out.set_meta("outlier_rate", fmt(noise.outlier_rate));
+  out.set_meta("seed", std::to_string(noise.seed));
+  return out;
+}
+
+}  // namespace stiff
