@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
+#include <cstring>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -18,7 +20,52 @@ struct stiff_plan {
 using namespace stiff;
 using namespace stiff::capi;
 
+namespace {
+/// The default criterion's name with static storage (stiff_plan_options.criterion is a
+/// borrowed pointer).
+const char* default_criterion() {
+  static const std::string name = PlanOptions{}.criterion;
+  return name.c_str();
+}
+}  // namespace
+
 extern "C" {
+
+stiff_status stiff_plan_options_init(stiff_plan_options* options, size_t struct_size) {
+  return guarded(__func__, [&] {
+    require(options, "options");
+    if (struct_size < offsetof(stiff_plan_options, annealing_initial_temperature))
+      throw InvalidArgument("struct_size " + std::to_string(struct_size) +
+                            " is smaller than the first released stiff_plan_options");
+    const size_t n = std::min(struct_size, sizeof(stiff_plan_options));
+    // The defaults are the core's own option structs: nothing is restated here.
+    const PoolOptions pool;
+    const PlanOptions plan;
+    stiff_plan_options o{};
+    o.struct_size = static_cast<uint32_t>(n);
+    o.count = static_cast<uint32_t>(plan.count);
+    o.criterion = default_criterion();
+    o.seed = plan.seed;
+    o.pool_poses = static_cast<uint32_t>(pool.pose_count);
+    o.pool_loads = static_cast<uint32_t>(pool.load_count);
+    o.range_fraction = pool.range_fraction;
+    o.load_min_N = pool.load_min_N;
+    o.load_max_N = pool.load_max_N;
+    o.load_step_N = pool.load_step_N > 0 ? pool.load_step_N : -1.0;
+    o.load_max_magnitude_N = 0.0;  // unlimited
+    o.min_sigma_m = pool.min_sigma_m;
+    o.optimizers = (plan.annealing.enabled ? STIFF_PLAN_ANNEALING : 0u) |
+                   (plan.exchange.enabled ? STIFF_PLAN_EXCHANGE : 0u) |
+                   (plan.refine.enabled ? STIFF_PLAN_REFINE : 0u);
+    o.annealing_iterations = static_cast<uint32_t>(plan.annealing.iterations);
+    o.tracker_sigma_m = pool.noise.tracker_sigma_m;
+    o.tracker_ppm = pool.noise.tracker_ppm;
+    o.annealing_initial_temperature = plan.annealing.initial_temperature;
+    o.annealing_initial_swap_count = static_cast<uint32_t>(plan.annealing.initial_swap_count);
+    std::memcpy(options, &o, n);
+    return STIFF_OK;
+  });
+}
 
 stiff_status stiff_plan_create(stiff_plan** out,
                                const stiff_robot* robot,
@@ -61,13 +108,7 @@ stiff_status stiff_plan_create(stiff_plan** out,
       plan.refine.enabled = o.optimizers & STIFF_PLAN_REFINE;
     }
     if (o.annealing_iterations) plan.annealing.iterations = o.annealing_iterations;
-    // Checked here, before the pool is built, with the C field's name (the core checks too).
-    if (!(std::isfinite(o.annealing_initial_temperature) && o.annealing_initial_temperature >= 0)) {
-      std::ostringstream got;
-      got << o.annealing_initial_temperature;
-      throw InvalidArgument("annealing_initial_temperature must be finite and >= 0 (got " +
-                            got.str() + ")");
-    }
+    // Validated once, in the core (check_plan_options), before the pool is built.
     plan.annealing.initial_temperature = o.annealing_initial_temperature;
     // The core caps k0 at N and at pool - N; the cap here only keeps the value an int.
     plan.annealing.initial_swap_count = static_cast<int>(

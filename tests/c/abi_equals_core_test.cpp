@@ -10,6 +10,7 @@
 
 #include "stiff/identify/identify.hpp"
 #include "stiff/io/robot_io.hpp"
+#include "stiff/plan/plan.hpp"
 #include "stiff/sim/simulate.hpp"
 #include "stiff/stiff.h"
 
@@ -154,9 +155,49 @@ TEST(CApi, PlanRejectsANegativeOrNonFiniteInitialTemperature) {
     EXPECT_EQ(p, nullptr);
     const std::string msg = stiff_last_error();
     EXPECT_EQ(msg.rfind("stiff_plan_create", 0), 0u) << msg;
-    EXPECT_NE(msg.find("annealing_initial_temperature"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("initial temperature T0"), std::string::npos) << msg;
   }
   stiff_robot_destroy(r);
+}
+
+// stiff_plan_options_init writes the core's own defaults (one source for every surface), and
+// for a caller compiled against an older, smaller struct touches nothing beyond its size.
+TEST(CApi, PlanOptionsInitGivesTheCoreDefaults) {
+  stiff_plan_options o;
+  std::memset(&o, 0xAB, sizeof o);
+  ASSERT_EQ(stiff_plan_options_init(&o, sizeof o), STIFF_OK) << stiff_last_error();
+  const stiff::PlanOptions plan;
+  const stiff::PoolOptions pool;
+  EXPECT_EQ(o.struct_size, sizeof o);
+  EXPECT_EQ(o.count, static_cast<uint32_t>(plan.count));
+  EXPECT_EQ(std::string(o.criterion), plan.criterion);
+  EXPECT_EQ(o.seed, plan.seed);
+  EXPECT_EQ(o.pool_poses, static_cast<uint32_t>(pool.pose_count));
+  EXPECT_EQ(o.pool_loads, static_cast<uint32_t>(pool.load_count));
+  EXPECT_EQ(o.range_fraction, pool.range_fraction);
+  EXPECT_EQ(o.load_min_N, pool.load_min_N);
+  EXPECT_EQ(o.load_max_N, pool.load_max_N);
+  EXPECT_EQ(o.load_step_N, pool.load_step_N);
+  EXPECT_EQ(o.min_sigma_m, pool.min_sigma_m);
+  EXPECT_EQ(o.annealing_iterations, static_cast<uint32_t>(plan.annealing.iterations));
+  EXPECT_EQ(o.optimizers, STIFF_PLAN_ANNEALING | STIFF_PLAN_EXCHANGE);
+  EXPECT_EQ(o.tracker_sigma_m, pool.noise.tracker_sigma_m);
+  EXPECT_EQ(o.q_fixed, nullptr);
+  EXPECT_EQ(o.task, nullptr);
+  EXPECT_EQ(o.progress, nullptr);
+
+  stiff_plan_options old;
+  std::memset(&old, 0xAB, sizeof old);
+  const size_t old_size = offsetof(stiff_plan_options, annealing_initial_temperature);
+  ASSERT_EQ(stiff_plan_options_init(&old, old_size), STIFF_OK);
+  EXPECT_EQ(old.struct_size, old_size);
+  EXPECT_EQ(old.count, static_cast<uint32_t>(plan.count));
+  unsigned char tail[sizeof old - old_size];
+  std::memset(tail, 0xAB, sizeof tail);
+  EXPECT_EQ(std::memcmp(reinterpret_cast<const unsigned char*>(&old) + old_size, tail, sizeof tail),
+            0);
+  EXPECT_EQ(stiff_plan_options_init(&old, 3), STIFF_E_INVALID_ARGUMENT);
+  EXPECT_EQ(stiff_plan_options_init(nullptr, sizeof old), STIFF_E_INVALID_ARGUMENT);
 }
 
 }  // namespace

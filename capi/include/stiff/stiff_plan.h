@@ -64,6 +64,14 @@ typedef struct stiff_plan_options {
                                               and at pool - N. @since 0.1 */
 } stiff_plan_options;
 
+/** Fill *options with the library's defaults (the values in brackets above; the automatic
+ *  choices stay 0) and struct_size = sizeof(stiff_plan_options), the one place where the
+ *  defaults are written (libgit2's options_init convention). Callers then change only the
+ *  fields they mean to set. struct_size: sizeof(stiff_plan_options) as the caller knows it;
+ *  fields beyond it are not touched. Errors: INVALID_ARGUMENT (NULL, struct_size too small).
+ *  @since 0.1 */
+STIFF_API stiff_status stiff_plan_options_init(stiff_plan_options* options, size_t struct_size);
+
 /** Plan measurements for robot. Errors: INVALID_ARGUMENT (count larger than the pool, too few
  *  to identify the compliances, empty load range, every pose singular, unknown criterion,
  *  negative or non-finite annealing_initial_temperature),

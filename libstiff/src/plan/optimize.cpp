@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <sstream>
 
 #include "plan_internal.hpp"
 #include "stiff/error.hpp"
@@ -632,9 +633,54 @@ PlanResult plan_measurements(const RobotModel& robot,
   return r;
 }
 
+namespace {
+std::string got(double v) {
+  std::ostringstream s;
+  s << " (got " << v << ")";
+  return s.str();
+}
+}  // namespace
+
+void check_plan_options(const PoolOptions& pool, const PlanOptions& plan) {
+  criterion_id(plan.criterion);
+  if (plan.count < 1) throw InvalidArgument("plan: count must be >= 1" + got(plan.count));
+  if (pool.candidate_file.empty() && pool.pose_count < 1)
+    throw InvalidArgument("plan: the pool's pose count must be >= 1" + got(pool.pose_count));
+  if (pool.load_count < 0)
+    throw InvalidArgument("plan: the pool's load count must be >= 0 (0: the whole grid)" +
+                          got(static_cast<double>(pool.load_count)));
+  if (!(pool.range_fraction > 0 && pool.range_fraction <= 1))
+    throw InvalidArgument("plan: range_fraction must be in (0, 1]" + got(pool.range_fraction));
+  if (!(pool.load_min_N >= 0 && pool.load_min_N <= pool.load_max_N &&
+        std::isfinite(pool.load_max_N)))
+    throw InvalidArgument("plan: the load range must satisfy 0 <= min <= max < inf (got [" +
+                          std::to_string(pool.load_min_N) + ", " + std::to_string(pool.load_max_N) +
+                          "] N)");
+  if (!(pool.min_sigma_m >= 0 && std::isfinite(pool.min_sigma_m)))
+    throw InvalidArgument("plan: min_sigma_m must be finite and >= 0" + got(pool.min_sigma_m));
+  if (!(pool.noise.tracker_sigma_m > 0 && std::isfinite(pool.noise.tracker_sigma_m)))
+    throw InvalidArgument("plan: the tracker sigma must be finite and > 0" +
+                          got(pool.noise.tracker_sigma_m));
+  const AnnealingOptions& a = plan.annealing;
+  if (a.enabled && a.iterations < 1)
+    throw InvalidArgument("plan: the annealing's iteration count must be >= 1" +
+                          got(static_cast<double>(a.iterations)));
+  if (!(std::isfinite(a.initial_temperature) && a.initial_temperature >= 0))
+    throw InvalidArgument(
+        "plan: the annealing's initial temperature T0 must be finite and >= 0 (0: automatic)" +
+        got(a.initial_temperature));
+  if (a.initial_swap_count < 0)
+    throw InvalidArgument(
+        "plan: the annealing's initial swap count k0 must be >= 0 (0: automatic)" +
+        got(a.initial_swap_count));
+}
+
 PlanResult plan_measurements(const RobotModel& robot,
                              const PoolOptions& pool_options,
                              const PlanOptions& options) {
+  // Every option is checked before the pool (the expensive part) is built, with one message
+  // that the C ABI, Python and the command line all show.
+  check_plan_options(pool_options, options);
   const CandidatePool pool = build_pool(robot, pool_options);
   return plan_measurements(robot, pool, options);
 }

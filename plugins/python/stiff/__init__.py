@@ -3,7 +3,7 @@ industrial robots. numpy-first API over the C ABI (libstiff_c); SI units (m, rad
 from .api import (Dataset, Fit, Model, Robot, describe_effect, effects, identify,
                   library_version, predict, random_design, simulate)
 from .fmu import export_fmu
-from .plan import Plan, criteria, evaluate_criteria, plan
+from .plan import Plan, criteria, evaluate_criteria, plan, plan_defaults
 from .diagnose import Diagnosis, diagnose
 from .compensate import compensate_path, inverse_kinematics, read_path  # noqa: F401
 from .errors import (CancelledError, InvalidArgumentError, NumericalError, ParseError,
@@ -12,6 +12,6 @@ from .errors import (CancelledError, InvalidArgumentError, NumericalError, Parse
 __version__ = "0.1.0"
 
 __all__ = ["Robot", "Dataset", "Fit", "Model", "identify", "simulate", "random_design", "predict",
-           "effects", "describe_effect", "diagnose", "Diagnosis", "export_fmu", "plan", "Plan", "criteria", "evaluate_criteria", "library_version", "StiffError", "ParseError",
+           "effects", "describe_effect", "diagnose", "Diagnosis", "export_fmu", "plan", "plan_defaults", "Plan", "criteria", "evaluate_criteria", "library_version", "StiffError", "ParseError",
            "InvalidArgumentError", "NumericalError", "CancelledError", "StiffIOError",
            "__version__"]

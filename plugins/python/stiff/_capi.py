@@ -225,6 +225,7 @@ class PlanOptions(C.Structure):
     ]
 
 
+_proto("stiff_plan_options_init", S, C.POINTER(PlanOptions), C.c_size_t)
 _proto("stiff_plan_create", S, HP, H, C.POINTER(PlanOptions))
 _proto("stiff_plan_destroy", None, H)
 _proto("stiff_plan_dataset", S, HP, H)

@@ -68,59 +68,107 @@ class Plan(_Handle):
                 f"{self.value:.4g}, found by {self.summary['found_by']})")
 
 
-def plan(robot: Robot, count: int = 10, criterion: str = "d_opt", *, seed: int = 1,
-         pool_poses: int = 500, pool_loads: int = 100, range_fraction: float = 0.95,
-         load_range_N: Sequence[float] = (15.0, 35.0), load_step_N: float = 5.0,
-         load_max_magnitude_N: float = 0.0, min_sigma_m: float = 0.05,
-         q_fixed: Optional[Sequence[float]] = None, optimizers: Sequence[str] = ("annealing", "exchange"),
-         annealing_iterations: int = 100000, annealing_t0: float = 0.0, annealing_k0: int = 0,
+def plan_defaults() -> dict:
+    """The library's planning defaults (stiff_plan_options_init): what every unset argument
+    of plan() and every unset option of `stiff plan` takes."""
+    o = _c.PlanOptions()
+    check(lib.stiff_plan_options_init(C.byref(o), C.sizeof(o)))
+    return {"count": o.count, "criterion": o.criterion.decode(), "seed": o.seed,
+            "pool_poses": o.pool_poses, "pool_loads": o.pool_loads,
+            "range_fraction": o.range_fraction, "load_range_N": (o.load_min_N, o.load_max_N),
+            "load_step_N": o.load_step_N if o.load_step_N > 0 else 0.0,
+            "min_sigma_m": o.min_sigma_m,
+            "optimizers": tuple(k for k, v in OPTIMIZERS.items() if o.optimizers & v),
+            "annealing_iterations": o.annealing_iterations,
+            "annealing_t0": o.annealing_initial_temperature,
+            "annealing_k0": o.annealing_initial_swap_count,
+            "tracker_sigma_m": o.tracker_sigma_m, "tracker_ppm": o.tracker_ppm}
+
+
+def plan(robot: Robot, count: Optional[int] = None, criterion: Optional[str] = None, *,
+         seed: Optional[int] = None, pool_poses: Optional[int] = None,
+         pool_loads: Optional[int] = None, range_fraction: Optional[float] = None,
+         load_range_N: Optional[Sequence[float]] = None, load_step_N: Optional[float] = None,
+         load_max_magnitude_N: Optional[float] = None, min_sigma_m: Optional[float] = None,
+         q_fixed: Optional[Sequence[float]] = None, optimizers: Optional[Sequence[str]] = None,
+         annealing_iterations: Optional[int] = None, annealing_t0: Optional[float] = None,
+         annealing_k0: Optional[int] = None,
          candidate_file=None, task: Optional[Dataset] = None,
-         tracker_sigma_m: float = 10e-6, tracker_ppm: float = 0.0,
+         tracker_sigma_m: Optional[float] = None, tracker_ppm: Optional[float] = None,
          workspace_box_m: Optional[Sequence[Sequence[float]]] = None,
          fixture_directions: Optional[Sequence[Sequence[float]]] = None,
          fixture_forces_N: Optional[Sequence[float]] = None,
          progress: Optional[Callable[[str, int, int, float], bool]] = None) -> Plan:
     """Plan `count` measurements (poses and loads) on `criterion` (default d_opt: it predicts
-    best in the Monte-Carlo study of docs/paper-study.md; "kappa_a" is the paper's). `q_fixed` holds joints at
-    values [rad] (NaN = free). `progress(optimizer, iteration, total, best_score)` may return
-    False to stop (raises CancelledError); an exception it raises is re-raised here.
-    `annealing_t0` is the annealing's initial temperature in cost units and `annealing_k0` the
-    elements swapped per step at its start; 0 = automatic (T0 from random swaps of the start
-    set, k0 = max(1, count / 3))."""
-    # The C options read 0 as "library default": an explicit 0 must not silently become 10.
-    if int(count) < 1:
-        raise InvalidArgumentError(f"plan: count must be >= 1 (got {count})")
-    if not 0 < range_fraction <= 1:
-        raise InvalidArgumentError(f"plan: range_fraction must be in (0, 1] (got {range_fraction})")
-    if not (math.isfinite(annealing_t0) and annealing_t0 >= 0):
-        raise InvalidArgumentError(f"plan: annealing_t0 must be finite and >= 0 (got {annealing_t0})")
-    if int(annealing_k0) != annealing_k0 or not 0 <= annealing_k0 <= 2**31 - 1:
-        raise InvalidArgumentError(f"plan: annealing_k0 must be an integer >= 0 (got {annealing_k0})")
+    best in the Monte-Carlo study of docs/paper-study.md; "kappa_a" is the paper's). An
+    argument left at None takes the library's default (plan_defaults()); the library checks
+    every value and its message names the option. `q_fixed` holds joints at values [rad]
+    (NaN = free). `progress(optimizer, iteration, total, best_score)` may return False to
+    stop (raises CancelledError); an exception it raises is re-raised here. `annealing_t0`
+    is the annealing's initial temperature in cost units and `annealing_k0` the elements
+    swapped per step at its start; 0 = automatic (T0 from random swaps of the start set,
+    k0 = max(1, count / 3)). A load step <= 0 means continuous loads."""
     o = _c.PlanOptions()
-    o.struct_size = C.sizeof(o)
-    o.count, o.criterion, o.seed = count, criterion.encode(), seed
-    o.pool_poses, o.pool_loads, o.range_fraction = pool_poses, pool_loads, range_fraction
-    o.load_min_N, o.load_max_N = float(load_range_N[0]), float(load_range_N[1])
-    o.load_step_N = load_step_N if load_step_N > 0 else -1.0
-    o.load_max_magnitude_N, o.min_sigma_m = load_max_magnitude_N, min_sigma_m
+    check(lib.stiff_plan_options_init(C.byref(o), C.sizeof(o)))
+
+    def count_arg(name, v):
+        # The C fields read 0 as "default": an explicit 0 or a negative count is refused here
+        # with the library's wording rather than silently replaced.
+        if int(v) != v or not 1 <= v <= 2**32 - 1:
+            raise InvalidArgumentError(f"plan: {name} must be an integer >= 1 (got {v})")
+        return int(v)
+
+    if count is not None:
+        o.count = count_arg("count", count)
+    if criterion is not None:
+        o.criterion = criterion.encode()
+    if seed is not None:
+        o.seed = seed
+    if pool_poses is not None:
+        o.pool_poses = count_arg("pool_poses", pool_poses)
+    if pool_loads is not None:
+        o.pool_loads = count_arg("pool_loads", pool_loads)
+    if range_fraction is not None:
+        if not range_fraction > 0:  # 0 would read as "default" in C; the library checks the rest
+            raise InvalidArgumentError(f"plan: range_fraction must be in (0, 1] (got {range_fraction})")
+        o.range_fraction = range_fraction
+    if load_range_N is not None:
+        o.load_min_N, o.load_max_N = float(load_range_N[0]), float(load_range_N[1])
+    if load_step_N is not None:
+        o.load_step_N = load_step_N if load_step_N > 0 else -1.0
+    if load_max_magnitude_N is not None:
+        o.load_max_magnitude_N = load_max_magnitude_N
+    if min_sigma_m is not None:
+        o.min_sigma_m = min_sigma_m
+    if annealing_iterations is not None:
+        o.annealing_iterations = count_arg("annealing_iterations", annealing_iterations)
+    if annealing_t0 is not None:
+        o.annealing_initial_temperature = float(annealing_t0)
+    if annealing_k0 is not None:
+        if int(annealing_k0) != annealing_k0 or not 0 <= annealing_k0 <= 2**31 - 1:
+            raise InvalidArgumentError(
+                f"plan: the annealing's initial swap count k0 must be >= 0 (0: automatic) (got {annealing_k0})")
+        o.annealing_initial_swap_count = int(annealing_k0)
+    if tracker_sigma_m is not None:
+        o.tracker_sigma_m = tracker_sigma_m
+    if tracker_ppm is not None:
+        o.tracker_ppm = tracker_ppm
     keep = []
     if q_fixed is not None:
         qf = _c.as_array(q_fixed)
         keep.append(qf)
         o.q_fixed, o.q_fixed_count = _c.ptr(qf), qf.size
-    mask = 0
-    for name in optimizers:
-        if name not in OPTIMIZERS:
-            raise ValueError(f"unknown optimizer {name!r} (use {', '.join(OPTIMIZERS)})")
-        mask |= OPTIMIZERS[name]
-    o.optimizers, o.annealing_iterations = mask, annealing_iterations
-    o.annealing_initial_temperature = float(annealing_t0)
-    o.annealing_initial_swap_count = int(annealing_k0)
+    if optimizers is not None:
+        mask = 0
+        for name in optimizers:
+            if name not in OPTIMIZERS:
+                raise ValueError(f"unknown optimizer {name!r} (use {', '.join(OPTIMIZERS)})")
+            mask |= OPTIMIZERS[name]
+        o.optimizers = mask
     if candidate_file is not None:
         o.candidate_file = _c.encode(os.fspath(candidate_file))
     if task is not None:
         o.task = task._h
-    o.tracker_sigma_m, o.tracker_ppm = tracker_sigma_m, tracker_ppm
     if workspace_box_m is not None:
         lo, hi = (list(map(float, v)) for v in workspace_box_m)
         o.use_workspace_box = 1

@@ -43,10 +43,12 @@ def test_progress_callback_can_stop_and_exceptions_propagate(rokae_path):
     (dict(count=1), "3N"),
     (dict(criterion="nope"), "unknown plan criterion"),
     (dict(load_range_N=(40, 20)), "load"),
-    (dict(annealing_t0=-1.0), "annealing_t0"),
-    (dict(annealing_t0=float("nan")), "annealing_t0"),
-    (dict(annealing_t0=float("inf")), "annealing_t0"),
-    (dict(annealing_k0=-1), "annealing_k0"),
+    (dict(annealing_t0=-1.0), "initial temperature T0"),
+    (dict(annealing_t0=float("nan")), "initial temperature T0"),
+    (dict(annealing_t0=float("inf")), "initial temperature T0"),
+    (dict(annealing_k0=-1), "initial swap count k0"),
+    (dict(pool_poses=0), "pool_poses must be an integer >= 1"),
+    (dict(annealing_iterations=-1), "annealing_iterations must be an integer >= 1"),
 ])
 def test_bad_requests_are_clear_errors(rokae_path, kwargs, message):
     robot = stiff.Robot(rokae_path)
@@ -82,20 +84,45 @@ def test_annealing_t0_and_k0_reach_the_optimizer(rokae_path):
     assert t["initial_temperature"] > 0 and t["initial_swap_count"] == 3
 
 
-def test_negative_t0_is_rejected_by_the_c_abi_naming_the_field(rokae_path):
-    # Past the Python check: the C library itself refuses it and names its field.
+def test_options_are_checked_once_with_one_message_on_every_surface(rokae_path, tmp_path):
+    # The core checks the options (check_plan_options) before building the pool; the C ABI,
+    # Python and the command line show its message unchanged.
     import ctypes as C
 
     from stiff import _capi
 
     robot = stiff.Robot(rokae_path)
     o = _capi.PlanOptions()
-    o.struct_size = C.sizeof(o)
+    _capi.check(_capi.lib.stiff_plan_options_init(C.byref(o), C.sizeof(o)))
     o.annealing_initial_temperature = -1.0
     h = C.c_void_p()
-    with pytest.raises(stiff.InvalidArgumentError, match="annealing_initial_temperature"):
+    with pytest.raises(stiff.InvalidArgumentError) as from_c:
         _capi.check(_capi.lib.stiff_plan_create(C.byref(h), robot, C.byref(o)))
     assert not h.value
+    with pytest.raises(stiff.InvalidArgumentError) as from_python:
+        stiff.plan(robot, annealing_t0=-1.0)
+    cli = subprocess.run([sys.executable, "-m", "stiff.cli", "plan", "--robot", rokae_path, "--t0", "-1",
+                          "-o", tmp_path / "p.csv"], capture_output=True, text=True)
+    message = "the annealing's initial temperature T0 must be finite and >= 0 (0: automatic) (got -1)"
+    assert message in str(from_c.value) and message in str(from_python.value)
+    assert cli.returncode == 2 and message in cli.stderr and "Traceback" not in cli.stderr
+
+
+def test_defaults_come_from_the_library(rokae_path):
+    # stiff_plan_options_init is the one place the defaults are written: the Python function
+    # and the command line's help show the same values, and an unset argument takes them.
+    d = stiff.plan_defaults()
+    assert d["count"] == 10 and d["criterion"] == "d_opt" and d["pool_poses"] == 500
+    assert d["annealing_iterations"] == 100000 and d["load_range_N"] == (15.0, 35.0)
+    assert d["optimizers"] == ("annealing", "exchange") and d["tracker_sigma_m"] == 10e-6
+    help_text = subprocess.run([sys.executable, "-m", "stiff.cli", "plan", "--help"],
+                               capture_output=True, text=True, check=True).stdout
+    for text in (f"default {d['count']})", f"default {d['pool_poses']})",
+                 f"default {d['annealing_iterations']})", "default 15,35)"):
+        assert text in " ".join(help_text.split()), text
+    robot = stiff.Robot(rokae_path)
+    p = stiff.plan(robot, pool_poses=40, pool_loads=10, annealing_iterations=500)
+    assert len(p.summary["measurements"]) == d["count"] and p.criterion == d["criterion"]
 
 
 def test_cli_plan_t0_and_k0(tmp_path, rokae_path):
@@ -108,5 +135,6 @@ def test_cli_plan_t0_and_k0(tmp_path, rokae_path):
     assert t["initial_temperature"] == 0.125 and t["initial_swap_count"] == 2
     bad = subprocess.run(cmd + ["--t0", "-1", "--json", tmp_path / "bad.json"],
                          capture_output=True, text=True)
-    assert bad.returncode == 2 and "--t0 -1" in bad.stderr and "Traceback" not in bad.stderr
+    assert bad.returncode == 2 and "T0" in bad.stderr and "got -1" in bad.stderr
+    assert "Traceback" not in bad.stderr
     assert not (tmp_path / "bad.json").exists()

@@ -426,6 +426,11 @@ struct PlanResult {
   uint64_t seed = 0;
 };
 
+/// Checks every option that does not need the pool (counts, ranges, the annealing's T0 and
+/// k0, the criterion's name); throws InvalidArgument naming the option and the value given.
+/// plan_measurements() calls it before building the pool.
+void check_plan_options(const PoolOptions& pool, const PlanOptions& plan);
+
 /// Plan N measurements: annealing and/or exchange on the pool (the better set is kept), then
 /// the optional NLopt refinement. Throws InvalidArgument (count > pool, 3N < m, unknown
 /// criterion, nothing enabled) or Cancelled.

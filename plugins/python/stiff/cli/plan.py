@@ -9,7 +9,7 @@ import numpy as np
 from .. import api
 from ..errors import CancelledError
 from ..plan import criteria as criterion_names
-from ..plan import evaluate_criteria, plan
+from ..plan import evaluate_criteria, plan, plan_defaults
 from .common import Formatter, ProgressBar, add_robot, atomic_write_text, fmt, robot_path, table
 
 EXAMPLE = """example:
@@ -36,31 +36,37 @@ def register(sub):
     p = sub.add_parser("plan", help="plan poses and loads of the experiment",
                        description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
     add_robot(p)
-    p.add_argument("--count", "-n", type=int, default=10, help="measurements N (default 10)")
-    p.add_argument("--criterion", "-c", default="d_opt",
-                   help="design criterion (default d_opt; the paper's is kappa_a; see "
+    d = plan_defaults()  # the library's defaults: one source for C, Python and this CLI
+    p.add_argument("--count", "-n", type=int, help=f"measurements N (default {d['count']})")
+    p.add_argument("--criterion", "-c",
+                   help=f"design criterion (default {d['criterion']}; the paper's is kappa_a; see "
                         "docs/paper-study.md)")
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--pool-poses", type=int, default=500, help="random candidate poses (default 500)")
-    p.add_argument("--pool-loads", type=int, default=100, help="candidate loads (default 100)")
-    p.add_argument("--range", type=float, default=0.95, help="fraction of each joint range (default 0.95)")
-    p.add_argument("--load-range", default="15,35", help="per-axis load magnitude range [N] (default 15,35)")
-    p.add_argument("--load-step", type=float, default=5.0, help="load grid step [N], 0 = continuous (default 5)")
-    p.add_argument("--load-max", type=float, default=0.0, help="largest |F| [N] (default: unlimited)")
-    p.add_argument("--min-sigma", type=float, default=0.05,
-                   help="reject poses whose translational Jacobian has sigma_min below this [m] (default 0.05)")
+    p.add_argument("--seed", type=int, help=f"random seed (default {d['seed']})")
+    p.add_argument("--pool-poses", type=int, help=f"random candidate poses (default {d['pool_poses']})")
+    p.add_argument("--pool-loads", type=int, help=f"candidate loads (default {d['pool_loads']})")
+    p.add_argument("--range", type=float,
+                   help=f"fraction of each joint range (default {d['range_fraction']:g})")
+    p.add_argument("--load-range", help="per-axis load magnitude range [N] (default "
+                   f"{d['load_range_N'][0]:g},{d['load_range_N'][1]:g})")
+    p.add_argument("--load-step", type=float,
+                   help=f"load grid step [N], 0 = continuous (default {d['load_step_N']:g})")
+    p.add_argument("--load-max", type=float, help="largest |F| [N] (default: unlimited)")
+    p.add_argument("--min-sigma", type=float,
+                   help="reject poses whose translational Jacobian has sigma_min below this [m] "
+                        f"(default {d['min_sigma_m']:g})")
     p.add_argument("--fix", action="append", default=[], metavar="J=DEG",
                    help="hold joint J at DEG degrees (the paper holds 6=0); repeatable")
-    p.add_argument("--iterations", type=int, default=100000, help="annealing iterations (default 1e5)")
-    p.add_argument("--t0", type=float, default=0.0, metavar="T0",
+    p.add_argument("--iterations", type=int,
+                   help=f"annealing iterations (default {d['annealing_iterations']})")
+    p.add_argument("--t0", type=float, metavar="T0",
                    help="annealing initial temperature in cost units (cost = 1/score for "
                         "kappa_a and kappa_j, -score otherwise; default 0 = automatic: from the "
                         "cost increases of random swaps of the start set)")
-    p.add_argument("--k0", type=int, default=0, metavar="K0",
+    p.add_argument("--k0", type=int, metavar="K0",
                    help="elements the annealing swaps per step at the start, falling to 1 "
                         "(default 0 = automatic: max(1, N/3))")
-    p.add_argument("--optimizers", default="annealing,exchange",
-                   help="comma-separated: annealing, exchange (default both)")
+    p.add_argument("--optimizers",
+                   help=f"comma-separated: annealing, exchange (default {','.join(d['optimizers'])})")
     p.add_argument("--refine", action="store_true", help="refine poses and loads continuously with NLopt")
     p.add_argument("--candidates", help="CSV whose poses are the candidates")
     p.add_argument("--box", metavar="XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
@@ -69,7 +75,8 @@ def register(sub):
                    help="load directions of a loading fixture (base frame); with --fixture-forces")
     p.add_argument("--fixture-forces", metavar="F1,F2,...", help="force magnitudes along each fixture direction [N]")
     p.add_argument("--task", help="CSV of task poses and loads (for --criterion task)")
-    p.add_argument("--tracker-sigma-um", type=float, default=10.0, help="row weighting noise [um]")
+    p.add_argument("--tracker-sigma-um", type=float,
+                   help=f"row weighting noise [um] (default {d['tracker_sigma_m'] * 1e6:g})")
     p.add_argument("--evaluate", help="only evaluate every criterion for this set (CSV)")
     p.add_argument("-o", "--output", help="plan file (CSV) to write")
     p.add_argument("--json", help="write the JSON summary here")
@@ -103,7 +110,8 @@ def run(args):
     robot = api.Robot(robot_path(args.robot))
     if args.evaluate:
         design = api.Dataset.read(args.evaluate, robot)
-        values = evaluate_criteria(robot, design, args.tracker_sigma_um * 1e-6)
+        sigma_um = args.tracker_sigma_um if args.tracker_sigma_um is not None else 10.0
+        values = evaluate_criteria(robot, design, sigma_um * 1e-6)
         print(f"{args.evaluate}: {int(values['count'])} measurements, {int(values['m'])} identifiable compliances")
         _print_criteria(values)
         if args.json:
@@ -111,19 +119,19 @@ def run(args):
         return 0
     if not args.output and not args.json:
         raise UserError("give -o plan.csv (and/or --json summary.json)")
-    if args.criterion not in criterion_names():
-        raise UserError(f"unknown criterion '{args.criterion}' (known: {', '.join(criterion_names())})")
-    try:
-        lo, hi = (float(x) for x in args.load_range.split(","))
-    except ValueError:
-        raise UserError(f"--load-range {args.load_range}: expected MIN,MAX in N")
-    if not (math.isfinite(args.t0) and args.t0 >= 0):
-        raise UserError(f"--t0 {args.t0}: expected a finite temperature >= 0 in cost units (0 = automatic)")
-    if args.k0 < 0:
-        raise UserError(f"--k0 {args.k0}: expected a swap count >= 0 (0 = automatic)")
-    optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
-    if args.refine:
-        optimizers.append("refine")
+    load_range = None
+    if args.load_range is not None:
+        try:
+            load_range = tuple(float(x) for x in args.load_range.split(","))
+            assert len(load_range) == 2
+        except (ValueError, AssertionError):
+            raise UserError(f"--load-range {args.load_range}: expected MIN,MAX in N")
+    optimizers = None
+    if args.optimizers is not None or args.refine:
+        names = args.optimizers if args.optimizers is not None else ",".join(plan_defaults()["optimizers"])
+        optimizers = [o.strip() for o in names.split(",") if o.strip()]
+        if args.refine:
+            optimizers.append("refine")
     task = api.Dataset.read(args.task, robot) if args.task else None
     box = None
     if args.box:
@@ -146,14 +154,16 @@ def run(args):
         def progress(optimizer, it, total, best):
             return bar.update(it, total or 1, f"{optimizer} best {best:.4g}")
         try:
+            # Unset options stay None: the library fills its defaults and checks every value.
             result = plan(robot, args.count, args.criterion, seed=args.seed, pool_poses=args.pool_poses,
-                          pool_loads=args.pool_loads, range_fraction=args.range, load_range_N=(lo, hi),
+                          pool_loads=args.pool_loads, range_fraction=args.range, load_range_N=load_range,
                           load_step_N=args.load_step, load_max_magnitude_N=args.load_max,
                           min_sigma_m=args.min_sigma, q_fixed=_fixed(args, robot.dof),
                           optimizers=optimizers, annealing_iterations=args.iterations,
                           annealing_t0=args.t0, annealing_k0=args.k0,
                           candidate_file=args.candidates, task=task,
-                          tracker_sigma_m=args.tracker_sigma_um * 1e-6, workspace_box_m=box,
+                          tracker_sigma_m=None if args.tracker_sigma_um is None else args.tracker_sigma_um * 1e-6,
+                          workspace_box_m=box,
                           fixture_directions=dirs, fixture_forces_N=forces, progress=progress)
         except CancelledError:
             raise UserError("stopped (Ctrl-C); nothing written")
