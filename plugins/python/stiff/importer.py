@@ -22,7 +22,6 @@ from __future__ import annotations
 import math
 import os
 import re
-import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional, Sequence
@@ -374,7 +373,3 @@ def parse_mapping(items: Sequence[str]) -> dict[str, str]:
         out[k.strip()] = v.strip()
     return out
 
-
-def command_line(argv: Sequence[str]) -> str:
-    """The command as a user would type it, for the file's metadata."""
-    return " ".join(shlex.quote(a) for a in argv)

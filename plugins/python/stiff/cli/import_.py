@@ -1,18 +1,17 @@
 """stiff import: convert a laser tracker's export into the absolute measurement format."""
 from __future__ import annotations
 
-import sys
 
 from .. import importer
 from .common import Formatter
 
 EXAMPLE = """examples:
-  stiff import --preset jacobi2025 --session ur5 --id-prefix grid ur5_grid.csv -o grid.csv
-  stiff import --preset landgraf2021 --session C measurements_random_poses.csv -o C.csv
-  stiff import --sep ';' --decimal-comma --euler zyx --session cell1 --robot ur10 \\
-      --map q1_deg=J1 --map q2_deg=J2 --map q3_deg=J3 --map q4_deg=J4 --map q5_deg=J5 \\
-      --map q6_deg=J6 --map px_mm=X --map py_mm=Y --map pz_mm=Z \\
-      --map a_deg=Rz --map b_deg=Ry --map c_deg=Rx export.csv -o cell1.csv
+  stiff import --preset jacobi2025 --session ur5 examples/import/jacobi2025_head.csv -o ur5.csv
+  stiff import --preset landgraf2021 --session C examples/import/landgraf2021_head.csv -o C.csv
+  stiff import --sep ';' --decimal-comma --euler zyx --session D --robot ur10 \\
+      --map id=Point --map q1_deg=J1 --map q2_deg=J2 --map q3_deg=J3 --map q4_deg=J4 \\
+      --map q5_deg=J5 --map q6_deg=J6 --map px_mm=X --map py_mm=Y --map pz_mm=Z \\
+      --map a_deg=Yaw --map b_deg=Pitch --map c_deg=Roll examples/import/tracker_export.csv -o D.csv
 
 --map OUTPUT=EXPRESSION names where each quantity comes from: OUTPUT is a column of the
 absolute format with its unit (id, session, q1_deg.., px_mm.., a_deg.., temp_C, fx_N..,
