@@ -226,9 +226,10 @@ def write_doc(res):
     w("# Calibration on real laser-tracker data")
     w("")
     w("Absolute measurements of two real robots, shipped in `examples/real/` (MIT licence, "
-      "citations in its README), calibrated with the model of docs/effects.md (geometry: "
-      "registration of each session, tool, joint offsets, kinematic errors with Hayati "
-      "parameters at parallel axes; then gravity compliance with lumped parameters). "
+      "citations in its README), calibrated with a model that grows step by step: geometry "
+      "(the registration of each session, the tool, joint offsets, kinematic errors with "
+      "Hayati parameters at parallel axes), then gravity compliance with lumped parameters, "
+      "then transmission errors periodic in the joint angles (first and second harmonic). "
       "Regenerate this page with")
     w("")
     w("```")
