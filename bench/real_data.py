@@ -1,0 +1,479 @@
+"""Calibration on the shipped real laser-tracker data: stiff against the numpy/scipy reference
+(bench/peers/absolute_ref.py) in the same run, and docs/real-data.md regenerated from it.
+
+    .venv/bin/python bench/real_data.py                 # both datasets, writes docs/real-data.md
+    .venv/bin/python bench/real_data.py --only ur5      # one dataset (the doc keeps the other)
+    .venv/bin/python bench/real_data.py --no-product    # the reference alone
+
+stiff is run through its command line, as a user would: `stiff identify --robot R --data F
+--model registration+tool+joint_offset+kinematic[+gravity_lumped] -o fit.json`, then
+`stiff predict --fit fit.json --data V -o pred.csv`. When the installed stiff cannot calibrate
+absolute data, its part is skipped with the reason and the reference's results stand alone.
+Results (with the per-pose errors) go to bench/results/real_data.json; plots to
+docs/real-data/*.png.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE / "peers"))
+import absolute_ref as ref  # noqa: E402
+
+REAL = ROOT / "examples" / "real"
+RESULTS = HERE / "results" / "real_data.json"
+DOC = ROOT / "docs" / "real-data.md"
+FIGS = ROOT / "docs" / "real-data"
+
+GEOMETRY = "registration+tool+joint_offset+kinematic"
+MODELS = {"geometry": GEOMETRY, "geometry+gravity": GEOMETRY + "+gravity_lumped",
+          "geometry+harmonics": GEOMETRY + "+harmonic",
+          "geometry+gravity+harmonics": GEOMETRY + "+gravity_lumped+harmonic"}
+
+
+# ----------------------------------------------------------------------------- product
+
+def stiff_exe():
+    if os.environ.get("STIFF_EXE"):
+        return os.environ["STIFF_EXE"]
+    exe = shutil.which("stiff")
+    venv = ROOT / ".venv" / "bin" / "stiff"
+    return str(venv) if venv.exists() else exe
+
+
+class ProductUnavailable(Exception):
+    pass
+
+
+def _run(cmd):
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise ProductUnavailable(f"`{' '.join(cmd[1:4])} ...` failed: "
+                                 f"{(r.stderr or r.stdout).strip().splitlines()[-1:]}")
+    return r.stdout
+
+
+def write_rows(src, idx, dst):
+    """A copy of an absolute CSV with only the data rows idx (metadata and header kept)."""
+    lines = Path(src).read_text().splitlines()
+    head = [i for i, ln in enumerate(lines) if ln and not ln.startswith("#")][0]
+    body = lines[head + 1:]
+    Path(dst).write_text("\n".join(lines[:head + 1] + [body[i] for i in idx]) + "\n")
+
+
+def product_errors(robot, train, test, model, tmp):
+    """Calibrate with stiff on `train`, predict `test`: per-pose position errors [mm],
+    the number of identified parameters, calibration RMS [mm] and the identify time [s]."""
+    exe = stiff_exe()
+    fit = os.path.join(tmp, "fit.json")
+    pred = os.path.join(tmp, "pred.csv")
+    t = time.perf_counter()
+    _run([exe, "identify", "--robot", robot, "--data", str(train), "--model", model,
+          "-o", fit])
+    seconds = time.perf_counter() - t
+    _run([exe, "predict", "--robot", robot, "--fit", fit, "--data", str(test), "-o", pred])
+    js = json.loads(Path(fit).read_text())
+    with open(pred) as f:
+        P = {r["id"]: np.array([float(r["x_m"]), float(r["y_m"]), float(r["z_m"])])
+             for r in csv.DictReader(f)}
+    d = ref.read_absolute(test)
+    e = np.array([np.linalg.norm(P[i] - p) for i, p in zip(d["ids"], d["p"])]) * 1e3
+    fitstats = js.get("fit", {})
+    return e, {"parameters": fitstats.get("rank"),
+               "rms_mm": (fitstats.get("rms_m") or float("nan")) * 1e3 * math.sqrt(3),
+               "seconds": seconds}
+
+
+def summary(e):
+    e = np.asarray(e)
+    return {"mean_mm": float(e.mean()), "max_mm": float(e.max()),
+            "rms_mm": float(np.sqrt(np.mean(e ** 2))), "n": int(e.size),
+            "ci95_mean_mm": float(1.96 * e.std(ddof=1) / math.sqrt(e.size)),
+            "per_pose_mm": [round(float(v), 5) for v in e]}
+
+
+def product_ur5(folds=5, seed=0):
+    out = {}
+    grid, test = REAL / "ur5" / "ur5_grid.csv", REAL / "ur5" / "ur5_random.csv"
+    n = len(ref.read_absolute(grid)["q"])
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in ref.UR5_MODELS:
+            model = MODELS[name]
+            e, st = product_errors("ur5", grid, test, model, tmp)
+            res = {"calibration": st, "validation": summary(e)}
+            perm = np.random.default_rng(seed).permutation(n)
+            errs = []
+            for k in range(folds):
+                te = np.sort(perm[k::folds])
+                tr = np.setdiff1d(perm, te)
+                write_rows(grid, tr, os.path.join(tmp, "tr.csv"))
+                write_rows(grid, te, os.path.join(tmp, "te.csv"))
+                ek, _ = product_errors("ur5", os.path.join(tmp, "tr.csv"),
+                                       os.path.join(tmp, "te.csv"), model, tmp)
+                errs.append(ek)
+            res["cv"] = summary(np.concatenate(errs))
+            out[name] = res
+    return out
+
+
+def product_ur10(seed=0):
+    out = {}
+    C = REAL / "ur10" / ref.UR10_SERIES["C"]
+    n = len(ref.read_absolute(C)["q"])
+    perm = np.random.default_rng(seed).permutation(n)
+    tr, te = np.sort(perm[:n // 2]), np.sort(perm[n // 2:])
+    with tempfile.TemporaryDirectory() as tmp:
+        write_rows(C, tr, os.path.join(tmp, "tr.csv"))
+        write_rows(C, te, os.path.join(tmp, "te.csv"))
+        for name in ref.UR10_MODELS:
+            model = MODELS[name]
+            e, st = product_errors("ur10", os.path.join(tmp, "tr.csv"),
+                                   os.path.join(tmp, "te.csv"), model, tmp)
+            out[name] = {"half_C": {"calibration": st, "validation": summary(e)}}
+    return out
+
+
+# ----------------------------------------------------------------------------- report
+
+def _f(v, spec=".4f"):
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:{spec}}"
+
+
+def _ci(s):
+    return f"{_f(s['mean_mm'])} ± {_f(s['ci95_mean_mm'], '.4f')}" if s.get("ci95_mean_mm") \
+        else _f(s["mean_mm"])
+
+
+def plot_ur5(res, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+    names = ("nominal",) + ref.UR5_MODELS
+    r = res["reference"]["ur5"]
+    val = [r[n]["validation"]["per_pose_mm"] for n in names]
+    ax[0].boxplot(val, showmeans=True)
+    ax[0].set_xticks(range(1, len(names) + 1),
+                     ["nominal"] + [n.replace("geometry+", "+").replace("+", "\n+ ")
+                                    for n in names[1:]], fontsize=7)
+    ax[0].set_yscale("log")
+    ax[0].axhline(0.1, color="grey", ls="--", lw=0.8)
+    ax[0].text(len(names) + 0.4, 0.1, "repeatability", va="bottom", ha="right", fontsize=8, color="grey")
+    ax[0].set_ylabel("position error [mm]")
+    ax[0].set_title("UR5: 20 random test poses (reference)", fontsize=10)
+    for n in ref.UR5_MODELS:
+        e = np.sort(r[n]["cv"]["per_pose_mm"])
+        ax[1].plot(e, np.arange(1, e.size + 1) / e.size, label=n)
+    ax[1].set_xlabel("position error [mm]")
+    ax[1].set_ylabel("fraction of grid poses")
+    ax[1].set_title("UR5: 5-fold cross-validation on the grid", fontsize=10)
+    ax[1].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_ur10(res, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+
+    r = res["reference"]["ur10"]
+    cases = [k for k in ("half_C", "B (20%)", "D (20%)", "A (20%)") if k in r["geometry"]]
+    fig, ax = plt.subplots(figsize=(8, 3.6))
+    names = [n for n in ref.UR10_MODELS if n in r]
+    w = 0.8 / len(names)
+    for j, n in enumerate(names):
+        m = [(r[n][k]["validation"] if k == "half_C" else r[n][k])["mean_mm"] for k in cases]
+        ax.bar(np.arange(len(cases)) + (j - (len(names) - 1) / 2) * w, m, w, label=n)
+    ax.set_yscale("log")
+    ax.set_xticks(range(len(cases)), ["C: other half" if k == "half_C" else
+                                      f"series {k[0]}\n(registration: 20 %)" for k in cases])
+    ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_ylabel("mean position error [mm]")
+    ax.set_title("UR10: calibrated on series C (reference)", fontsize=10)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _clean(msg):
+    return re.sub(r"\S*/\S*?:(\d+:)*\s*", "", msg)
+
+
+def write_doc(res):
+    FIGS.mkdir(parents=True, exist_ok=True)
+    L = []
+    w = L.append
+    w("# Calibration on real laser-tracker data")
+    w("")
+    w("Absolute measurements of two real robots, shipped in `examples/real/` (MIT licence, "
+      "citations in its README), calibrated with a model that grows step by step: geometry "
+      "(the registration of each session, the tool, joint offsets, kinematic errors with "
+      "Hayati parameters at parallel axes), then gravity compliance with lumped parameters, "
+      "then transmission errors periodic in the joint angles (first and second harmonic). "
+      "Regenerate this page with")
+    w("")
+    w("```")
+    w(".venv/bin/python bench/real_data.py")
+    w("```")
+    w("")
+    w("Every number below is measured by that command. The tables marked *reference* come "
+      "from an independent numpy/scipy implementation of the same kind of model "
+      "(`bench/peers/absolute_ref.py`: standard DH plus Hayati's beta at parallel axes, a "
+      "registration per session, the tool, gravity compliance as lumped gravity-torque "
+      "regressors from the nominal geometry; identifiable parameters chosen by column-pivoted "
+      "QR of the unit-column Jacobian with a relative pivot tolerance of 1e-3; "
+      "`scipy.optimize.least_squares` with its finite-difference Jacobian). They are what "
+      "stiff's own calibration is checked against.")
+    w("")
+    w("Errors are Euclidean distances between the measured and the predicted target position; "
+      "± is the 95 % confidence interval of the mean (1.96 s / sqrt(n)).")
+    w("")
+    prod = res.get("product", {})
+
+    # ---- UR5
+    if "ur5" in res["reference"]:
+        r = res["reference"]["ur5"]
+        w("## UR5 (Jacobi 2025)")
+        w("")
+        w(f"{r['calibration_rows']} grid poses for calibration, {r['validation_rows']} random "
+          "poses for validation, one session (the authors registered the tracker to the base). "
+          "The UR5's repeatability is ±0.1 mm; the 20 test poses resolve a mean only to about "
+          "±0.013 mm, so models are compared by 5-fold cross-validation on the grid as well.")
+        w("")
+        w("| model (reference) | parameters | calibration RMS [mm] | validation mean [mm] | "
+          "max [mm] | RMS [mm] | 5-fold CV mean [mm] | CV RMS [mm] |")
+        w("| --- | --- | --- | --- | --- | --- | --- | --- |")
+        for n in ("nominal",) + ref.UR5_MODELS:
+            c, v = r[n]["calibration"], r[n]["validation"]
+            cv = r[n].get("cv")
+            label = "nominal (registration and tool only)" if n == "nominal" else n
+            w(f"| {label} | {c['parameters']} | {_f(c['rms_mm'])} | {_ci(v)} | "
+              f"{_f(v['max_mm'])} | {_f(v['rms_mm'])} | {_ci(cv) if cv else '-'} | "
+              f"{_f(cv['rms_mm']) if cv else '-'} |")
+        w("")
+        if "ur5" in prod and "skipped" not in prod["ur5"]:
+            p = prod["ur5"]
+            w("| model (stiff) | parameters | calibration RMS [mm] | validation mean [mm] | "
+              "max [mm] | RMS [mm] | 5-fold CV mean [mm] | identify time [s] |")
+            w("| --- | --- | --- | --- | --- | --- | --- | --- |")
+            for n in ref.UR5_MODELS:
+                c, v, cv = p[n]["calibration"], p[n]["validation"], p[n]["cv"]
+                w(f"| {n} | {c['parameters']} | {_f(c['rms_mm'])} | {_ci(v)} | "
+                  f"{_f(v['max_mm'])} | {_f(v['rms_mm'])} | {_ci(cv)} | "
+                  f"{_f(c['seconds'], '.3f')} |")
+            w("")
+        elif "ur5" in prod:
+            w(f"stiff: not run ({_clean(prod['ur5']['skipped'])}).")
+            w("")
+        cvs = {n: np.array(r[n]["cv"]["per_pose_mm"]) for n in ref.UR5_MODELS}
+        best = min(cvs, key=lambda n: cvs[n].mean())
+        w("Paired differences of the cross-validated errors (same folds, same poses; mean "
+          "± 95 % interval, negative = better):")
+        w("")
+        w("| step | change of the CV mean [mm] |")
+        w("| --- | --- |")
+        for a_, b_ in (("geometry", "geometry+gravity"), ("geometry", "geometry+harmonics"),
+                       ("geometry+gravity", "geometry+gravity+harmonics"),
+                       ("geometry+harmonics", "geometry+gravity+harmonics")):
+            d = cvs[b_] - cvs[a_]
+            w(f"| {a_} -> {b_} | {d.mean():+.4f} ± {1.96 * d.std(ddof=1) / math.sqrt(d.size):.4f} |")
+        w("")
+        w(f"The best model by cross-validation is {best}: {cvs[best].mean():.4f} mm mean, "
+          f"{np.sqrt(np.mean(cvs[best] ** 2)):.4f} mm RMS on poses it was not fitted to, "
+          "below the UR5's ±0.1 mm repeatability: what remains is at the robot's "
+          "repeatability, and no candidate of this list is supported beyond it.")
+        w("")
+        g = r["geometry"]["calibration"]
+        w(f"Held by the reference's rank test (geometry): {', '.join(g['held'])}. The target "
+          "sits almost on the axis of joint 6, so that joint's offset and the tilt of the last "
+          "axes are not determined by positions alone; theta1 and the z of the base go into "
+          "the registration; a translation along parallel axes 2-3-4 is one parameter, not "
+          "three.")
+        w("")
+        w("stiff runs with its built-in `ur5` (the URDF of examples/robots: its base_link is "
+          "the DH base turned 180 deg about z and its tip frame is turned by a constant "
+          "rotation; the registration and the tool take both up), the reference with "
+          "Universal Robots' DH table of the same arm.")
+        w("")
+        w("Published (Jacobi 2025, on the same 20 test poses): mean 2.5664 mm uncalibrated, "
+          "0.1549 mm after calibration of a modified DH model combined with a neural network "
+          "for the residual. The uncalibrated figure is against the authors' nominal model and "
+          "registration; the nominal row above refits the registration and the tool point to "
+          "the grid, which already removes most of that.")
+        w("")
+        w("![UR5](real-data/ur5.png)")
+        w("")
+
+    # ---- UR10
+    if "ur10" in res["reference"]:
+        r = res["reference"]["ur10"]
+        rows = r["rows"]
+        w("## UR10 (Landgraf et al. 2021)")
+        w("")
+        w("Four series, each its own tracker set-up (session), with the T-Mac's 6-D pose: C "
+          f"random poses ({rows.get('C')} rows), B joint configurations ({rows.get('B')}), "
+          f"D ISO cubes ({rows.get('D')}), A a grid ({rows.get('A')} rows shipped: every 5th "
+          "of 11911). Orientation residuals weigh 1 mm per mrad.")
+        w("")
+        w("(b) Calibrated on a random half of C, validated on the other half:")
+        w("")
+        w("| model (reference) | parameters | calibration RMS [mm] | validation mean [mm] | "
+          "max [mm] | RMS [mm] | mean [deg] |")
+        w("| --- | --- | --- | --- | --- | --- | --- |")
+        for n in ("nominal",) + ref.UR10_MODELS:
+            if n not in r:
+                continue
+            c, v = r[n]["half_C"]["calibration"], r[n]["half_C"]["validation"]
+            label = "nominal (registration and tool only)" if n == "nominal" else n
+            w(f"| {label} | {c['parameters']} | {_f(c['rms_mm'])} | {_ci(v)} | "
+              f"{_f(v['max_mm'])} | {_f(v['rms_mm'])} | {_f(v.get('mean_deg'))} |")
+        w("")
+        if "ur10" in prod and "skipped" not in prod["ur10"]:
+            p = prod["ur10"]
+            w("| model (stiff) | parameters | calibration RMS [mm] | validation mean [mm] | "
+              "max [mm] | RMS [mm] | identify time [s] |")
+            w("| --- | --- | --- | --- | --- | --- | --- |")
+            for n in ref.UR10_MODELS:
+                c, v = p[n]["half_C"]["calibration"], p[n]["half_C"]["validation"]
+                w(f"| {n} | {c['parameters']} | {_f(c['rms_mm'])} | {_ci(v)} | "
+                  f"{_f(v['max_mm'])} | {_f(v['rms_mm'])} | {_f(c['seconds'], '.3f')} |")
+            w("")
+        elif "ur10" in prod:
+            w(f"stiff: not run ({_clean(prod['ur10']['skipped'])}).")
+            w("")
+        w("(a) Calibrated on all of C, then each other series with only its registration "
+          "refitted, from a random 20 % of its rows (or 15 poses), evaluated on the rest:")
+        w("")
+        w("| model (reference) | parameters | series | registration from | mean [mm] | "
+          "max [mm] | RMS [mm] | mean [deg] |")
+        w("| --- | --- | --- | --- | --- | --- | --- | --- |")
+        for n in ref.UR10_MODELS:
+            if n not in r:
+                continue
+            for k in ("B", "D", "A"):
+                for lab in ("20%", "15 poses"):
+                    key = f"{k} ({lab})"
+                    if key not in r[n]:
+                        continue
+                    v = r[n][key]
+                    w(f"| {n} | {r[n]['C']['calibration']['parameters']} | {k} | "
+                      f"{lab.replace('%', ' %')} | {_ci(v)} | {_f(v['max_mm'])} | "
+                      f"{_f(v['rms_mm'])} | {_f(v.get('mean_deg'))} |")
+        w("")
+        if all(n in r for n in ref.UR10_MODELS):
+            hv = lambda n: r[n]["half_C"]["validation"]["mean_mm"]
+            tr = lambda n: [r[n][f"{k} (20%)"]["mean_mm"] for k in "BDA" if f"{k} (20%)" in r[n]]
+            g, gg, gh = "geometry", "geometry+gravity", "geometry+gravity+harmonics"
+            w(f"Within series C the three models differ little ({hv(g):.3f}, {hv(gg):.3f}, "
+              f"{hv(gh):.3f} mm): C alone cannot tell them apart, and the largest model looks "
+              "best. Carried to the other set-ups they part: gravity compliance lowers the "
+              f"error on B, D, A from {min(tr(g)):.2f}-{max(tr(g)):.2f} mm to "
+              f"{min(tr(gg)):.2f}-{max(tr(gg)):.2f} mm, so it is what transfers; joint "
+              f"harmonics fitted on C raise it to {min(tr(gh)):.1f}-{max(tr(gh)):.1f} mm: "
+              "they fit C's poses, not the robot, and a calibration must refuse them.")
+            w("")
+        w("Published (Landgraf et al. 2021, IEEE CASE): the same four series, with the "
+          "authors' own evaluation protocol (a hybrid of a kinematic calibration and neural "
+          "networks); their figures are not on the splits above and are not repeated here.")
+        w("")
+        w("![UR10](real-data/ur10.png)")
+        w("")
+    w("## Speed")
+    w("")
+    w("| run | reference: rank test + fit [s] | of which least_squares [s] | stiff identify [s] |")
+    w("| --- | --- | --- | --- |")
+    for ds, key in (("ur5", None), ("ur10", "half_C")):
+        if ds not in res["reference"]:
+            continue
+        for n in (ref.UR5_MODELS if ds == "ur5" else ref.UR10_MODELS):
+            rr = res["reference"][ds][n]
+            c = rr[key]["calibration"] if key else rr["calibration"]
+            pp = prod.get(ds, {})
+            ps = "-"
+            if n in pp:
+                pc = pp[n][key]["calibration"] if key else pp[n]["calibration"]
+                ps = _f(pc["seconds"], ".3f")
+            w(f"| {ds} {n}{' (half of C)' if key else ''} | {_f(c['seconds'], '.2f')} | "
+              f"{_f(c.get('least_squares_seconds'), '.2f')} | {ps} |")
+    w("")
+    w("The reference's time covers its identifiability test and the least-squares fit "
+      "(scipy's finite-difference Jacobian); stiff's is the wall time of `stiff identify` "
+      "including the start of the process. Both are measured on the same machine in the same "
+      "run; a loaded machine slows both.")
+    w("")
+    DOC.write_text("\n".join(L))
+    if "ur5" in res["reference"]:
+        plot_ur5(res, FIGS / "ur5.png")
+    if "ur10" in res["reference"]:
+        plot_ur10(res, FIGS / "ur10.png")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--only", choices=["ur5", "ur10"])
+    ap.add_argument("--no-product", action="store_true", help="run the reference alone")
+    ap.add_argument("--doc-only", action="store_true",
+                    help="rewrite the document and plots from the last results, run nothing")
+    a = ap.parse_args(argv)
+    res = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    res.setdefault("reference", {})
+    res.setdefault("product", {})
+    for ds in ("ur5", "ur10"):
+        if a.doc_only or (a.only and ds != a.only):
+            continue
+        t = time.perf_counter()
+        res["reference"][ds] = ref.study_ur5(REAL) if ds == "ur5" else ref.study_ur10(REAL)
+        print(f"reference {ds}: {time.perf_counter() - t:.1f} s")
+        if a.no_product:
+            res["product"][ds] = {"skipped": "not asked (--no-product)"}
+            continue
+        try:
+            res["product"][ds] = product_ur5() if ds == "ur5" else product_ur10()
+        except (ProductUnavailable, FileNotFoundError, KeyError) as e:
+            # No machine paths in the document: the reason, not where it happened.
+            why = re.sub(r"\S*/\S*?:(\d+:)*\s*", "", str(e))
+            msg = f"this build of stiff cannot calibrate absolute data: {why}"
+            print(f"stiff {ds}: skipped, {msg}")
+            res["product"][ds] = {"skipped": msg}
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(res, indent=1) + "\n")
+    write_doc(res)
+    for ds, r in res["reference"].items():
+        for n in (ref.UR5_MODELS if ds == "ur5" else ref.UR10_MODELS):
+            if ds == "ur5":
+                v = r[n]["validation"]
+                print(f"reference ur5 {n}: {r[n]['calibration']['parameters']} parameters, "
+                      f"validation mean {v['mean_mm']:.4f} max {v['max_mm']:.4f} mm, "
+                      f"CV mean {r[n]['cv']['mean_mm']:.4f} mm")
+            else:
+                v = r[n]["half_C"]["validation"]
+                print(f"reference ur10 {n}: half C mean {v['mean_mm']:.4f} mm "
+                      f"{v.get('mean_deg', float('nan')):.4f} deg; " + "; ".join(
+                          f"{k} {r[n][k]['mean_mm']:.4f} mm" for k in r[n]
+                          if k not in ("half_C", "C")))
+    print(f"wrote {DOC.relative_to(ROOT)}, {RESULTS.relative_to(ROOT)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
