@@ -27,6 +27,29 @@ const char* default_criterion() {
   static const std::string name = PlanOptions{}.criterion;
   return name.c_str();
 }
+/// Every criterion's value of `set` as JSON; errors name the calling function `fn`.
+stiff_status criteria_json(const char* fn,
+                           char* json,
+                           size_t capacity,
+                           size_t* needed,
+                           const stiff_robot* robot,
+                           const stiff_dataset* set,
+                           const stiff_dataset* task,
+                           double tracker_sigma_m) {
+  return guarded(fn, [&] {
+    require(robot, "robot");
+    require(set, "set");
+    if (!(std::isfinite(tracker_sigma_m) && tracker_sigma_m >= 0))
+      throw InvalidArgument("tracker_sigma_m must be finite and >= 0");
+    CriteriaOptions co;
+    if (tracker_sigma_m > 0) co.noise.tracker_sigma_m = tracker_sigma_m;
+    if (task) co.task = task->data;
+    nlohmann::json j = nlohmann::json::object();
+    for (const auto& [name, value] : evaluate_criteria(robot->model, set->data, co))
+      j[name] = std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+    return copy_string(j.dump(), json, capacity, needed);
+  });
+}
 }  // namespace
 
 extern "C" {
@@ -178,24 +201,23 @@ stiff_status stiff_plan_json(char* json, size_t capacity, size_t* needed, const 
   });
 }
 
+stiff_status stiff_criteria_task_json(char* json,
+                                      size_t capacity,
+                                      size_t* needed,
+                                      const stiff_robot* robot,
+                                      const stiff_dataset* set,
+                                      const stiff_dataset* task,
+                                      double tracker_sigma_m) {
+  return criteria_json(__func__, json, capacity, needed, robot, set, task, tracker_sigma_m);
+}
+
 stiff_status stiff_criteria_json(char* json,
                                  size_t capacity,
                                  size_t* needed,
                                  const stiff_robot* robot,
                                  const stiff_dataset* set,
                                  double tracker_sigma_m) {
-  return guarded(__func__, [&] {
-    require(robot, "robot");
-    require(set, "set");
-    if (!(std::isfinite(tracker_sigma_m) && tracker_sigma_m >= 0))
-      throw InvalidArgument("tracker_sigma_m must be finite and >= 0");
-    CriteriaOptions co;
-    if (tracker_sigma_m > 0) co.noise.tracker_sigma_m = tracker_sigma_m;
-    nlohmann::json j = nlohmann::json::object();
-    for (const auto& [name, value] : evaluate_criteria(robot->model, set->data, co))
-      j[name] = std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
-    return copy_string(j.dump(), json, capacity, needed);
-  });
+  return criteria_json(__func__, json, capacity, needed, robot, set, nullptr, tracker_sigma_m);
 }
 
 size_t stiff_criterion_count(void) { return criterion_registry().size(); }

@@ -97,6 +97,15 @@ STIFF_API stiff_status stiff_criteria_json(char* json,
                                            const stiff_robot* robot,
                                            const stiff_dataset* set,
                                            double tracker_sigma_m);
+/** As stiff_criteria_json, with the task poses and loads that the `task` criterion needs
+ *  (task may be NULL: its value is then null). @since 0.1 */
+STIFF_API stiff_status stiff_criteria_task_json(char* json,
+                                                size_t capacity,
+                                                size_t* needed,
+                                                const stiff_robot* robot,
+                                                const stiff_dataset* set,
+                                                const stiff_dataset* task,
+                                                double tracker_sigma_m);
 /** Number of criteria and the name of criterion i. @since 0.1 */
 STIFF_API size_t stiff_criterion_count(void);
 STIFF_API stiff_status stiff_criterion_name(char* name,

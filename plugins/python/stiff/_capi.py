@@ -231,6 +231,7 @@ _proto("stiff_plan_destroy", None, H)
 _proto("stiff_plan_dataset", S, HP, H)
 _proto("stiff_plan_json", S, C.c_char_p, C.c_size_t, c_size_p, H)
 _proto("stiff_criteria_json", S, C.c_char_p, C.c_size_t, c_size_p, H, H, C.c_double)
+_proto("stiff_criteria_task_json", S, C.c_char_p, C.c_size_t, c_size_p, H, H, H, C.c_double)
 _proto("stiff_criterion_count", C.c_size_t)
 _proto("stiff_criterion_name", S, C.c_char_p, C.c_size_t, c_size_p, C.c_size_t)
 

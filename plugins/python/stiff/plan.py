@@ -22,9 +22,12 @@ def criteria() -> list[str]:
     return [_c.get_string(lib.stiff_criterion_name, i) for i in range(lib.stiff_criterion_count())]
 
 
-def evaluate_criteria(robot: Robot, design: Dataset, tracker_sigma_m: float = 10e-6) -> dict:
-    """Every criterion's value for a given set of poses and loads."""
-    return json.loads(_c.get_string(lib.stiff_criteria_json, robot, design, tracker_sigma_m))
+def evaluate_criteria(robot: Robot, design: Dataset, tracker_sigma_m: float = 10e-6,
+                      task: Optional[Dataset] = None) -> dict:
+    """Every criterion's value for a given set of poses and loads; `task` (poses and loads of
+    use) gives the `task` criterion a value (None without it)."""
+    return json.loads(_c.get_string(lib.stiff_criteria_task_json, robot, design, task,
+                                    tracker_sigma_m))
 
 
 class Plan(_Handle):

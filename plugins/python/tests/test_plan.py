@@ -1,5 +1,7 @@
 """Planning through the Python API and the command line."""
 import json
+import math
+import os
 import subprocess
 import sys
 
@@ -138,3 +140,31 @@ def test_cli_plan_t0_and_k0(tmp_path, rokae_path):
     assert bad.returncode == 2 and "T0" in bad.stderr and "got -1" in bad.stderr
     assert "Traceback" not in bad.stderr
     assert not (tmp_path / "bad.json").exists()
+
+
+def _task_value_numpy(robot, design, task, sigma_m=10e-6):
+    """An independent numpy implementation of the task criterion sqrt(tr(M^-1 S) / 3) [m]
+    (docs/planning.md): M from the design's observation blocks A_i[r, k] = J[r, k] (J[:, k] . F)
+    weighted by 1/sigma^2, S the mean of the task's B^T B, over joints 1-5 (joint 6 has no
+    lever arm at the flange centre)."""
+    def blocks(q, force):
+        out = []
+        for qi, fi in zip(np.atleast_2d(q), np.atleast_2d(force)):
+            j = robot.jacobian(qi)[:3, :5]
+            out.append(j * (j.T @ fi)[None, :])
+        return np.array(out)
+    a = blocks(design.q, design.force) / sigma_m
+    m = np.einsum("nrk,nrl->kl", a, a)
+    b = blocks(task.q, task.force)
+    s = np.einsum("nrk,nrl->kl", b, b) / b.shape[0]
+    return math.sqrt(np.trace(np.linalg.solve(m, s)) / 3)
+
+
+def test_task_criterion_of_a_given_set_equals_an_independent_computation(rokae_path):
+    robot = stiff.Robot(rokae_path)
+    design = stiff.Dataset.read(os.path.join(os.path.dirname(rokae_path), "..", "paper",
+                                             "design_kappa_a.csv"), robot)
+    task = stiff.random_design(robot, 15, seed=4)
+    values = stiff.evaluate_criteria(robot, design, task=task)
+    assert values["task"] == pytest.approx(_task_value_numpy(robot, design, task), rel=1e-9)
+    assert stiff.evaluate_criteria(robot, design)["task"] is None
