@@ -143,7 +143,8 @@ int dump_pool(const char* path, int poses, int loads) {
           const double v = (*jac)(r, p.identified_joints[k]);
           f.write(reinterpret_cast<const char*>(&v), sizeof v);
         }
-    f.write(reinterpret_cast<const char*>(&p.weight2[i]), sizeof(double));
+    const double weight2 = 1.0 / (p.sigma_m[i] * p.sigma_m[i]);
+    f.write(reinterpret_cast<const char*>(&weight2), sizeof weight2);
   }
   for (const auto& F : p.forces)
     f.write(reinterpret_cast<const char*>(F.data()), 3 * sizeof(double));

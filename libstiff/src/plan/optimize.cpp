@@ -43,7 +43,7 @@ Context make_context(const RobotModel& robot,
 void validate(const CandidatePool& pool, const PlanOptions& o) {
   criterion_id(o.criterion);
   const int m = pool.identified_count();
-  if (pool.size() == 0 || m == 0 || pool.packed_gram.empty())
+  if (pool.size() == 0 || m == 0 || !pool.kernel)
     throw InvalidArgument("plan: the pool is empty or not finalized");
   if (o.count < 1) throw InvalidArgument("plan: count must be >= 1");
   if (o.count > pool.size())
@@ -89,8 +89,8 @@ struct PackedKernel {
       : pool(p),
         t(packed_size(c.m)),
         jac(c.id == Crit::kappa_j),
-        table(jac ? nullptr : p.element_table()),
-        stride(p.element_table_stride()) {}
+        table(jac ? nullptr : kernel_of(p).element_table()),
+        stride(kernel_of(p).element_table_stride) {}
   int size() const { return MC > 0 ? packed_size(MC) : t; }
   // Element e's packed matrix: a pointer into the table, or `scratch` filled.
   const double* element(int e, double* scratch) const {
@@ -529,7 +529,7 @@ void finish_trace(OptimizerTrace& t, const Context& ctx) {
 
 IncrementalInformation::IncrementalInformation(const CandidatePool& pool, std::vector<int> elements)
     : pool_(&pool), elements_(std::move(elements)) {
-  if (pool.packed_gram.empty()) throw InvalidArgument("plan: the pool is not finalized");
+  if (!pool.kernel) throw InvalidArgument("plan: the pool is not finalized");
   for (int e : elements_)
     if (e < 0 || e >= pool.size()) throw InvalidArgument("plan: element index out of range");
   refresh();

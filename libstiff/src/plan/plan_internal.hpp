@@ -5,8 +5,10 @@
 
 #include <Eigen/Eigenvalues>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -49,18 +51,66 @@ inline int dim(int m) {
   return MC > 0 ? MC : m;
 }
 
+/// Blocks on 64-byte cache lines; blocks of 2 MB and more on 2 MB boundaries, and on Linux
+/// marked for transparent huge pages (a random read of a large table then misses the TLB far
+/// less often).
+void* allocate_table(std::size_t bytes);
+void free_table(void* p, std::size_t bytes) noexcept;
+
+/// std::allocator for the planning tables: see allocate_table.
+template <class T>
+struct TableAllocator {
+  using value_type = T;
+  TableAllocator() = default;
+  template <class U>
+  TableAllocator(const TableAllocator<U>&) {}
+  T* allocate(std::size_t n) { return static_cast<T*>(allocate_table(n * sizeof(T))); }
+  void deallocate(T* p, std::size_t n) noexcept { free_table(p, n * sizeof(T)); }
+  template <class U>
+  bool operator==(const TableAllocator<U>&) const {
+    return true;
+  }
+  template <class U>
+  bool operator!=(const TableAllocator<U>&) const {
+    return false;
+  }
+};
+
+/// What CandidatePool::finalize() packs for the kernels: per pose the m x m Gram matrix
+/// Jp_I^T Jp_I (row-major), the 3 x m load Jacobian Jl_I (column-major) and 1/sigma^2, per
+/// load F; and, below a memory budget, per element the packed lower triangle of
+/// A_e^T A_e / sigma_e^2 (packed_size(m) doubles in the kernels' order, 2 x 2 diagonal blocks
+/// first; rows start on cache lines and are padded to whole lines). Without the table the
+/// kernels compute the rows from the per-pose data, with the same values bit for bit.
+struct KernelData {
+  std::vector<double> packed_gram;
+  std::vector<double> packed_load_jacobian;
+  std::vector<double> weight2;
+  std::vector<double> packed_force;
+  std::vector<double, TableAllocator<double>> element_table_storage;
+  int element_table_stride = 0;
+  /// Row e of the element table at element_table() + e * element_table_stride; nullptr when
+  /// the table is not stored.
+  const double* element_table() const {
+    return element_table_storage.empty() ? nullptr : element_table_storage.data();
+  }
+};
+
+/// The kernel data of a finalized pool (InvalidArgument otherwise).
+const KernelData& kernel_of(const CandidatePool& p);
+
 // M += sign * w^2 * diag(t) (Jp^T Jp) diag(t), t = Jl^T F: the element's A_e^T A_e / sigma^2
 // (method.md eq. 3: A[r, k] = Jp[r, k] t_k). Lower triangle of row-major m x m only.
 template <int MC>
 inline void add_element(const CandidatePool& p, int e, double sign, double* M) {
   const int m = dim<MC>(p.identified_count());
   const int pose = p.element_pose[e];
-  const double* jl = p.packed_load_jacobian.data() + static_cast<size_t>(pose) * 3 * m;
-  const double* f = p.packed_force.data() + 3 * static_cast<size_t>(p.element_load[e]);
-  const double* g = p.packed_gram.data() + static_cast<size_t>(pose) * m * m;
+  const double* jl = p.kernel->packed_load_jacobian.data() + static_cast<size_t>(pose) * 3 * m;
+  const double* f = p.kernel->packed_force.data() + 3 * static_cast<size_t>(p.element_load[e]);
+  const double* g = p.kernel->packed_gram.data() + static_cast<size_t>(pose) * m * m;
   double t[kMaxM];
   for (int k = 0; k < m; ++k) t[k] = force_torque(jl + 3 * k, f);
-  const double s = sign * p.weight2[pose];
+  const double s = sign * p.kernel->weight2[pose];
   for (int k = 0; k < m; ++k) {
     const double sk = s * t[k];
     for (int l = 0; l <= k; ++l) M[k * m + l] += sk * t[l] * g[k * m + l];
@@ -71,7 +121,7 @@ inline void add_element(const CandidatePool& p, int e, double sign, double* M) {
 template <int MC>
 inline void add_jacobian(const CandidatePool& p, int e, double sign, double* MJ) {
   const int m = dim<MC>(p.identified_count());
-  const double* g = p.packed_gram.data() + static_cast<size_t>(p.element_pose[e]) * m * m;
+  const double* g = p.kernel->packed_gram.data() + static_cast<size_t>(p.element_pose[e]) * m * m;
   for (int k = 0; k < m; ++k)
     for (int l = 0; l <= k; ++l) MJ[k * m + l] += sign * g[k * m + l];
 }
@@ -404,12 +454,10 @@ STIFF_ALWAYS_INLINE inline double packed_at(const double* X, int r, int c) {
   return X[packed_index(MC, r, c)];
 }
 
-/// Largest per-element table finalize() stores (CandidatePool::element_table()):
-/// 64 MB, a 1e5-element pool up to m = 10. Beyond the L2 cache the annealing's random reads of
-/// the table miss, but it draws its candidates eight draws ahead and prefetches their rows, so
-/// the table still beats computing elements from the per-pose data: m = 5, 1e5 elements
-/// (12 MB) on a 2-core Xeon VM with 2 MB L2 per core: 1.75e7 swaps/s with the table and
-/// look-ahead, 1.0e7 computing elements (docs/benchmarks.md).
+/// Largest per-element table finalize() stores (KernelData::element_table()): 64 MB, a
+/// 1e5-element pool up to m = 10. Beyond the L2 cache the annealing's random reads of the table
+/// miss, but it draws its candidates ahead and prefetches their rows, so the table still beats
+/// computing elements from the per-pose data (measured in bench/, docs/benchmarks.md).
 constexpr double kElementTableBudgetBytes = 64.0 * 1024 * 1024;
 /// Cache line of x86-64 and AArch64: the element table's rows start on one and are padded to
 /// whole lines; the annealing prefetches them line by line.
@@ -421,12 +469,12 @@ template <int MC>
 inline void element_information(const CandidatePool& p, int e, double* G) {
   const int m = dim<MC>(p.identified_count());
   const int pose = p.element_pose[e];
-  const double* jl = p.packed_load_jacobian.data() + static_cast<size_t>(pose) * 3 * m;
-  const double* f = p.packed_force.data() + 3 * static_cast<size_t>(p.element_load[e]);
-  const double* g = p.packed_gram.data() + static_cast<size_t>(pose) * m * m;
+  const double* jl = p.kernel->packed_load_jacobian.data() + static_cast<size_t>(pose) * 3 * m;
+  const double* f = p.kernel->packed_force.data() + 3 * static_cast<size_t>(p.element_load[e]);
+  const double* g = p.kernel->packed_gram.data() + static_cast<size_t>(pose) * m * m;
   double t[kMaxM];
   for (int k = 0; k < m; ++k) t[k] = force_torque(jl + 3 * k, f);
-  const double s = p.weight2[pose];
+  const double s = p.kernel->weight2[pose];
   for (int k = 0; k < m; ++k) {
     const double sk = s * t[k];
     for (int l = 0; l <= k; ++l) G[packed_index(m, k, l)] = sk * t[l] * g[k * m + l];
@@ -437,7 +485,7 @@ inline void element_information(const CandidatePool& p, int e, double* G) {
 template <int MC>
 inline void element_jacobian_information(const CandidatePool& p, int e, double* G) {
   const int m = dim<MC>(p.identified_count());
-  const double* g = p.packed_gram.data() + static_cast<size_t>(p.element_pose[e]) * m * m;
+  const double* g = p.kernel->packed_gram.data() + static_cast<size_t>(p.element_pose[e]) * m * m;
   for (int k = 0; k < m; ++k)
     for (int l = 0; l <= k; ++l) G[packed_index(m, k, l)] = g[k * m + l];
 }

@@ -317,42 +317,45 @@ void CandidatePool::finalize() {
   if (m > plan_detail::kMaxM)
     throw InvalidArgument("plan pool: at most " + std::to_string(plan_detail::kMaxM) +
                           " identified joints supported");
-  packed_gram.assign(np * m * m, 0.0);
-  packed_load_jacobian.assign(np * 3 * m, 0.0);
-  weight2.assign(np, 0.0);
+  auto k = std::make_shared<plan_detail::KernelData>();
+  k->packed_gram.assign(np * m * m, 0.0);
+  k->packed_load_jacobian.assign(np * 3 * m, 0.0);
+  k->weight2.assign(np, 0.0);
   for (size_t i = 0; i < np; ++i) {
-    for (int k = 0; k < m; ++k) {
-      const int jk = identified_joints[k];
-      for (int l = 0; l < m; ++l)
-        packed_gram[i * m * m + k * m + l] =
-            jacobian_meas[i].col(jk).dot(jacobian_meas[i].col(identified_joints[l]));
+    for (int a = 0; a < m; ++a) {
+      const int ja = identified_joints[a];
+      for (int b = 0; b < m; ++b)
+        k->packed_gram[i * m * m + a * m + b] =
+            jacobian_meas[i].col(ja).dot(jacobian_meas[i].col(identified_joints[b]));
       for (int r = 0; r < 3; ++r)
-        packed_load_jacobian[i * 3 * m + 3 * k + r] = jacobian_load[i](r, jk);
+        k->packed_load_jacobian[i * 3 * m + 3 * a + r] = jacobian_load[i](r, ja);
     }
-    weight2[i] = 1.0 / (sigma_m[i] * sigma_m[i]);
+    k->weight2[i] = 1.0 / (sigma_m[i] * sigma_m[i]);
   }
-  packed_force.resize(3 * forces.size());
+  k->packed_force.resize(3 * forces.size());
   for (size_t l = 0; l < forces.size(); ++l)
-    for (int r = 0; r < 3; ++r) packed_force[3 * l + r] = forces[l](r);
-  // Per-element A_e^T A_e / sigma_e^2 for the optimizers' inner loop, below a memory budget.
-  const size_t ne = element_pose.size(), stride = element_table_stride();
-  element_table_storage.clear();
-  element_table_storage.shrink_to_fit();
+    for (int r = 0; r < 3; ++r) k->packed_force[3 * l + r] = forces[l](r);
+  // Rows of the element table start on cache lines and are padded to whole lines.
+  constexpr int kLine = plan_detail::kCacheLineDoubles;
+  k->element_table_stride = (plan_detail::packed_size(m) + kLine - 1) / kLine * kLine;
+  kernel = k;
+  // Per-element A_e^T A_e / sigma_e^2 for the optimizers' inner loop, below a memory budget
+  // (computed by the kernels from the per-pose data just stored).
+  const size_t ne = element_pose.size(), stride = static_cast<size_t>(k->element_table_stride);
   if (static_cast<double>(ne) * stride * sizeof(double) <= plan_detail::kElementTableBudgetBytes) {
-    element_table_storage.assign(ne * stride, 0.0);
-    double* table = element_table_storage.data();
+    k->element_table_storage.assign(ne * stride, 0.0);
+    double* table = k->element_table_storage.data();
     for (size_t e = 0; e < ne; ++e)
       plan_detail::element_information<0>(*this, static_cast<int>(e), table + e * stride);
   }
 }
 
-namespace detail {
+namespace plan_detail {
 
 namespace {
 constexpr std::size_t kHugePageBytes = std::size_t{2} << 20;
 std::align_val_t table_alignment(std::size_t bytes) {
-  return std::align_val_t{bytes >= kHugePageBytes ? kHugePageBytes
-                                                  : std::size_t{plan_detail::kCacheLineBytes}};
+  return std::align_val_t{bytes >= kHugePageBytes ? kHugePageBytes : std::size_t{kCacheLineBytes}};
 }
 }  // namespace
 
@@ -369,17 +372,12 @@ void free_table(void* p, std::size_t bytes) noexcept {
   ::operator delete(p, table_alignment(bytes));
 }
 
-}  // namespace detail
-
-int CandidatePool::element_table_stride() const {
-  const int t = plan_detail::packed_size(identified_count());
-  constexpr int kLine = plan_detail::kCacheLineDoubles;
-  return (t + kLine - 1) / kLine * kLine;
+const KernelData& kernel_of(const CandidatePool& p) {
+  if (!p.kernel) throw InvalidArgument("plan: the pool is not finalized");
+  return *p.kernel;
 }
 
-const double* CandidatePool::element_table() const {
-  return element_table_storage.empty() ? nullptr : element_table_storage.data();
-}
+}  // namespace plan_detail
 
 Eigen::Matrix<double, 3, Eigen::Dynamic> CandidatePool::block(int e) const {
   if (e < 0 || e >= size()) throw InvalidArgument("plan pool: element index out of range");
@@ -396,7 +394,7 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> CandidatePool::block(int e) const {
 
 Eigen::MatrixXd CandidatePool::information(int e) const {
   const auto a = block(e);
-  return weight2[element_pose[e]] * (a.transpose() * a);
+  return plan_detail::kernel_of(*this).weight2[element_pose[e]] * (a.transpose() * a);
 }
 
 }  // namespace stiff

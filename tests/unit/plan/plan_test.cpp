@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 
 #include "plan_test_support.hpp"
 #include "stiff/error.hpp"
@@ -114,8 +115,8 @@ void expect_same_scores(const CandidatePool& pool, const plan_detail::Context& c
       } else {
         add_element<0>(pool, e, 1.0, full.data());
         element_information<0>(pool, e, g.data());
-        if (const double* table = pool.element_table()) {
-          const double* row = table + static_cast<size_t>(e) * pool.element_table_stride();
+        if (const double* table = kernel_of(pool).element_table()) {
+          const double* row = table + static_cast<size_t>(e) * kernel_of(pool).element_table_stride;
           for (int q = 0; q < t; ++q) ASSERT_EQ(g[q], row[q]);
         }
       }
@@ -153,14 +154,16 @@ TEST(PlanFastPath, SameCriterionValuesAsGenericPathOnRandomSets) {
   const CandidatePool pool = build_pool(robot, paper_pool(200, 50));
   ASSERT_EQ(pool.identified_count(), 5);
   // Table stored, rows on 64-byte lines, two lines each.
-  ASSERT_NE(pool.element_table(), nullptr);
-  ASSERT_EQ(reinterpret_cast<std::uintptr_t>(pool.element_table()) % 64, 0u);
-  ASSERT_EQ(pool.element_table_stride(), 16);
-  const CandidatePool copy = pool;  // a copy is aligned too
+  const KernelData& k = kernel_of(pool);
+  ASSERT_NE(k.element_table(), nullptr);
+  ASSERT_EQ(reinterpret_cast<std::uintptr_t>(k.element_table()) % 64, 0u);
+  ASSERT_EQ(k.element_table_stride, 16);
+  // A copy of the kernel data (as a pool without a shared kernel would make) is aligned too.
+  const KernelData copy = k;
   ASSERT_EQ(reinterpret_cast<std::uintptr_t>(copy.element_table()) % 64, 0u);
   for (int e : {0, pool.size() / 2, pool.size() - 1})
     for (int q = 0; q < 15; ++q)
-      ASSERT_EQ(copy.element_table()[16 * e + q], pool.element_table()[16 * e + q]);
+      ASSERT_EQ(copy.element_table()[16 * e + q], k.element_table()[16 * e + q]);
   const std::vector<double> task =
       task_information(robot, test::paper_design_j(), pool.identified_joints);
   Rng rng(11);
@@ -218,10 +221,12 @@ TEST(PlanFastPath, AnnealingWithAndWithoutElementTableAndFastRng) {
   // A pool above the table budget computes the elements on the fly: same plan.
   const RobotModel robot = test::rokae();
   const CandidatePool pool = build_pool(robot, paper_pool(100, 20));
-  ASSERT_NE(pool.element_table(), nullptr);
+  ASSERT_NE(plan_detail::kernel_of(pool).element_table(), nullptr);
   CandidatePool no_table = pool;
-  no_table.element_table_storage.clear();
-  ASSERT_EQ(no_table.element_table(), nullptr);
+  auto k = std::make_shared<plan_detail::KernelData>(plan_detail::kernel_of(pool));
+  k->element_table_storage.clear();
+  no_table.kernel = k;
+  ASSERT_EQ(plan_detail::kernel_of(no_table).element_table(), nullptr);
   PlanOptions o;
   o.annealing.iterations = 5000;
   o.exchange.max_passes = 2;

@@ -32,6 +32,7 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <memory>
 #include <new>
 #include <string>
 #include <vector>
@@ -95,32 +96,9 @@ struct PoolOptions {
   uint64_t seed = 1;
 };
 
-namespace detail {
-/// Blocks on 64-byte cache lines; blocks of 2 MB and more on 2 MB boundaries, and on Linux
-/// marked for transparent huge pages (a random read of a large table then misses the TLB far
-/// less often).
-void* allocate_table(std::size_t bytes);
-void free_table(void* p, std::size_t bytes) noexcept;
-}  // namespace detail
-
-/// std::allocator for the planning tables: see detail::allocate_table.
-template <class T>
-struct TableAllocator {
-  using value_type = T;
-  TableAllocator() = default;
-  template <class U>
-  TableAllocator(const TableAllocator<U>&) {}
-  T* allocate(std::size_t n) { return static_cast<T*>(detail::allocate_table(n * sizeof(T))); }
-  void deallocate(T* p, std::size_t n) noexcept { detail::free_table(p, n * sizeof(T)); }
-  template <class U>
-  bool operator==(const TableAllocator<U>&) const {
-    return true;
-  }
-  template <class U>
-  bool operator!=(const TableAllocator<U>&) const {
-    return false;
-  }
-};
+namespace plan_detail {
+struct KernelData;  // the planner's private packed data (plan_internal.hpp)
+}  // namespace plan_detail
 
 /// Candidate pool Omega: poses with their Jacobians, loads, and the list of elements
 /// (pose index, load index). Fields are public for the planning kernels; call finalize() after
@@ -157,23 +135,9 @@ struct CandidatePool {
   /// The options it was built with (refinement uses the joint, box and load limits).
   PoolOptions options;
 
-  /// Kernel data written by finalize(): per pose the m x m Gram matrix Jp_I^T Jp_I (row-major)
-  /// and the 3 x m load Jacobian Jl_I (column-major), per pose 1/sigma^2, per load F.
-  std::vector<double> packed_gram;
-  std::vector<double> packed_load_jacobian;
-  std::vector<double> weight2;
-  std::vector<double> packed_force;
-  /// Kernel data written by finalize() when it fits in 64 MB (1e5 elements up to m = 10): per
-  /// element the packed lower triangle of A_e^T A_e / sigma_e^2 (m (m + 1) / 2 doubles in the
-  /// planning kernels' order, 2 x 2 diagonal blocks first: plan_internal.hpp, packed_index).
-  /// Rows start on 64-byte cache lines and are padded to whole lines (15 doubles for m = 5 then
-  /// span two lines, never three). Read it through element_table(). Empty above the budget;
-  /// the kernels then compute the rows from the per-pose data, with the same values bit for bit.
-  std::vector<double, TableAllocator<double>> element_table_storage;
-  /// Row e of the element table at element_table() + e * element_table_stride(); nullptr when
-  /// finalize() did not store it.
-  const double* element_table() const;
-  int element_table_stride() const;
+  /// Packed data of the planning kernels, written by finalize(): private to the planner,
+  /// immutable once written and shared by copies of the pool. Null before finalize().
+  std::shared_ptr<const plan_detail::KernelData> kernel;
 
   int size() const { return static_cast<int>(element_pose.size()); }
   int identified_count() const { return static_cast<int>(identified_joints.size()); }
