@@ -25,11 +25,7 @@ class Complementary : public EffectT<Complementary> {
     return true;
   }
   std::vector<std::string> experiment_hints() const override {
-    return {
-        "load reversal: measure +F and -F at every pose (a linear-elastic response is odd in F; "
-        "backlash, preload nonlinearity and drift show in the even part)",
-        "a second load level at a subset of poses (nonlinear and second-order stiffness depend on "
-        "the level, backlash and drift do not)"};
+    return {effects::kHintLoadReversal, effects::kHintLoadLevel};
   }
   std::string description() const override {
     return "complementary (geometric) stiffness K_g = d(J^T F)/dq under load: d += gamma (J C "

@@ -66,9 +66,7 @@ class Drift : public EffectT<Drift> {
     return true;
   }
   std::vector<std::string> experiment_hints() const override {
-    return {
-        "load reversal: measure +F and -F at every pose (a linear-elastic response is odd in F; "
-        "backlash, preload nonlinearity and drift show in the even part)"};
+    return {effects::kHintLoadReversal};
   }
   std::string description() const override {
     return "thermal drift: per session an offset and a linear rate in time, d += b + v (t - "

@@ -27,7 +27,7 @@ class GravityCompensator : public EffectT<GravityCompensator> {
     return true;
   }
   std::vector<std::string> experiment_hints() const override {
-    return {"more gravity variety: poses over the whole q2/q3 range (gravity preload differs)"};
+    return {effects::kHintGravityVariety};
   }
   std::string description() const override {
     return "gravity compensator spring: joint-2 compliance varies with q2, c2(q2) = c2 + alpha "

@@ -31,12 +31,7 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
     return true;
   }
   std::vector<std::string> experiment_hints() const override {
-    return {
-        "load reversal: measure +F and -F at every pose (a linear-elastic response is odd in F; "
-        "backlash, preload nonlinearity and drift show in the even part)",
-        "a second load level at a subset of poses (nonlinear and second-order stiffness depend on "
-        "the level, backlash and drift do not)",
-        "more gravity variety: poses over the whole q2/q3 range (gravity preload differs)"};
+    return {effects::kHintLoadReversal, effects::kHintLoadLevel, effects::kHintGravityVariety};
   }
   std::string description() const override {
     return "hardening reducer: dtheta_j += e_j [phi(tau_g+tau_F) - phi(tau_g)], phi = T1 "

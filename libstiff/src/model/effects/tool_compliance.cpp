@@ -30,11 +30,7 @@ class ToolCompliance : public EffectT<ToolCompliance> {
     set_parameter(p, "s_yz", 0.1e-6);
     return true;
   }
-  std::vector<std::string> experiment_hints() const override {
-    return {
-        "a second load level at a subset of poses (nonlinear and second-order stiffness depend on "
-        "the level, backlash and drift do not)"};
-  }
+  std::vector<std::string> experiment_hints() const override { return {effects::kHintLoadLevel}; }
   std::string description() const override {
     return "series compliance of sensor and tooling: d += R_06 S R_06^T F, S symmetric 3x3 in "
            "the flange frame";

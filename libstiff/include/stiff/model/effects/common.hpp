@@ -15,6 +15,17 @@
 
 namespace stiff::effects {
 
+/// Experiments that separate effects (Effect::experiment_hints), shared by the effects that
+/// the same experiment tells apart.
+inline constexpr const char* kHintLoadReversal =
+    "load reversal: measure +F and -F at every pose (a linear-elastic response is odd in F; "
+    "backlash, preload nonlinearity and drift show in the even part)";
+inline constexpr const char* kHintLoadLevel =
+    "a second load level at a subset of poses (nonlinear and second-order stiffness depend on "
+    "the level, backlash and drift do not)";
+inline constexpr const char* kHintGravityVariety =
+    "more gravity variety: poses over the whole q2/q3 range (gravity preload differs)";
+
 /// A parameter spec in one line: name, SI unit, one line of physics, bounds, typical
 /// magnitude, null value (effect off) and start value of a fit.
 inline ParameterSpec parameter(std::string name,
