@@ -31,7 +31,7 @@ extern "C" {
 #define STIFF_POINT_UNREACHABLE 2    /**< no IK solution within the limits: previous q held */
 #define STIFF_POINT_BRANCH_CHANGE 4  /**< the analytic branch changed (e.g. a wrist flip) */
 #define STIFF_POINT_JUMP 8           /**< a joint moved more than 0.35 rad (20 deg) */
-#define STIFF_POINT_NOT_CONVERGED 16 /**< compensation did not reach 1e-10 m / 1e-10 rad */
+#define STIFF_POINT_NOT_CONVERGED 16 /**< compensation did not reach 1e-12 (m and rad) */
 
 /** 1 if the robot's inverse kinematics is analytic (6R, spherical wrist, axes 2 and 3
  *  parallel), 0 if numerical (damped least squares). @since 0.1 */
@@ -75,7 +75,7 @@ STIFF_API stiff_status stiff_ik_path(double* q_out,
 /** Compensated joint command for one pose: q_cmd (n = dof values [rad]) such that the loaded
  *  tool at q_cmd under `wrench` reaches the unloaded pose FK(q):
  *    p(q_cmd) + d(q_cmd, W) = p(q),  Exp(rot(q_cmd, W)) R(q_cmd) = R(q)
- *  (6-D; position only for robots with fewer than 6 joints), to 1e-10 m and 1e-10 rad.
+ *  (6-D; position only for robots with fewer than 6 joints), to 1e-12 m and 1e-12 rad.
  *  Errors: INVALID_ARGUMENT (size, NaN), NUMERICAL (did not converge). @since 0.1 */
 STIFF_API stiff_status stiff_compensate_pose(
     double* q_cmd, const stiff_model* model, const double* q, size_t n, const double wrench[6]);
