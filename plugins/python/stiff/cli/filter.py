@@ -138,12 +138,14 @@ def run(args):
     result = filter_program(program, model, spec, opts)
     written = result.write(args.output)
     rows = result.table()
+    rot = args.tool_rotation is not None
     print(table(["#", "line", "name", "motion", "F [N]", "deflection [um]", "correction [um]",
-                 "residual [um]", "rot [deg]", "flags"],
+                 "residual [um]"] + (["rot [deg]", "unrotated [um]"] if rot else []) + ["flags"],
                 [[r["target"], r["line"], r["name"], r["motion"], f"{r['force_N']:.1f}",
                   f"{r['deflection_um']:.1f}", f"{r['correction_um']:.1f}",
-                  f"{r['residual_um']:.3g}", f"{r['tool_rotation_deg']:.0f}", r["flags"]]
-                 for r in rows]))
+                  f"{r['residual_um']:.3g}"] +
+                 ([f"{r['tool_rotation_deg']:.0f}", f"{r['deflection_unrotated_um']:.1f}"]
+                  if rot else []) + [r["flags"]] for r in rows]))
     s = result.summary()
     print(f"{program.fmt.name}: {s['targets']} targets, max predicted deflection "
           f"{s['max_deflection_um']:.1f} um, max residual after filtering "

@@ -47,8 +47,12 @@ def zyx_angles(r: np.ndarray) -> tuple[float, float, float]:
 
 
 def nearest_deg(angle_deg: float, reference_deg: float) -> float:
-    """angle + 360 k closest to the reference (keeps 180 vs -180 as the program wrote it)."""
-    return angle_deg + 360.0 * round((reference_deg - angle_deg) / 360.0)
+    """The angle in (-180, 180] as controllers want it, except that an angle at the +-180
+    seam keeps the sign the program wrote (180 stays 180, -180 stays -180)."""
+    a = math.remainder(angle_deg, 360.0)
+    if abs(abs(a) - 180.0) < 1e-9 and abs(abs(reference_deg) - 180.0) < 1e-9:
+        return math.copysign(180.0, reference_deg)
+    return 180.0 if a == -180.0 else a
 
 
 # ------------------------------------------------------------------------------ KUKA

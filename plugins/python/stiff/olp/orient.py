@@ -9,7 +9,9 @@ that minimises the predicted deflection of the TCP, subject to
 - never worse: at every target the predicted deflection is not larger than at psi = 0.
 
 The angles live on a grid (step `resolution`); dynamic programming over the grid finds the
-sequence with the least sum of squared deflections among the admissible, smooth ones. psi = 0
+sequence with the least sum of squared deflections among the admissible, smooth ones (plus a
+small cost on each change and on the size of the rotation, which settle ties towards a smooth
+and small rotation). psi = 0
 everywhere is always admissible when the nominal path is, so a solution exists.
 The process wrench is taken as independent of psi (a rotationally symmetric cutter: the cutting
 force follows the feed direction and the tool axis, not the spindle housing)."""
@@ -86,9 +88,14 @@ def optimise_tool_rotation(model, poses, wrenches, base=None, tool=None, q_seed=
             defl[i, j], qs[i, j] = np.linalg.norm(r.deflection[:3]), q
     admissible = defl <= defl[:, [zero]] * (1 + 1e-12)
     admissible &= np.isfinite(defl)
-    # Dynamic programming: least sum of squares with |psi_i - psi_(i-1)| <= max_step.
+    # Dynamic programming: least sum of squares with |psi_i - psi_(i-1)| <= max_step. Among
+    # equal deflections the smaller rotation wins (a 1e-6 relative pull towards psi = 0).
     reach = int(math.floor(max_step_deg / resolution_deg + 1e-9))
-    cost = np.where(admissible[0], defl[0] ** 2, np.inf)
+    pull = 1e-6 * float(np.mean(defl[:, zero] ** 2)) * grid ** 2
+    # A change between targets costs a thousandth of a mean squared deflection per max_step^2:
+    # it settles ties and tiny gains towards a smooth rotation.
+    smooth = 1e-3 * float(np.mean(defl[:, zero] ** 2))
+    cost = np.where(admissible[0], defl[0] ** 2 + pull, np.inf)
     back = np.zeros((n_pts, grid.size), dtype=int)
     for i in range(1, n_pts):
         new = np.full(grid.size, np.inf)
@@ -96,8 +103,9 @@ def optimise_tool_rotation(model, poses, wrenches, base=None, tool=None, q_seed=
             if not admissible[i, j]:
                 continue
             lo, hi = max(0, j - reach), min(grid.size, j + reach + 1)
-            b = lo + int(np.argmin(cost[lo:hi]))
-            new[j] = cost[b] + defl[i, j] ** 2
+            step = cost[lo:hi] + smooth * ((np.arange(lo, hi) - j) / max(reach, 1)) ** 2
+            b = lo + int(np.argmin(step))
+            new[j] = step[b - lo] + defl[i, j] ** 2 + pull[j]
             back[i, j] = b
         cost = new
     j = int(np.argmin(cost))

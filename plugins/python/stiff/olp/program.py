@@ -141,6 +141,7 @@ class TargetReport:
     q_nominal: np.ndarray
     q_cmd: np.ndarray
     tool_rotation: float = 0.0  # rotation about the tool axis chosen for stiffness [rad]
+    deflection_unrotated: float = float("nan")  # |deflection| [m] at the programmed rotation
 
     def flags(self) -> str:
         names = [(POINT_UNREACHABLE, "unreachable"), (POINT_SINGULAR, "singular"),
@@ -186,6 +187,7 @@ class FilterResult:
                          "correction_um": float(np.linalg.norm(r.correction) * 1e6),
                          "residual_um": float(r.residual * 1e6),
                          "tool_rotation_deg": float(np.degrees(r.tool_rotation)),
+                         "deflection_unrotated_um": float(r.deflection_unrotated * 1e6),
                          "flags": r.flags()})
         return rows
 
@@ -420,12 +422,12 @@ def filter_program(program: Program, model: Model, wrench: WrenchSpec,
         prev_pos = pose_ref[:3, 3]
         if q_nom is not None:
             prev_q = q_nom
-        plan.append([t, pose_ref, q_nom, w, 0.0])
+        plan.append([t, pose_ref, q_nom, w, 0.0, float("nan")])
     if o.tool_rotation_limit_deg:
         _rotate_paths(plan, eng, fmt, o)
     # Pass 2: compensate and print.
     reps, reports, done = [], [], {}
-    for number, (t, pose_ref, q_nom, w, psi) in enumerate(plan, start=1):
+    for number, (t, pose_ref, q_nom, w, psi, d0) in enumerate(plan, start=1):
         where = f"{program.paths[motions]}:{t.line}"
         if q_nom is None:
             reports.append(TargetReport(number, t.file, t.line, t.name, t.motion, w, np.zeros(6),
@@ -450,14 +452,15 @@ def filter_program(program: Program, model: Model, wrench: WrenchSpec,
                                   f"{fmt.config_key(c_cmd)}); move the target away from the "
                                   "singularity or choose another configuration")
         if key in done:
-            if not np.allclose(done[key], w, atol=1e-9) or psi:
+            if not np.allclose(done[key][0], w, atol=1e-9) or psi:
                 raise FilterError(f"{where}: target {t.name} is used by several motions with "
                                   "different wrenches or tool rotations; give each motion its "
                                   "own point")
+            first = done[key][1]
             reports.append(TargetReport(number, t.file, t.line, t.name, t.motion, w, ft.deflection,
-                                        np.zeros(3), 0.0, status, q_nom, ft.q, psi))
+                                        first.correction, first.residual, status, q_nom, ft.q,
+                                        psi))
             continue
-        done[key] = w
         new_values = (list(o.joint_map.to_vendor(ft.q)) if t.joint
                       else fmt.values_of(ft.pose, t))
         texts = fmt.format_values(t, new_values, o.min_decimals)
@@ -475,6 +478,10 @@ def filter_program(program: Program, model: Model, wrench: WrenchSpec,
         reports.append(TargetReport(number, t.file, t.line, t.name, t.motion, w, ft.deflection,
                                     pose_w[:3, 3] - pose_ref[:3, 3], residual, status, q_nom,
                                     ft.q, psi))
+        done[key] = (w, reports[-1])
+    for r, p in zip(reports, plan):
+        r.deflection_unrotated = p[5] if math.isfinite(p[5]) else float(
+            np.linalg.norm(r.deflection[:3]))
     return FilterResult(program, program.rewrite(reps), reports)
 
 
@@ -484,7 +491,7 @@ def _rotate_paths(plan: list, eng: "_Engine", fmt, o: FilterOptions) -> None:
     from .orient import optimise_tool_rotation, rotate_about_tool_axis
 
     runs, cur = [], []
-    for i, (t, pose, q, w, _) in enumerate(plan):
+    for i, (t, pose, q, w, _, _) in enumerate(plan):
         ok = t.process and not t.joint and q is not None
         if ok and cur and (plan[cur[-1]][0].base is not t.base or plan[cur[-1]][0].tool is not t.tool):
             runs.append(cur)
@@ -506,7 +513,8 @@ def _rotate_paths(plan: list, eng: "_Engine", fmt, o: FilterOptions) -> None:
             plan[run[0]][2], limit_deg=o.tool_rotation_limit_deg,
             resolution_deg=o.tool_rotation_resolution_deg,
             max_step_deg=o.tool_rotation_max_step_deg, key=key, near_singular=eng.near_singular)
-        for i, psi, q in zip(run, rot.psi, rot.q):
+        for i, psi, q, d0 in zip(run, rot.psi, rot.q, rot.nominal):
             plan[i][1] = rotate_about_tool_axis(plan[i][1], float(psi))
             plan[i][2] = q
             plan[i][4] = float(psi)
+            plan[i][5] = float(d0)
