@@ -371,11 +371,12 @@ class _TestPost:
 
 def test_robodk_wrapper_drives_a_test_post(robot, model):
     m, _ = model
-    from stiff.olp.robodk_post import CompensatingPost
+    from stiff.olp.robodk_post import compensating_post_class
 
     material, cut = MATERIALS["C45"], MillingCut(10.0, 2, 0.05, 5.0, 2.0)
-    post = _TestPost()
-    wrapped = CompensatingPost(post, m, milling=(material, cut))
+    RobotPost = compensating_post_class(_TestPost, m, milling=(material, cut))
+    wrapped = RobotPost()   # what RoboDK does with a post file's RobotPost
+    post = wrapped._post
     frame, tool = rm.KUKA_2_Pose(list(WP)), rm.KUKA_2_Pose(list(TOOL))
     wrapped.setFrame(frame)
     wrapped.setTool(tool)
@@ -467,3 +468,54 @@ def test_tool_rotation_never_worse_on_the_virtual_robot(robot, tmp_path):
     # the fit is noise-free: model and truth agree to far better than 1 %
     assert np.all(sim_opt <= sim_nom * 1.01)
     assert sim_opt.max() < sim_nom.max() and sim_opt.mean() < sim_nom.mean()
+
+
+def test_configuration_change_is_an_error(robot, tmp_path):
+    """A target 0.015 deg on the negative side of the wrist singularity: the compensation
+    turns joint 5 positive, a wrist flip, which must not pass silently."""
+    from stiff.olp.target import ArmGeometry, Configuration, JointMap
+
+    # the paper's (soft) arm: the wrist turns by about 3e-4 rad under this load
+    data = stiff.simulate(robot, stiff.random_design(robot, count=40, seed=3),
+                          stiffness=[50914, 16382, 31311, 7791.1, 5613.6, 4000], tracker_sigma_m=0.0)
+    m = stiff.Model(robot, stiff.identify(robot, data))
+    q = np.array([0.3, 0.2, -0.4, 0.5, -2.5e-4, 0.2])
+    c = Configuration.of(ArmGeometry(robot), q, JointMap())
+    k = fr.pose_to_kuka(robot.tool_pose(q))
+    p = tmp_path / "wrist.src"
+    p.write_text("DEF wrist()\n$LOAD = LOAD_DATA[2]\nLIN {X %.6f, Y %.6f, Z %.6f, A %.6f, B %.6f, "
+                 "C %.6f, S %d, T %d}\nEND\n" % (*k, c.kuka_status(), c.kuka_turn()))
+    loads = {2: olp.ToolLoad(8.0, np.array([0.0, 0.0, 0.1]))}
+    spec = olp.WrenchSpec(force=[100, 50, -200], tool_weight=True)
+    with pytest.raises(olp.FilterError, match=r"wrist.src:3: .*changes the arm configuration "
+                                              r"\(Status 110 -> Status 010\)"):
+        olp.filter_program(olp.read_program(p, loads=loads), m, spec)
+    with pytest.raises(olp.FilterError, match=r"LOAD_DATA\[2\].*--load 2"):
+        olp.read_program(p)
+    res = olp.filter_program(olp.read_program(p, loads=loads), m, spec,
+                             olp.FilterOptions(allow_config_change=True))
+    assert "configuration change" in res.targets[0].flags()
+    assert "near-singular" in res.targets[0].flags()
+    # the written Status is the compensated one
+    assert re.search(r"S 2, T", res.texts["src"])
+    # the tool weight of LOAD_DATA[2] is part of the wrench: 8 kg
+    assert np.allclose(res.targets[0].wrench[:3], [100, 50, -200 - 8.0 * 9.80665])
+
+
+def test_force_file_gives_the_wrench_per_target(model, programs, tmp_path):
+    m, _ = model
+    f = tmp_path / "forces.csv"
+    f.write_text("# per-target process forces\ntarget,fx_N,fy_N,fz_N,mx_Nm,my_Nm,mz_Nm\n"
+                 "3,10,20,-30,0,0,1\n5,0,0,-80,0,0,0\n")
+    prog = olp.read_program(programs / "abb" / "Slot.mod")
+    res = olp.filter_program(prog, m, olp.WrenchSpec(force=[0, 0, -50], force_file=str(f)))
+    w = np.array([r.wrench for r in res.targets])
+    assert np.allclose(w[2], [10, 20, -30, 0, 0, 1]) and np.allclose(w[4], [0, 0, -80, 0, 0, 0])
+    assert np.allclose(w[3], [0, 0, -50, 0, 0, 0])   # constant force elsewhere on MoveL
+    assert np.allclose(w[1], 0) and np.allclose(w[0], 0)  # MoveJ / MoveAbsJ: air
+    f.write_text("target,fx_N,fy_N\n1,2,3\n")
+    with pytest.raises(olp.FilterError, match="forces.csv:1: header"):
+        olp.filter_program(prog, m, olp.WrenchSpec(force_file=str(f)))
+    f.write_text("target,fx_N,fy_N,fz_N\n1,2,x,3\n")
+    with pytest.raises(olp.FilterError, match="forces.csv:2:"):
+        olp.filter_program(prog, m, olp.WrenchSpec(force_file=str(f)))

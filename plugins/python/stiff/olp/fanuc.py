@@ -65,6 +65,10 @@ class FanucFormat:
         return c.fanuc_config()[:3]
 
     @staticmethod
+    def key_text(key) -> str:
+        return "'" + " ".join(key) + "'"
+
+    @staticmethod
     def config_matches(t: Target, c) -> bool:
         return tuple(t.config) == c.fanuc_config()
 

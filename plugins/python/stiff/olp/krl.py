@@ -136,6 +136,10 @@ class KrlFormat:
         return (c.kuka_status() & 7,)
 
     @staticmethod
+    def key_text(key) -> str:
+        return f"Status {key[0]:03b}"
+
+    @staticmethod
     def config_matches(t: Target, c) -> bool:
         s, tt = t.config
         return (s is None or (s & 7) == (c.kuka_status() & 7)) and (tt is None or tt == c.kuka_turn())

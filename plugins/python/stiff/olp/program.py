@@ -448,9 +448,9 @@ def filter_program(program: Program, model: Model, wrench: WrenchSpec,
             status |= POINT_CONFIG_CHANGE
             if not o.allow_config_change:
                 raise FilterError(f"{where}: target {t.name}: the compensation changes the arm "
-                                  f"configuration ({fmt.config_key(c_nom)} -> "
-                                  f"{fmt.config_key(c_cmd)}); move the target away from the "
-                                  "singularity or choose another configuration")
+                                  f"configuration ({fmt.key_text(fmt.config_key(c_nom))} -> "
+                                  f"{fmt.key_text(fmt.config_key(c_cmd))}); move the target "
+                                  "away from the singularity or choose another configuration")
         if key in done:
             if not np.allclose(done[key][0], w, atol=1e-9) or psi:
                 raise FilterError(f"{where}: target {t.name} is used by several motions with "

@@ -100,6 +100,10 @@ class RapidFormat:
         return (c.abb_confdata()[3],)
 
     @staticmethod
+    def key_text(key) -> str:
+        return f"cfx {key[0]}"
+
+    @staticmethod
     def config_matches(t: Target, c) -> bool:
         return list(t.config) == c.abb_confdata()
 

@@ -21,7 +21,7 @@ from .cutting import KienzleMaterial, MillingCut, mean_force
 from .program import GRAVITY, ToolLoad
 from .target import JointMap, filter_target
 
-__all__ = ["CompensatingPost", "PostMotion"]
+__all__ = ["CompensatingPost", "PostMotion", "compensating_post_class"]
 
 _SPINDLE_ON = re.compile(r"\b(?:M0?3|M0?4|SPINDLE[_ ]?ON)\b", re.IGNORECASE)
 _SPINDLE_OFF = re.compile(r"\b(?:M0?5|SPINDLE[_ ]?OFF)\b", re.IGNORECASE)
@@ -186,3 +186,19 @@ class CompensatingPost:
         p1, j1 = self._compensate("MoveC", pose1, joints1)
         p2, j2 = self._compensate("MoveC", pose2, joints2)
         return self._post.MoveC(p1, j1, p2, j2, conf_RLF_1, conf_RLF_2)
+
+
+def compensating_post_class(post_class, model, **options):
+    """A RobotPost class for a RoboDK post-processor file: instances are `post_class`
+    instances wrapped in CompensatingPost(model, **options). In the post file:
+
+        from KUKA_KRC4 import RobotPost as VendorPost   # any post RoboDK ships or yours
+        RobotPost = compensating_post_class(VendorPost, model, milling=(material, cut))
+    """
+
+    class RobotPost:
+        def __new__(cls, *args, **kwargs):
+            return CompensatingPost(post_class(*args, **kwargs), model, **options)
+
+    RobotPost.__name__ = f"Compensating{post_class.__name__}"
+    return RobotPost
