@@ -261,7 +261,7 @@ def test_wrong_configuration_and_bad_programs_are_clear_errors(model, programs, 
     src = programs / "kuka" / "slot.src"
     src.write_text(src.read_text(encoding="latin-1").replace("$BASE = {X", "$BASE = BASE_DATA[3]\r\n;{X"),
                    encoding="latin-1", newline="")
-    with pytest.raises(olp.FilterError, match=r"BASE_DATA\[3\].*--base 3"):
+    with pytest.raises(olp.FilterError, match=r"slot.src:8: BASE_DATA\[3\].*--frame 3"):
         olp.read_program(src)
     p = tmp_path / "rel.src"
     p.write_text("DEF rel()\nLIN_REL {X 10}\nEND\n")
@@ -519,3 +519,39 @@ def test_force_file_gives_the_wrench_per_target(model, programs, tmp_path):
     f.write_text("target,fx_N,fy_N,fz_N\n1,2,x,3\n")
     with pytest.raises(olp.FilterError, match="forces.csv:2:"):
         olp.filter_program(prog, m, olp.WrenchSpec(force_file=str(f)))
+
+
+def test_damaged_programs_give_clear_errors(model, programs):
+    """Truncated, cut or corrupted programs: a FilterError naming the file (or a clean
+    result), never another exception; the input is never modified."""
+    import random
+
+    m, _ = model
+    rng = random.Random(3)
+    frames = dict(frames={1: fr.fanuc_to_pose(*WP)}, tools={1: fr.fanuc_to_pose(*TOOL)})
+    files = [programs / "kuka" / "slot.src", programs / "kuka" / "slot.dat",
+             programs / "abb" / "Slot.mod", programs / "fanuc" / "slot.ls"]
+    originals = {f: f.read_bytes() for f in files}
+    for f in files:
+        for _ in range(40):
+            b = bytearray(originals[f])
+            i = rng.randrange(len(b))
+            op = rng.choice(["trunc", "flip", "del", "ins"])
+            if op == "trunc":
+                b = b[:i]
+            elif op == "flip":
+                b[i] = rng.choice(b"[]{},;:'\"0123456789.-eE XYZabc\n")
+            elif op == "del":
+                del b[i:i + rng.randrange(1, 20)]
+            else:
+                b[i:i] = bytes(rng.choice(b"[]{},;'-.9eE") for _ in range(rng.randrange(1, 4)))
+            f.write_bytes(bytes(b))
+            main = f.with_suffix(".src") if f.suffix == ".dat" else f
+            try:
+                prog = olp.read_program(main, **(frames if f.suffix == ".ls" else {}))
+                olp.filter_program(prog, m, olp.WrenchSpec(force=[0, 0, -50], tool_weight=True))
+            except olp.FilterError as e:
+                assert main.name in str(e) or f.name in str(e), str(e)
+            except stiff.StiffError:
+                pass
+            f.write_bytes(originals[f])

@@ -124,46 +124,51 @@ def read_ls(path, *, uframes: Optional[dict] = None, utools: Optional[dict] = No
     lines = text.splitlines(keepends=True)
     for lineno, raw in enumerate(lines, start=1):
         line_start, pos = pos, pos + len(raw)
-        if line_start < mn or line_start >= pos_sec:
-            continue
-        where = f"{path}:{lineno}"
-        fm = _FRAMESEL.match(raw)
-        if fm:
-            continue  # the frame numbers stored in each position decide
-        m = _MOTION.match(raw)
-        kind = None
-        if m:
-            kind, n, sp, unit = m.group(1), int(m.group(2)), m.group(3), m.group(4)
-        else:
-            c = _CONT.match(raw)
-            if c and targets and targets[-1].motion == "C":
-                kind, n, sp, unit = "C", int(c.group(1)), c.group(2), c.group(3)
-        if kind is None:
-            if re.match(r"^\s*\d+:\s*[JLCA]\s+PR\[", raw):
-                raise FilterError(f"{where}: motions to position registers PR[] are not "
-                                  "supported (their values live in the controller)")
-            continue
-        if n not in points:
-            raise FilterError(f"{where}: P[{n}] is not in the /POS section")
-        dline, fields, uf, ut, conf = points[n]
-        if uf not in uframes:
-            raise FilterError(f"{path}:{dline}: P[{n}] uses UF {uf}: give the user frame "
-                              f"(--uframe {uf}=x,y,z,w,p,r)")
-        if ut not in utools:
-            raise FilterError(f"{path}:{dline}: P[{n}] uses UT {ut}: give the tool frame "
-                              f"(--utool {ut}=x,y,z,w,p,r)")
-        speed = float(sp) * _SPEED[unit] if sp and unit in _SPEED else None
-        cart = all(k in fields for k in _CART)
-        names = _CART if cart else sorted([k for k in fields if k.startswith("J")])
-        if not cart and len(names) < 1:
-            raise FilterError(f"{path}:{dline}: P[{n}]: neither X..R nor J1..Jn")
-        vals = [float(fields[k][0]) for k in names]
-        spans = [("ls", fields[k][1], fields[k][2]) for k in names]
-        t = Target("ls", lineno, f"P[{n}]", kind, kind in ("L", "C"), not cart, vals, spans,
-                   uframes[uf], utools[ut], None,
-                   config=conf[0] if (cart and conf) else None,
-                   config_spans=[("ls",) + conf[1]] if (cart and conf) else [],
-                   speed=speed, decl_line=dline, decl_file="ls")
-        t.program_text = {"ls": text}
-        targets.append(t)
+        try:
+            if line_start < mn or line_start >= pos_sec:
+                continue
+            where = f"{path}:{lineno}"
+            fm = _FRAMESEL.match(raw)
+            if fm:
+                continue  # the frame numbers stored in each position decide
+            m = _MOTION.match(raw)
+            kind = None
+            if m:
+                kind, n, sp, unit = m.group(1), int(m.group(2)), m.group(3), m.group(4)
+            else:
+                c = _CONT.match(raw)
+                if c and targets and targets[-1].motion == "C":
+                    kind, n, sp, unit = "C", int(c.group(1)), c.group(2), c.group(3)
+            if kind is None:
+                if re.match(r"^\s*\d+:\s*[JLCA]\s+PR\[", raw):
+                    raise FilterError(f"{where}: motions to position registers PR[] are not "
+                                      "supported (their values live in the controller)")
+                continue
+            if n not in points:
+                raise FilterError(f"{where}: P[{n}] is not in the /POS section")
+            dline, fields, uf, ut, conf = points[n]
+            if uf not in uframes:
+                raise FilterError(f"{path}:{dline}: P[{n}] uses UF {uf}: give the user frame "
+                                  f"(--uframe {uf}=x,y,z,w,p,r)")
+            if ut not in utools:
+                raise FilterError(f"{path}:{dline}: P[{n}] uses UT {ut}: give the tool frame "
+                                  f"(--utool {ut}=x,y,z,w,p,r)")
+            speed = float(sp) * _SPEED[unit] if sp and unit in _SPEED else None
+            cart = all(k in fields for k in _CART)
+            names = _CART if cart else sorted([k for k in fields if k.startswith("J")])
+            if not cart and len(names) < 1:
+                raise FilterError(f"{path}:{dline}: P[{n}]: neither X..R nor J1..Jn")
+            vals = [float(fields[k][0]) for k in names]
+            spans = [("ls", fields[k][1], fields[k][2]) for k in names]
+            t = Target("ls", lineno, f"P[{n}]", kind, kind in ("L", "C"), not cart, vals, spans,
+                       uframes[uf], utools[ut], None,
+                       config=conf[0] if (cart and conf) else None,
+                       config_spans=[("ls",) + conf[1]] if (cart and conf) else [],
+                       speed=speed, decl_line=dline, decl_file="ls")
+            t.program_text = {"ls": text}
+            targets.append(t)
+        except FilterError as e:
+            if str(e).startswith(path):
+                raise
+            raise FilterError(f"{path}:{lineno}: {e}") from None
     return Program(FanucFormat(), {"ls": path}, {"ls": text}, targets)

@@ -214,9 +214,10 @@ def read_krl(src_path, *, base_data: Optional[dict] = None, tool_data: Optional[
         mm = re.match(r"\s*(BASE_DATA|TOOL_DATA|LOAD_DATA)\[(\d+)\]", ref, re.IGNORECASE)
         if mm:
             n = int(mm.group(2))
+            option = {"base": "frame"}.get(kind, kind)
             if n not in table:
                 raise FilterError(f"{where}: {mm.group(1).upper()}[{n}] is defined in the "
-                                  f"controller's $config.dat: give it (--{kind} {n}=...)")
+                                  f"controller's $config.dat: give it (--{option} {n}=...)")
             return table[n]
         return None
 
@@ -226,94 +227,99 @@ def read_krl(src_path, *, base_data: Optional[dict] = None, tool_data: Optional[
     pos = 0
     for lineno, raw in enumerate(text.splitlines(keepends=True), start=1):
         line_start, pos = pos, pos + len(raw)
-        code = _code(raw)
-        where = f"{src_path}:{lineno}"
-        if not code.strip():
-            continue
-        m = _VEL.match(code)
-        if m:
-            speed = float(m.group(1))
-        for b in _BAS.finditer(code):
-            n = int(b.group(2))
-            if b.group(1).upper() == "BASE":
-                base = lookup(f"BASE_DATA[{n}]", base_data, "base", where)
-            else:
-                tool = lookup(f"TOOL_DATA[{n}]", tool_data, "tool", where)
-                load = load_data.get(n, load)
-        m = _ASSIGN.match(code)
-        if m:
-            what, rhs = m.group(1).upper(), m.group(2).strip()
-            table = {"BASE": base_data, "TOOL": tool_data, "LOAD": load_data}[what]
-            value = lookup(rhs, table, what.lower(), where)
-            if value is None:
-                if rhs.startswith("{"):
-                    _, fields = _aggregate(text, line_start + raw.index("{"))
-                elif rhs.split(":")[0].strip().upper() in decls:
-                    fields = decls[rhs.split(":")[0].strip().upper()][3]
-                elif what == "BASE" and rhs.upper().startswith("$NULLFRAME"):
-                    fields = None
-                else:
-                    raise FilterError(f"{where}: ${what} = {rhs}: only aggregates, declared "
-                                      f"variables and {what}_DATA[n] are understood")
-                if what == "LOAD":
-                    value = _load(fields, text, where)
-                else:
-                    value = np.eye(4) if fields is None else _frame(fields, where)
-            if what == "BASE":
-                base = value
-            elif what == "TOOL":
-                tool = value
-            else:
-                load = value
-            continue
-        m = _MOTION.match(code)
-        if not m:
-            continue
-        kind = m.group(1).upper()
-        if kind.endswith("_REL"):
-            raise FilterError(f"{where}: {kind}: relative motions are not supported (their "
-                              "target depends on where the robot is)")
-        args = m.group(2)
-        arg_start = line_start + raw.index(args) if args else line_start
-        # Targets: aggregates or variable names, one (PTP/LIN) or two (CIRC).
-        items, i = [], 0
-        while i < len(args) and len(items) < (2 if "CIRC" in kind else 1):
-            if args[i].isspace() or args[i] == ",":
-                i += 1
+        try:
+            code = _code(raw)
+            where = f"{src_path}:{lineno}"
+            if not code.strip():
                 continue
-            if args[i] == "{":
-                end, fields = _aggregate(text, arg_start + i)
-                items.append(("inline", "src", lineno, fields))
-                i = end - arg_start
+            m = _VEL.match(code)
+            if m:
+                speed = float(m.group(1))
+            for b in _BAS.finditer(code):
+                n = int(b.group(2))
+                if b.group(1).upper() == "BASE":
+                    base = lookup(f"BASE_DATA[{n}]", base_data, "base", where)
+                else:
+                    tool = lookup(f"TOOL_DATA[{n}]", tool_data, "tool", where)
+                    load = load_data.get(n, load)
+            m = _ASSIGN.match(code)
+            if m:
+                what, rhs = m.group(1).upper(), m.group(2).strip()
+                table = {"BASE": base_data, "TOOL": tool_data, "LOAD": load_data}[what]
+                value = lookup(rhs, table, what.lower(), where)
+                if value is None:
+                    if rhs.startswith("{"):
+                        _, fields = _aggregate(text, line_start + raw.index("{"))
+                    elif rhs.split(":")[0].strip().upper() in decls:
+                        fields = decls[rhs.split(":")[0].strip().upper()][3]
+                    elif what == "BASE" and rhs.upper().startswith("$NULLFRAME"):
+                        fields = None
+                    else:
+                        raise FilterError(f"{where}: ${what} = {rhs}: only aggregates, declared "
+                                          f"variables and {what}_DATA[n] are understood")
+                    if what == "LOAD":
+                        value = _load(fields, text, where)
+                    else:
+                        value = np.eye(4) if fields is None else _frame(fields, where)
+                if what == "BASE":
+                    base = value
+                elif what == "TOOL":
+                    tool = value
+                else:
+                    load = value
                 continue
-            w = re.match(r"[A-Za-z_$][A-Za-z0-9_]*", args[i:])
-            if not w:
-                raise FilterError(f"{where}: cannot read the target of {kind}")
-            name = w.group(0).upper()
-            if name not in decls:
-                raise FilterError(f"{where}: {kind} {w.group(0)}: no declaration of "
-                                  f"{w.group(0)} in the .src or .dat")
-            t_kind, key, dline, fields = decls[name]
-            items.append((w.group(0), key, dline, fields))
-            i += len(w.group(0))
-        for label, key, dline, fields in items:
-            cart = all(k in fields for k in _CART)
-            joint = all(k in fields for k in _AXES)
-            if not cart and not joint:
-                present = [k for k in _CART if k in fields]
-                raise FilterError(f"{paths[key]}:{dline}: target {label}: "
-                                  + ("partial position aggregates are not supported (missing "
-                                     + ", ".join(k for k in _CART if k not in fields) + ")"
-                                     if present else "neither X..C nor A1..A6"))
-            names = _CART if cart else _AXES
-            vals = [_num(fields[k][0]) for k in names]
-            spans = [(key, fields[k][1], fields[k][2]) for k in names]
-            config, cspans = _parse_config(fields, key) if cart else ((None, None), [])
-            t = Target(file=key, line=lineno, name=label, motion=kind,
-                       process=kind in ("LIN", "CIRC", "SLIN", "SCIRC"), joint=not cart,
-                       values=vals, spans=spans, base=base, tool=tool, load=load,
-                       config=None if config == (None, None) else config, config_spans=cspans,
-                       speed=speed, decl_line=dline, decl_file=key)
-            t.program_text = texts
-            targets.append(t)
+            m = _MOTION.match(code)
+            if not m:
+                continue
+            kind = m.group(1).upper()
+            if kind.endswith("_REL"):
+                raise FilterError(f"{where}: {kind}: relative motions are not supported (their "
+                                  "target depends on where the robot is)")
+            args = m.group(2)
+            arg_start = line_start + raw.index(args) if args else line_start
+            # Targets: aggregates or variable names, one (PTP/LIN) or two (CIRC).
+            items, i = [], 0
+            while i < len(args) and len(items) < (2 if "CIRC" in kind else 1):
+                if args[i].isspace() or args[i] == ",":
+                    i += 1
+                    continue
+                if args[i] == "{":
+                    end, fields = _aggregate(text, arg_start + i)
+                    items.append(("inline", "src", lineno, fields))
+                    i = end - arg_start
+                    continue
+                w = re.match(r"[A-Za-z_$][A-Za-z0-9_]*", args[i:])
+                if not w:
+                    raise FilterError(f"{where}: cannot read the target of {kind}")
+                name = w.group(0).upper()
+                if name not in decls:
+                    raise FilterError(f"{where}: {kind} {w.group(0)}: no declaration of "
+                                      f"{w.group(0)} in the .src or .dat")
+                t_kind, key, dline, fields = decls[name]
+                items.append((w.group(0), key, dline, fields))
+                i += len(w.group(0))
+            for label, key, dline, fields in items:
+                cart = all(k in fields for k in _CART)
+                joint = all(k in fields for k in _AXES)
+                if not cart and not joint:
+                    present = [k for k in _CART if k in fields]
+                    raise FilterError(f"{paths[key]}:{dline}: target {label}: "
+                                      + ("partial position aggregates are not supported (missing "
+                                         + ", ".join(k for k in _CART if k not in fields) + ")"
+                                         if present else "neither X..C nor A1..A6"))
+                names = _CART if cart else _AXES
+                vals = [_num(fields[k][0]) for k in names]
+                spans = [(key, fields[k][1], fields[k][2]) for k in names]
+                config, cspans = _parse_config(fields, key) if cart else ((None, None), [])
+                t = Target(file=key, line=lineno, name=label, motion=kind,
+                           process=kind in ("LIN", "CIRC", "SLIN", "SCIRC"), joint=not cart,
+                           values=vals, spans=spans, base=base, tool=tool, load=load,
+                           config=None if config == (None, None) else config, config_spans=cspans,
+                           speed=speed, decl_line=dline, decl_file=key)
+                t.program_text = texts
+                targets.append(t)
+        except FilterError as e:
+            if str(e).startswith(src_path):
+                raise
+            raise FilterError(f"{src_path}:{lineno}: {e}") from None
     return Program(KrlFormat(), paths, texts, targets)

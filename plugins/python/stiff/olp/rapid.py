@@ -57,7 +57,8 @@ def _nums(tree, what: str) -> list:
 
 
 def _pose(tree, what: str) -> np.ndarray:
-    if not isinstance(tree, list) or len(tree) != 2:
+    if (not isinstance(tree, list) or len(tree) != 2 or not isinstance(tree[0], list)
+            or not isinstance(tree[1], list) or len(tree[0]) != 3 or len(tree[1]) != 4):
         raise FilterError(f"{what}: expected [[x,y,z],[q1,q2,q3,q4]]")
     try:
         return fr.abb_to_pose(_nums(tree[0], what), _nums(tree[1], what))
@@ -191,67 +192,83 @@ def read_rapid(path) -> Program:
     pos = 0
     for lineno, raw in enumerate(text.splitlines(keepends=True), start=1):
         line_start, pos = pos, pos + len(raw)
-        code = _code(raw)
-        m = _MOVE.match(code)
-        if not m:
-            continue
-        where = f"{path}:{lineno}"
-        inst = m.group(1)
-        args_start = line_start + m.start(2)
-        args = _split_args(m.group(2))
-        ntarget = 2 if inst.lower() == "movec" else 1
-        if len(args) < ntarget + 3:
-            raise FilterError(f"{where}: {inst}: expected target, speed, zone, tool")
-        positional = [re.split(r"\\", a)[0].strip() for a in args]
-        tool_name = positional[ntarget + 2].upper()
-        if tool_name not in tools:
-            raise FilterError(f"{where}: tooldata {positional[ntarget + 2]} is not declared in "
-                              "this module")
-        wm = re.search(r"\\WObj\s*:=\s*(\w+)", m.group(2), re.IGNORECASE)
-        wname = wm.group(1).upper() if wm else "WOBJ0"
-        if wname not in wobjs:
-            raise FilterError(f"{where}: wobjdata {wm.group(1)} is not declared in this module")
-        tool, load = tools[tool_name]
-        base = wobjs[wname]
-        sp_arg = positional[ntarget]
-        speed = _speed(sp_arg, speeds)
-        offset = 0
-        for k in range(ntarget):
-            arg = args[k]
-            a_start = args_start + offset + (len(arg) - len(arg.lstrip()))
-            offset += len(arg) + 1
-            name = arg.strip()
-            if name.startswith("["):
-                _, tree = _brackets(text, a_start)
-                label, dline, tkind = "inline", lineno, \
-                    "jointtarget" if inst.lower() == "moveabsj" else "robtarget"
-            else:
-                if "(" in name:
-                    raise FilterError(f"{where}: {inst} {name}: computed targets (Offs, RelTool)"
-                                      " are not supported")
-                if name.upper() not in decl:
-                    raise FilterError(f"{where}: {inst} {name}: not declared in this module")
-                tkind, dline, tree = decl[name.upper()]
-                label = name
-            if inst.lower() == "moveabsj":
-                if tkind != "jointtarget":
-                    raise FilterError(f"{where}: MoveAbsJ needs a jointtarget")
-                leaves = tree[0]
-                vals = _nums(leaves, f"{path}:{dline}: jointtarget {label}")
-                t = Target("mod", lineno, label, inst, False, True, vals,
-                           [("mod", lf[1], lf[2]) for lf in leaves], base, tool, load,
-                           speed=speed, decl_line=dline, decl_file="mod")
-            else:
-                if tkind != "robtarget" or len(tree) != 4:
-                    raise FilterError(f"{path}:{dline}: {label}: expected robtarget [[x,y,z],"
-                                      "[q1,q2,q3,q4],[cf1,cf4,cf6,cfx],[eax]]")
-                leaves = list(tree[0]) + list(tree[1])
-                vals = _nums(leaves, f"{path}:{dline}: robtarget {label}")
-                conf = [int(float(c[0])) for c in tree[2]]
-                t = Target("mod", lineno, label, inst, inst.lower().startswith(("movel", "movec")),
-                           False, vals, [("mod", lf[1], lf[2]) for lf in leaves], base, tool,
-                           load, config=conf, config_spans=[("mod", c[1], c[2]) for c in tree[2]],
-                           speed=speed, decl_line=dline, decl_file="mod")
-            t.program_text = {"mod": text}
-            targets.append(t)
+        try:
+            code = _code(raw)
+            m = _MOVE.match(code)
+            if not m:
+                continue
+            where = f"{path}:{lineno}"
+            inst = m.group(1)
+            args_start = line_start + m.start(2)
+            args = _split_args(m.group(2))
+            ntarget = 2 if inst.lower() == "movec" else 1
+            if len(args) < ntarget + 3:
+                raise FilterError(f"{where}: {inst}: expected target, speed, zone, tool")
+            positional = [re.split(r"\\", a)[0].strip() for a in args]
+            tool_name = positional[ntarget + 2].upper()
+            if tool_name not in tools:
+                raise FilterError(f"{where}: tooldata {positional[ntarget + 2]} is not declared in "
+                                  "this module")
+            wm = re.search(r"\\WObj\s*:=\s*(\w+)", m.group(2), re.IGNORECASE)
+            wname = wm.group(1).upper() if wm else "WOBJ0"
+            if wname not in wobjs:
+                raise FilterError(f"{where}: wobjdata {wm.group(1)} is not declared in this module")
+            tool, load = tools[tool_name]
+            base = wobjs[wname]
+            sp_arg = positional[ntarget]
+            speed = _speed(sp_arg, speeds)
+            offset = 0
+            for k in range(ntarget):
+                arg = args[k]
+                a_start = args_start + offset + (len(arg) - len(arg.lstrip()))
+                offset += len(arg) + 1
+                name = arg.strip()
+                if name.startswith("["):
+                    _, tree = _brackets(text, a_start)
+                    label, dline, tkind = "inline", lineno, \
+                        "jointtarget" if inst.lower() == "moveabsj" else "robtarget"
+                else:
+                    if "(" in name:
+                        raise FilterError(f"{where}: {inst} {name}: computed targets (Offs, RelTool)"
+                                          " are not supported")
+                    if name.upper() not in decl:
+                        raise FilterError(f"{where}: {inst} {name}: not declared in this module")
+                    tkind, dline, tree = decl[name.upper()]
+                    label = name
+                if inst.lower() == "moveabsj":
+                    if tkind != "jointtarget":
+                        raise FilterError(f"{where}: MoveAbsJ needs a jointtarget")
+                    if (not isinstance(tree, list) or len(tree) != 2 or not isinstance(tree[0], list)
+                            or len(tree[0]) != 6):
+                        raise FilterError(f"{path}:{dline}: {label}: expected jointtarget "
+                                          "[[j1,...,j6],[eax]]")
+                    leaves = tree[0]
+                    vals = _nums(leaves, f"{path}:{dline}: jointtarget {label}")
+                    t = Target("mod", lineno, label, inst, False, True, vals,
+                               [("mod", lf[1], lf[2]) for lf in leaves], base, tool, load,
+                               speed=speed, decl_line=dline, decl_file="mod")
+                else:
+                    if (tkind != "robtarget" or not isinstance(tree, list) or len(tree) != 4
+                            or not all(isinstance(x, list) for x in tree[:3])
+                            or [len(x) for x in tree[:3]] != [3, 4, 4]):
+                        raise FilterError(f"{path}:{dline}: {label}: expected robtarget [[x,y,z],"
+                                          "[q1,q2,q3,q4],[cf1,cf4,cf6,cfx],[eax]]")
+                    leaves = list(tree[0]) + list(tree[1])
+                    vals = _nums(leaves, f"{path}:{dline}: robtarget {label}")
+                    _pose(tree[:2], f"{path}:{dline}: robtarget {label}")  # unit quaternion
+                    try:
+                        conf = [int(c[0]) for c in tree[2]]
+                    except (TypeError, ValueError):
+                        raise FilterError(f"{path}:{dline}: robtarget {label}: confdata must be "
+                                          "four integers")
+                    t = Target("mod", lineno, label, inst, inst.lower().startswith(("movel", "movec")),
+                               False, vals, [("mod", lf[1], lf[2]) for lf in leaves], base, tool,
+                               load, config=conf, config_spans=[("mod", c[1], c[2]) for c in tree[2]],
+                               speed=speed, decl_line=dline, decl_file="mod")
+                t.program_text = {"mod": text}
+                targets.append(t)
+        except FilterError as e:
+            if str(e).startswith(path):
+                raise
+            raise FilterError(f"{path}:{lineno}: {e}") from None
     return Program(RapidFormat(), {"mod": path}, {"mod": text}, targets)
