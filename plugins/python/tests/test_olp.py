@@ -555,3 +555,24 @@ def test_damaged_programs_give_clear_errors(model, programs):
             except stiff.StiffError:
                 pass
             f.write_bytes(originals[f])
+
+
+def test_configuration_flags_on_an_abb_arm(root):
+    """IRB 120 (its robot file has ABB's joint zeros): at the zero pose the wrist centre is in
+    front of axis 1 and of the lower arm; the flags follow the vendors' definitions."""
+    from stiff.olp.target import ArmGeometry, Configuration, JointMap
+
+    irb = stiff.Robot(str(root / "examples" / "robots" / "abb_irb120.yaml"))
+    geo = ArmGeometry(irb)
+    conf = lambda deg: Configuration.of(geo, np.radians(deg), JointMap())
+    c = conf([0, 0, 0, 0, 30, 0])
+    assert c.abb_confdata() == [0, 0, 0, 0] and c.kuka_status() == 2
+    assert c.fanuc_config() == ("F", "U", "T", 0, 0, 0)
+    assert conf([0, 0, 0, 0, -30, 0]).abb_confdata() == [0, 0, 0, 1]
+    assert conf([-10, 0, 0, -100, 30, 200]).abb_confdata() == [-1, -2, 2, 0]
+    assert conf([-10, 0, 0, -100, 30, 200]).fanuc_config()[3:] == (0, 0, 1)
+    assert conf([0, 60, -100, 0, 30, 0]).abb_confdata()[3] == 2       # elbow down, in front
+    assert conf([0, 0, -100, 0, 30, 0]).abb_confdata()[3] == 6        # forearm past vertical
+    # behind axis 1: the arm leaning back over its base
+    back = conf([0, -100, -60, 0, 30, 0])
+    assert not back.front and back.abb_confdata()[3] >= 4 and back.kuka_status() & 1

@@ -114,9 +114,10 @@ class ArmGeometry:
       not move when joints 4-6 move);
     - shoulder: the wrist centre in front of axis 1 when it is on the side where it is at
       q2 = q3 = 0 (same q1);
-    - elbow: |c - axis 2|^2 = A + B cos q3 + C sin q3 (law of cosines), so the stretched arm is
-      at q3* = atan2(C, B); the elbow is 'up' when q3 - q3* (wrapped) has the sign it has at
-      q = 0;
+    - elbow: |c - axis 2|^2 = A + B cos q3 + C sin q3 (law of cosines), so the stretched arm
+      is at q3* = atan2(C, B); 'up' is the side of q3* on which the canonical pose lies (upper
+      arm vertical, forearm horizontal, wrist centre in front: the zero of ABB and Fanuc arms,
+      KUKA's A2 = -90, A3 = 90 deg), found from the geometry, not from the joint zeros;
     - wrist: the sign of joint 5 (axes 4 and 6 aligned at q5 = 0)."""
 
     def __init__(self, robot: Robot):
@@ -153,7 +154,31 @@ class ArmGeometry:
         m = np.array([[1, math.cos(x), math.sin(x)] for x in (0.0, 2 * math.pi / 3, 4 * math.pi / 3)])
         _, bb, cc = np.linalg.solve(m, d2)
         self.q3_stretched = math.atan2(cc, bb)
-        self.elbow_sign_at_zero = 1.0 if _wrap(0.0 - self.q3_stretched) >= 0 else -1.0
+        # Which side of the stretched arm is 'up': the side of the canonical pose with the upper
+        # arm vertical and the forearm horizontal, wrist centre in front (ABB and Fanuc zero,
+        # KUKA's A2 = -90, A3 = 90 deg): anchored in the geometry, not in the joint zeros.
+        up = self.axis1_dir if self.axis1_dir[2] >= 0 else -self.axis1_dir
+        best, q2v = -np.inf, 0.0
+        for a2 in np.linspace(-math.pi, math.pi, 73):
+            e = self._elbow(np.array([0, a2, 0, 0, 0, 0.0]))
+            r = e - self.axis2_point
+            h = float(r @ up) / max(float(np.linalg.norm(r)), 1e-12)
+            if h > best:
+                best, q2v = h, a2
+        self.elbow_sign = 1.0
+        for cand in (self.q3_stretched + math.pi / 2, self.q3_stretched - math.pi / 2):
+            if self.front(np.array([0, q2v, cand, 0, 0, 0.0])):
+                self.elbow_sign = 1.0 if _wrap(cand - self.q3_stretched) >= 0 else -1.0
+                break
+
+    def _elbow(self, q) -> np.ndarray:
+        """A point on axis 3: the centre of the circle the wrist centre draws about it."""
+        pts = []
+        for dq in (-0.3, 0.0, 0.3):
+            v = np.array(q, dtype=float)
+            v[2] += dq
+            pts.append(self.centre(v))
+        return _circumcentre(*pts)
 
     def centre(self, q) -> np.ndarray:
         t = tool_poses(self.robot, np.asarray(q, dtype=float))[0]
@@ -168,7 +193,7 @@ class ArmGeometry:
         return float(c[:2] @ c0[:2]) >= 0.0
 
     def elbow_up(self, q) -> bool:
-        return _wrap(float(q[2]) - self.q3_stretched) * self.elbow_sign_at_zero >= 0.0
+        return _wrap(float(q[2]) - self.q3_stretched) * self.elbow_sign >= 0.0
 
     def wrist_positive(self, q) -> bool:
         return float(q[4]) >= 0.0
