@@ -576,3 +576,43 @@ def test_configuration_flags_on_an_abb_arm(root):
     # behind axis 1: the arm leaning back over its base
     back = conf([0, -100, -60, 0, 30, 0])
     assert not back.front and back.abb_confdata()[3] >= 4 and back.kuka_status() & 1
+
+
+def test_circular_moves_controller_frames_and_fanuc_joints(robot, model, tmp_path):
+    """KRL CIRC (two inline targets) with BAS(#BASE/#TOOL, n) frames from the controller, and a
+    Fanuc circular move (continuation line) plus a joint position: all compensated, FK check."""
+    m, _ = model
+    src = tmp_path / "circ.src"
+    src.write_text("DEF circ()\n  BAS(#BASE, 1)\n  BAS(#TOOL, 2)\n"
+                   "  LIN {X 60.0, Y 0.0, Z -2.0, A 0.0, B 10.0, C 180.0}\n"
+                   "  CIRC {X 80.0, Y 30.0, Z -2.0, A 0.0, B 10.0, C 180.0}, "
+                   "{X 60.0, Y 60.0, Z -2.0, A 0.0, B 10.0, C 180.0} C_DIS ; arc\nEND\n")
+    frames = dict(frames={1: fr.kuka_to_pose(*WP)}, tools={2: fr.kuka_to_pose(*TOOL)})
+    prog = olp.read_program(src, **frames)
+    assert [t.motion for t in prog.targets] == ["LIN", "CIRC", "CIRC"]
+    res = olp.filter_program(prog, m, olp.WrenchSpec(force=[0, 50, -100]))
+    (tmp_path / "o").mkdir()
+    res.write(tmp_path / "o")
+    _check_program(robot, m, src, tmp_path / "o", res, **frames)
+    # Fanuc: joint position P[1], linear P[2], circular via P[3] to P[4]
+    q = np.radians([-8.0, -50.0, 8.0, -5.0, 52.0, -20.0])
+    joint = "\t" + ",\t".join(f"J{i + 1}= {v:10.3f} deg" for i, v in enumerate(np.degrees(q)))
+    pts = {2: (60, 0), 3: (80, 30), 4: (60, 60)}
+    pos = ["P[1]{", "   GP1:", "\tUF : 1, UT : 1,", joint, "};"]
+    for n, (x, y) in pts.items():
+        pos += [f"P[{n}]{{", "   GP1:", "\tUF : 1, UT : 1,\t\tCONFIG : 'F U T, 0, 0, 0',",
+                f"\tX = {x:9.3f}  mm,\tY = {y:9.3f}  mm,\tZ =    -2.000  mm,",
+                "\tW =  180.000 deg,\tP =   10.000 deg,\tR =    0.000 deg", "};"]
+    ls = tmp_path / "arc.ls"
+    ls.write_text("\n".join(["/PROG  ARC", "/MN", "   1:J P[1] 20% FINE    ;",
+                             "   2:L P[2] 20mm/sec FINE    ;", "   3:C P[3]    ;",
+                             "    :  P[4] 20mm/sec CNT50    ;", "/POS"] + pos + ["/END", ""]))
+    lsf = dict(frames={1: fr.fanuc_to_pose(*WP)}, tools={1: fr.fanuc_to_pose(*TOOL)})
+    prog = olp.read_program(ls, **lsf)
+    assert [(t.name, t.motion, t.joint) for t in prog.targets] == [
+        ("P[1]", "J", True), ("P[2]", "L", False), ("P[3]", "C", False), ("P[4]", "C", False)]
+    res = olp.filter_program(prog, m, olp.WrenchSpec(force=[0, 50, -100], tool_load=olp.ToolLoad(
+        4.0, np.array([0, 0, 0.05])), tool_weight=True))
+    (tmp_path / "o2").mkdir()
+    res.write(tmp_path / "o2")
+    _check_program(robot, m, ls, tmp_path / "o2", res, **lsf)
