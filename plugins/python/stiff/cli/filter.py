@@ -22,10 +22,11 @@ from . import UserError
 from .common import Formatter, add_robot, atomic_write_text, robot_path, table
 
 EXAMPLE = """worked example (docs/olp.md):
-  stiff simulate --robot rokae --count 40 -o data.csv
+  stiff simulate --robot rokae --stiffness 50914,16382,31311,7791.1,5613.6,4000 --count 40 \\
+      -o data.csv
   stiff identify --robot rokae --data data.csv -o fit.json
   stiff filter --robot rokae --fit fit.json examples/programs/kuka/slot.src --tool-weight \\
-      --material C45 --cut 10,2,0.05,10,2 -o filtered --report filtered/report.csv
+      --material C45 --cut 10,2,0.05,5,2 -o filtered --report filtered/report.csv
 
 Frames the program names by number live in the controller: --frame N=..., --tool N=...
 in the program's own convention (KRL x,y,z,a,b,c; Fanuc x,y,z,w,p,r) [mm, deg];
