@@ -13,7 +13,7 @@ from .program import FilterError, Program, Target, ToolLoad
 
 NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _PAIR = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)\s+('B[01]+'|" + NUM + ")")
-_MOTION = re.compile(r"^\s*(PTP|LIN|CIRC|SPTP|SLIN|SCIRC|PTP_REL|LIN_REL|CIRC_REL)\b\s*(.*)$",
+_MOTION = re.compile(r"^\s*(PTP|LIN|CIRC|SPTP|SLIN|SCIRC|SPL|PTP_REL|LIN_REL|CIRC_REL)\b\s*(.*)$",
                      re.IGNORECASE)
 _DECL = re.compile(r"\bDECL\s+(?:GLOBAL\s+)?(E6POS|POS|FRAME|E6AXIS|AXIS|LOAD)\s+(\w+)\s*=\s*\{",
                    re.IGNORECASE)
@@ -312,7 +312,7 @@ def read_krl(src_path, *, base_data: Optional[dict] = None, tool_data: Optional[
                 spans = [(key, fields[k][1], fields[k][2]) for k in names]
                 config, cspans = _parse_config(fields, key) if cart else ((None, None), [])
                 t = Target(file=key, line=lineno, name=label, motion=kind,
-                           process=kind in ("LIN", "CIRC", "SLIN", "SCIRC"), joint=not cart,
+                           process=kind in ("LIN", "CIRC", "SLIN", "SCIRC", "SPL"), joint=not cart,
                            values=vals, spans=spans, base=base, tool=tool, load=load,
                            config=None if config == (None, None) else config, config_spans=cspans,
                            speed=speed, decl_line=dline, decl_file=key)
