@@ -124,6 +124,8 @@ def _masked(text: str, spans) -> str:
 def _oracle_pose(fmt_name, values):
     if fmt_name == "KUKA KRL":
         return mat(rm.KUKA_2_Pose(values))
+    if fmt_name == "Yaskawa JBI":
+        return mat(rm.Motoman_2_Pose(values[:6]))
     if fmt_name == "ABB RAPID":
         t = mat(rm.quaternion_2_pose(values[3:7]))
         t[:3, 3] = np.array(values[:3]) * 1e-3
@@ -247,6 +249,23 @@ def test_fanuc_golden(robot, model, programs, tmp_path):
     res.write(out)
     _check_program(robot, m, src, out, res, **frames)
     with pytest.raises(olp.FilterError, match="UF 1"):
+        olp.read_program(src)
+
+
+def test_jbi_golden(robot, model, programs, tmp_path):
+    m, _ = model
+    src = programs / "yaskawa" / "SLOT.JBI"
+    frames = dict(frames={1: fr.fanuc_to_pose(*WP)}, tools={1: fr.fanuc_to_pose(*TOOL)})
+    prog = olp.read_program(src, **frames)
+    assert [t.motion for t in prog.targets][:2] == ["MOVJ", "MOVL"]
+    res = olp.filter_program(prog, m, olp.WrenchSpec(
+        force=[20, 60, -100], tool_load=olp.ToolLoad(4.5, np.array([0, 0, 0.06])),
+        tool_weight=True))
+    out = tmp_path / "out"
+    res.write(out)
+    _check_program(robot, m, src, out, res, **frames)
+    assert (out / "SLOT.JBI").read_bytes().count(b"\r\n") == src.read_bytes().count(b"\r\n")
+    with pytest.raises(olp.FilterError, match="SLOT.JBI:10: C00000 is in user frame 1"):
         olp.read_program(src)
 
 
@@ -530,7 +549,8 @@ def test_damaged_programs_give_clear_errors(model, programs):
     rng = random.Random(3)
     frames = dict(frames={1: fr.fanuc_to_pose(*WP)}, tools={1: fr.fanuc_to_pose(*TOOL)})
     files = [programs / "kuka" / "slot.src", programs / "kuka" / "slot.dat",
-             programs / "abb" / "Slot.mod", programs / "fanuc" / "slot.ls"]
+             programs / "abb" / "Slot.mod", programs / "fanuc" / "slot.ls",
+             programs / "yaskawa" / "SLOT.JBI"]
     originals = {f: f.read_bytes() for f in files}
     for f in files:
         for _ in range(40):
@@ -548,7 +568,7 @@ def test_damaged_programs_give_clear_errors(model, programs):
             f.write_bytes(bytes(b))
             main = f.with_suffix(".src") if f.suffix == ".dat" else f
             try:
-                prog = olp.read_program(main, **(frames if f.suffix == ".ls" else {}))
+                prog = olp.read_program(main, **(frames if f.suffix in (".ls", ".JBI") else {}))
                 olp.filter_program(prog, m, olp.WrenchSpec(force=[0, 0, -50], tool_weight=True))
             except olp.FilterError as e:
                 assert main.name in str(e) or f.name in str(e), str(e)

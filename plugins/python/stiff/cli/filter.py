@@ -29,7 +29,8 @@ EXAMPLE = """worked example (docs/olp.md):
       --material C45 --cut 10,2,0.05,5,2 -o filtered --report filtered/report.csv
 
 Frames the program names by number live in the controller: --frame N=..., --tool N=...
-in the program's own convention (KRL x,y,z,a,b,c; Fanuc x,y,z,w,p,r) [mm, deg];
+in the program's own convention (KRL x,y,z,a,b,c; Fanuc x,y,z,w,p,r; JBI x,y,z,rx,ry,rz)
+[mm, deg];
 --load N=mass,cx,cy,cz [kg, mm] for KRL LOAD_DATA[N]."""
 
 
@@ -58,10 +59,12 @@ def _numbered(items, n, what, convert) -> dict:
 
 
 def register(sub):
-    p = sub.add_parser("filter", help="compensate the targets of a KUKA, ABB or Fanuc program",
+    p = sub.add_parser("filter", help="compensate the targets of a KUKA, ABB, Fanuc or Yaskawa "
+                       "program",
                        description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
     add_robot(p)
-    p.add_argument("program", help="program file: .src (KRL, its .dat beside it), .mod, .ls")
+    p.add_argument("program", help="program file: .src (KRL, its .dat beside it), .mod, .ls, "
+                   ".jbi")
     p.add_argument("--fit", "-f", required=True, help="fit JSON of the robot")
     p.add_argument("--output", "-o", required=True,
                    help="output directory (the program is written there under its own name)")
@@ -101,7 +104,7 @@ def register(sub):
 
 def run(args):
     ext = args.program.lower().rsplit(".", 1)[-1]
-    conv = fr.fanuc_to_pose if ext == "ls" else fr.kuka_to_pose
+    conv = fr.fanuc_to_pose if ext in ("ls", "jbi") else fr.kuka_to_pose
     frames = _numbered(args.frame, 6, "--frame", lambda v: conv(*v))
     tools = _numbered(args.tool, 6, "--tool", lambda v: conv(*v))
     loads = _numbered(args.load, 4, "--load",

@@ -21,8 +21,9 @@ __all__ = ["read_program", "filter_file", "filter_program", "filter_target", "Fi
 def read_program(path, *, frames: Optional[dict] = None, tools: Optional[dict] = None,
                  loads: Optional[dict] = None) -> Program:
     """Parse a program by its extension: .src (KRL, with its .dat), .mod/.modx/.prg (RAPID),
-    .ls (Fanuc). frames/tools: {n: 4 x 4} controller frames the program refers to by number
-    (KRL BASE_DATA/TOOL_DATA, Fanuc UFRAME/UTOOL); loads: {n: ToolLoad} (KRL LOAD_DATA)."""
+    .ls (Fanuc), .jbi (Yaskawa). frames/tools: {n: 4 x 4} controller frames the program refers
+    to by number (KRL BASE_DATA/TOOL_DATA, Fanuc UFRAME/UTOOL, JBI USER/TOOL); loads: {n:
+    ToolLoad} (KRL LOAD_DATA)."""
     ext = os.path.splitext(os.fspath(path))[1].lower()
     if ext == ".src":
         from .krl import read_krl
@@ -33,7 +34,11 @@ def read_program(path, *, frames: Optional[dict] = None, tools: Optional[dict] =
     if ext == ".ls":
         from .fanuc import read_ls
         return read_ls(path, uframes=frames, utools=tools)
-    raise FilterError(f"{path}: unknown program type '{ext}' (KUKA .src, ABB .mod, Fanuc .ls)")
+    if ext == ".jbi":
+        from .jbi import read_jbi
+        return read_jbi(path, uframes=frames, utools=tools)
+    raise FilterError(f"{path}: unknown program type '{ext}' (KUKA .src, ABB .mod, Fanuc .ls, "
+                      "Yaskawa .jbi)")
 
 
 def filter_file(model, path, wrench: WrenchSpec, options: Optional[FilterOptions] = None,

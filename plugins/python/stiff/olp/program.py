@@ -461,6 +461,12 @@ def filter_program(program: Program, model: Model, wrench: WrenchSpec,
                                         first.correction, first.residual, status, q_nom, ft.q,
                                         psi))
             continue
+        if not np.any(w) and not psi:
+            # no load and no rotation: nothing to compensate, the numbers stay as written
+            reports.append(TargetReport(number, t.file, t.line, t.name, t.motion, w, ft.deflection,
+                                        np.zeros(3), 0.0, status, q_nom, ft.q, psi))
+            done[key] = (w, reports[-1])
+            continue
         new_values = (list(o.joint_map.to_vendor(ft.q)) if t.joint
                       else fmt.values_of(ft.pose, t))
         texts = fmt.format_values(t, new_values, o.min_decimals)
