@@ -269,6 +269,20 @@ def test_jbi_golden(robot, model, programs, tmp_path):
         olp.read_program(src)
 
 
+def test_feed_per_tooth_follows_the_programmed_speed(model, programs):
+    """KRL $VEL.CP = 0.02 m/s at 12000 1/min with 2 teeth: f_z = 0.05 mm whatever --cut says."""
+    m, _ = model
+    prog = olp.read_program(programs / "kuka" / "slot.src")
+    material = MATERIALS["C45"]
+    fast = olp.filter_program(prog, m, olp.WrenchSpec(
+        milling=(material, MillingCut(10.0, 2, 0.2, 5.0, 2.0)), spindle_rpm=12000.0))
+    direct = olp.filter_program(prog, m, olp.WrenchSpec(
+        milling=(material, MillingCut(10.0, 2, 0.05, 5.0, 2.0))))
+    w1 = np.array([r.wrench for r in fast.targets])
+    w2 = np.array([r.wrench for r in direct.targets])
+    assert np.abs(w1).max() > 50 and np.allclose(w1, w2, atol=1e-9)
+
+
 def test_wrong_configuration_and_bad_programs_are_clear_errors(model, programs, tmp_path):
     m, _ = model
     dat = programs / "kuka" / "slot.dat"

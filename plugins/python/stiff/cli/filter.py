@@ -81,6 +81,9 @@ def register(sub):
     p.add_argument("--material", help="Kienzle constants by name: " + ", ".join(MATERIALS))
     p.add_argument("--kc", help="Kienzle constants kc1.1,mc [N/mm^2, -] (instead of --material)")
     p.add_argument("--cut", help="milling cut D,z,fz,ae,ap [mm, teeth, mm, mm, mm]")
+    p.add_argument("--spindle-rpm", type=float,
+                   help="spindle speed [1/min]: the feed per tooth of each motion follows from "
+                   "its programmed speed, f_z = v / (n z), instead of the fz of --cut")
     p.add_argument("--up-milling", action="store_true", help="up (conventional) milling; "
                    "default down (climb) milling")
     p.add_argument("--radial-ratio", type=float, default=0.3, help="F_r / F_t (default 0.3)")
@@ -132,6 +135,10 @@ def run(args):
                          args.axial_ratio)
         cut.check()
         spec.milling = (mat, cut)
+        if args.spindle_rpm is not None:
+            if not args.spindle_rpm > 0:
+                raise UserError("--spindle-rpm must be positive")
+            spec.spindle_rpm = args.spindle_rpm
     opts = FilterOptions(min_decimals=args.decimals, allow_config_change=args.allow_config_change,
                          tool_rotation_limit_deg=args.tool_rotation,
                          tool_rotation_max_step_deg=args.tool_rotation_step)

@@ -13,8 +13,9 @@ sequence with the least sum of squared deflections among the admissible, smooth 
 small cost on each change and on the size of the rotation, which settle ties towards a smooth
 and small rotation). psi = 0
 everywhere is always admissible when the nominal path is, so a solution exists.
-The process wrench is taken as independent of psi (a rotationally symmetric cutter: the cutting
-force follows the feed direction and the tool axis, not the spindle housing)."""
+The process wrench is independent of psi (a rotationally symmetric cutter: the cutting force
+follows the feed direction and the tool axis, not the spindle housing); the weight of a tool
+whose centre of gravity is off the tool axis turns with it (pass wrenches as a function)."""
 from __future__ import annotations
 
 import math
@@ -51,12 +52,17 @@ def optimise_tool_rotation(model, poses, wrenches, base=None, tool=None, q_seed=
                            max_step_deg: float = 10.0, key=None, near_singular=None,
                            ) -> ToolRotation:
     """poses: (N, 4, 4) TCP targets in the reference frame; wrenches: (N, 6) at the TCP in the
-    reference frame; q_seed: joints near the first target's nominal solution. key(q): the
+    reference frame, or wrenches(i, rotated_pose) -> (6,) when the wrench turns with the tool
+    (the weight of an off-axis tool); q_seed: joints near the first target's nominal solution. key(q): the
     configuration that must not change (e.g. a format's configuration flags); near_singular(q):
     True inside the singularity margins. Both default to none."""
     poses = np.asarray(poses, dtype=float).reshape(-1, 4, 4)
-    w = np.asarray(wrenches, dtype=float).reshape(-1, 6)
     n_pts = poses.shape[0]
+    if callable(wrenches):
+        wrench_at = wrenches
+    else:
+        w = np.asarray(wrenches, dtype=float).reshape(-1, 6)
+        wrench_at = lambda i, pose: w[i]
     k = int(round(limit_deg / resolution_deg))
     grid = np.radians(resolution_deg) * np.arange(-k, k + 1)
     zero = k
@@ -66,7 +72,7 @@ def optimise_tool_rotation(model, poses, wrenches, base=None, tool=None, q_seed=
     seed = q_seed
     bad = POINT_UNREACHABLE | POINT_SINGULAR | POINT_NOT_CONVERGED
     for i in range(n_pts):
-        nom = filter_target(model, poses[i], seed, w[i], base, tool)
+        nom = filter_target(model, poses[i], seed, wrench_at(i, poses[i]), base, tool)
         if nom.status & bad:
             raise ValueError(f"target {i + 1}: the nominal orientation is not usable "
                              f"(status {nom.status}); fix the path first")
@@ -77,7 +83,8 @@ def optimise_tool_rotation(model, poses, wrenches, base=None, tool=None, q_seed=
             if j == zero:
                 defl[i, j], qs[i, j] = np.linalg.norm(nom.deflection[:3]), q_nom
                 continue
-            r = filter_target(model, rotate_about_tool_axis(poses[i], psi), q_nom, w[i], base, tool)
+            rotated = rotate_about_tool_axis(poses[i], psi)
+            r = filter_target(model, rotated, q_nom, wrench_at(i, rotated), base, tool)
             if r.status & bad:
                 continue
             q = _nominal_q(model, rotate_about_tool_axis(poses[i], psi), r, q_nom, base, tool)

@@ -12,7 +12,7 @@ import ctypes as C
 import math
 import os
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Optional, Sequence
 
 import numpy as np
@@ -101,13 +101,15 @@ class WrenchSpec:
     force_file: CSV `target,fx_N,fy_N,fz_N[,mx_Nm,my_Nm,mz_Nm]` per target number (1-based,
     the report's numbering), overriding the constant force for the targets it lists;
     milling: (material, cut) for the Kienzle model on process moves, directed along the
-    motion; tool_weight: add the gravity of the program's tool load (or `tool_load`)."""
+    motion (with spindle_rpm, the feed per tooth of each motion follows from its programmed
+    speed: f_z = v / (n z)); tool_weight: add the gravity of the program's tool load (or `tool_load`)."""
 
     force: Optional[Sequence[float]] = None
     force_file: Optional[str] = None
     milling: Optional[tuple] = None
     tool_weight: bool = False
     tool_load: Optional[ToolLoad] = None
+    spindle_rpm: Optional[float] = None  # milling: f_z from each motion's programmed speed
 
 
 @dataclass
@@ -353,6 +355,22 @@ class _Engine:
         return _inv(t.base) @ loaded @ back, _inv(t.base) @ mp_pose @ back
 
 
+def _weight_wrench(t: Target, pose_ref: np.ndarray, load: Optional[ToolLoad]) -> np.ndarray:
+    """Weight of the tool load at the TCP, reference-frame components, with the tool at the
+    target (the loaded state): F = m g, M = (p_cog - p_TCP) x F."""
+    w = np.zeros(6)
+    if load is None:
+        return w
+    tcp = t.base @ pose_ref
+    fl = tcp @ _inv(t.tool)
+    f = load.mass * GRAVITY
+    cog = (fl @ np.append(load.cog, 1.0))[:3]
+    rb = t.base[:3, :3]
+    w[:3] = rb.T @ f
+    w[3:] = rb.T @ np.cross(cog - tcp[:3, 3], f)
+    return w
+
+
 def _process_wrench(spec: WrenchSpec, t: Target, number: int, forces: dict, prev_pos,
                     pose_ref: np.ndarray) -> np.ndarray:
     w = np.zeros(6)
@@ -365,6 +383,9 @@ def _process_wrench(spec: WrenchSpec, t: Target, number: int, forces: dict, prev
         w[:f.size] = f
     if spec.milling is not None and prev_pos is not None:
         material, cut = spec.milling
+        if spec.spindle_rpm and t.speed:
+            # feed per tooth from the programmed feed: f_z = v_f / (n z)
+            cut = replace(cut, feed_per_tooth=t.speed * 1e3 * 60.0 / (spec.spindle_rpm * cut.teeth))
         feed = pose_ref[:3, 3] - prev_pos
         axis = pose_ref[:3, 2]
         feed = feed - axis * (feed @ axis)
@@ -387,7 +408,7 @@ def filter_program(program: Program, model: Model, wrench: WrenchSpec,
     n = model.robot.dof
     prev_q = (np.asarray(o.q_start, dtype=float) if o.q_start is not None
               else 0.5 * (eng.lo + eng.hi))
-    prev_pos = None
+    prev_pos, prev_base = None, None
     motions = next(iter(program.paths))  # the file with the motion instructions
     # Pass 1: nominal pose, joints and wrench of every target.
     plan = []
@@ -409,25 +430,20 @@ def filter_program(program: Program, model: Model, wrench: WrenchSpec,
             if q_nom is None and len(sols):
                 raise FilterError(f"{where}: target {t.name}: no inverse kinematics solution "
                                   f"in the configuration the program gives ({fmt.config_text(t)})")
-        w = _process_wrench(wrench, t, number, forces, prev_pos, pose_ref)
-        load = wrench.tool_load or t.load
-        if wrench.tool_weight and load is not None and q_nom is not None:
-            fl = eng.flange(q_nom)
-            f_base = load.mass * GRAVITY
-            cog = (fl @ np.append(load.cog, 1.0))[:3]
-            tcp = (fl @ t.tool)[:3, 3]
-            rb = t.base[:3, :3]
-            w[:3] += rb.T @ f_base
-            w[3:] += rb.T @ np.cross(cog - tcp, f_base)
-        prev_pos = pose_ref[:3, 3]
+        if prev_base is not t.base:
+            prev_pos = None  # a new reference frame: no feed direction from the last target
+        w_process = _process_wrench(wrench, t, number, forces, prev_pos, pose_ref)
+        load = (wrench.tool_load or t.load) if wrench.tool_weight else None
+        w = w_process + _weight_wrench(t, pose_ref, load)
+        prev_pos, prev_base = pose_ref[:3, 3], t.base
         if q_nom is not None:
             prev_q = q_nom
-        plan.append([t, pose_ref, q_nom, w, 0.0, float("nan")])
+        plan.append([t, pose_ref, q_nom, w, 0.0, float("nan"), w_process, load])
     if o.tool_rotation_limit_deg:
         _rotate_paths(plan, eng, fmt, o)
     # Pass 2: compensate and print.
     reps, reports, done = [], [], {}
-    for number, (t, pose_ref, q_nom, w, psi, d0) in enumerate(plan, start=1):
+    for number, (t, pose_ref, q_nom, w, psi, d0, _, _) in enumerate(plan, start=1):
         where = f"{program.paths[motions]}:{t.line}"
         if q_nom is None:
             reports.append(TargetReport(number, t.file, t.line, t.name, t.motion, w, np.zeros(6),
@@ -497,7 +513,7 @@ def _rotate_paths(plan: list, eng: "_Engine", fmt, o: FilterOptions) -> None:
     from .orient import optimise_tool_rotation, rotate_about_tool_axis
 
     runs, cur = [], []
-    for i, (t, pose, q, w, _, _) in enumerate(plan):
+    for i, (t, pose, q, w, *_) in enumerate(plan):
         ok = t.process and not t.joint and q is not None
         if ok and cur and (plan[cur[-1]][0].base is not t.base or plan[cur[-1]][0].tool is not t.tool):
             runs.append(cur)
@@ -514,13 +530,17 @@ def _rotate_paths(plan: list, eng: "_Engine", fmt, o: FilterOptions) -> None:
         key = lambda q: fmt.config_key(eng.configuration(q))
     for run in runs:
         t0 = plan[run[0]][0]
+        # the process wrench does not turn with the tool; the weight of an off-axis tool does
+        wrench_at = lambda k, pose, run=run: plan[run[k]][6] + _weight_wrench(
+            plan[run[k]][0], pose, plan[run[k]][7])
         rot = optimise_tool_rotation(
-            eng.model, [plan[i][1] for i in run], [plan[i][3] for i in run], t0.base, t0.tool,
+            eng.model, [plan[i][1] for i in run], wrench_at, t0.base, t0.tool,
             plan[run[0]][2], limit_deg=o.tool_rotation_limit_deg,
             resolution_deg=o.tool_rotation_resolution_deg,
             max_step_deg=o.tool_rotation_max_step_deg, key=key, near_singular=eng.near_singular)
         for i, psi, q, d0 in zip(run, rot.psi, rot.q, rot.nominal):
             plan[i][1] = rotate_about_tool_axis(plan[i][1], float(psi))
+            plan[i][3] = plan[i][6] + _weight_wrench(plan[i][0], plan[i][1], plan[i][7])
             plan[i][2] = q
             plan[i][4] = float(psi)
             plan[i][5] = float(d0)
