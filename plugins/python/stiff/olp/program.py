@@ -270,7 +270,12 @@ class _Engine:
         self.robot = model.robot
         self.o = options
         self.mp, self.lp = tool_points(self.robot)
-        self.geometry = ArmGeometry(self.robot) if self.robot.dof == 6 else None
+        try:
+            self.geometry = ArmGeometry(self.robot)
+        except ValueError:
+            # not a 6R arm with a spherical wrist: no configuration flags to compute or check;
+            # targets take the solution nearest the previous one
+            self.geometry = None
         lo, hi = self.robot.limits
         self.lo, self.hi = lo, hi
 
@@ -312,7 +317,7 @@ class _Engine:
     def matches(self, fmt, t: Target, q) -> bool:
         """Do the joints q have the configuration the program writes? A joint within 1e-6 rad
         of a turn or quadrant boundary matches either side (rounding of the program)."""
-        if fmt.config_matches(t, self.configuration(q)):
+        if self.geometry is None or fmt.config_matches(t, self.configuration(q)):
             return True
         for j in (0, 3, 5):
             for eps in (-1e-6, 1e-6):
