@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional
-
 import numpy as np
 
 from ..compensate import POINT_NOT_CONVERGED, POINT_SINGULAR, POINT_UNREACHABLE

@@ -13,7 +13,7 @@ import math
 import os
 import tempfile
 from dataclasses import dataclass, field, replace
-from typing import Callable, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -23,7 +23,7 @@ from ..api import Model, Robot
 from ..compensate import (POINT_NOT_CONVERGED, POINT_SINGULAR, POINT_UNREACHABLE,
                           inverse_kinematics, tool_poses)
 from ..errors import StiffError
-from .cutting import KienzleMaterial, MillingCut, mean_force
+from .cutting import mean_force
 from .target import POINT_CONFIG_CHANGE, ArmGeometry, Configuration, JointMap, filter_target
 
 __all__ = ["FilterError", "ToolLoad", "Target", "Program", "WrenchSpec", "FilterOptions",

@@ -17,7 +17,7 @@ from typing import Optional
 
 import numpy as np
 
-from .cutting import KienzleMaterial, MillingCut, mean_force
+from .cutting import mean_force
 from .program import GRAVITY, ToolLoad
 from .target import JointMap, filter_target
 
@@ -137,9 +137,8 @@ class CompensatingPost:
                         fx, fy, fa = mean_force(material, cut)
                         w[:3] += fx * x + fy * np.cross(axis, x) - fa * axis
         if self._load is not None:
-            from .program import _inv, _trans, tool_points
+            from .program import _inv
 
-            mp, _ = tool_points(self._model.robot)
             fl = self._frame @ pose @ _inv(self._tool)
             cog = (fl @ np.append(self._load.cog, 1.0))[:3]
             f = self._load.mass * GRAVITY

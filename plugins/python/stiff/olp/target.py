@@ -13,7 +13,7 @@ import numpy as np
 from .. import _capi as _c
 from .._capi import check, lib
 from ..api import Model, Robot
-from ..compensate import POINT_NOT_CONVERGED, POINT_SINGULAR, POINT_UNREACHABLE, tool_poses
+from ..compensate import tool_poses
 
 __all__ = ["FilteredTarget", "filter_target", "JointMap", "ArmGeometry", "Configuration",
            "POINT_CONFIG_CHANGE"]
