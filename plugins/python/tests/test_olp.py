@@ -392,11 +392,11 @@ class _TestPost:
 
     def MoveJ(self, pose, joints, conf_RLF=None):
         self.lines.append("PTP " + " ".join(f"{v:.9f}" for v in rm.Pose_2_KUKA(pose)) +
-                          " | " + " ".join(f"{v:.9f}" for v in joints))
+                          " | " + " ".join(f"{v:.9f}" for v in (joints or [])))
 
     def MoveL(self, pose, joints, conf_RLF=None):
         self.lines.append("LIN " + " ".join(f"{v:.9f}" for v in rm.Pose_2_KUKA(pose)) +
-                          " | " + " ".join(f"{v:.9f}" for v in joints))
+                          " | " + " ".join(f"{v:.9f}" for v in (joints or [])))
 
     def ProgFinish(self, name):
         self.lines.append("END")
@@ -404,7 +404,7 @@ class _TestPost:
 
 def test_robodk_wrapper_drives_a_test_post(robot, model):
     m, _ = model
-    from stiff.olp.robodk_post import compensating_post_class
+    from stiff.olp.robodk_post import CompensatingPost, compensating_post_class
 
     material, cut = MATERIALS["C45"], MillingCut(10.0, 2, 0.05, 5.0, 2.0)
     RobotPost = compensating_post_class(_TestPost, m, milling=(material, cut))
@@ -448,6 +448,18 @@ def test_robodk_wrapper_drives_a_test_post(robot, model):
             assert np.linalg.norm(written[:3, 3] - nominal) > 10e-6
         else:
             assert np.linalg.norm(written[:3, 3] - nominal) < 1e-9
+    # a force table (3 values: a pure force) and a tool weight instead of the milling model
+    load = olp.ToolLoad(5.0, np.array([0.0, 0.0, 0.05]))
+    wrapped = CompensatingPost(_TestPost(), m, force_file={2: [0, 0, -90]}, tool_load=load)
+    wrapped.setFrame(frame)
+    wrapped.setTool(tool)
+    for kind, p in path:
+        (wrapped.MoveJ if kind == "J" else wrapped.MoveL)(
+            rm.KUKA_2_Pose(list(p) + [0, 0, 180]), None)
+    weight = 5.0 * 9.80665 * (np.linalg.inv(mat(frame))[:3, :3] @ [0, 0, -1])
+    w = np.array([mo.wrench for mo in wrapped.motions])
+    assert np.allclose(w[0, :3], weight) and np.allclose(w[1, :3], weight)
+    assert np.allclose(w[2, :3], weight + [0, 0, -90])   # second MoveL: the table's force
 
 
 # ------------------------------------------------------------- tool orientation

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["KienzleMaterial", "MATERIALS", "MillingCut", "mean_force", "specific_cutting_force",
-           "mean_chip_thickness"]
+           "mean_chip_thickness", "milling_wrench"]
 
 
 @dataclass(frozen=True)
@@ -107,3 +107,24 @@ def mean_force(material: KienzleMaterial, cut: MillingCut, samples: int = 2001) 
     w[1:-1:2], w[2:-1:2] = 4.0, 2.0
     integral = comp @ w * (phi[1] - phi[0]) / 3.0
     return cut.teeth / (2.0 * math.pi) * integral
+
+
+def milling_wrench(material: KienzleMaterial, cut: MillingCut, pose: np.ndarray,
+                   previous_position) -> np.ndarray:
+    """Wrench (F [N], M = 0) on the tool at `pose` (4 x 4, tool axis = z) cutting along the
+    motion from `previous_position` (same frame): mean_force's feed, normal and axial
+    components resolved on the feed direction projected normal to the tool axis, axis x feed,
+    and -axis (the axial force pushes the tool back towards the spindle). Zero without a feed
+    direction (first target, or a plunge along the tool axis)."""
+    w = np.zeros(6)
+    if previous_position is None:
+        return w
+    axis = pose[:3, 2]
+    feed = pose[:3, 3] - np.asarray(previous_position, dtype=float)
+    feed = feed - axis * (feed @ axis)
+    if np.linalg.norm(feed) <= 1e-9:
+        return w
+    x = feed / np.linalg.norm(feed)
+    fx, fy, fa = mean_force(material, cut)
+    w[:3] = fx * x + fy * np.cross(axis, x) - fa * axis
+    return w

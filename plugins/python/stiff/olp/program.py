@@ -23,7 +23,7 @@ from ..api import Model, Robot
 from ..compensate import (POINT_NOT_CONVERGED, POINT_SINGULAR, POINT_UNREACHABLE,
                           inverse_kinematics, tool_poses)
 from ..errors import StiffError
-from .cutting import mean_force
+from .cutting import milling_wrench
 from .target import POINT_CONFIG_CHANGE, ArmGeometry, Configuration, JointMap, filter_target
 
 __all__ = ["FilterError", "ToolLoad", "Target", "Program", "WrenchSpec", "FilterOptions",
@@ -386,20 +386,12 @@ def _process_wrench(spec: WrenchSpec, t: Target, number: int, forces: dict, prev
     if spec.force is not None:
         f = np.asarray(spec.force, dtype=float)
         w[:f.size] = f
-    if spec.milling is not None and prev_pos is not None:
+    if spec.milling is not None:
         material, cut = spec.milling
         if spec.spindle_rpm and t.speed:
             # feed per tooth from the programmed feed: f_z = v_f / (n z)
             cut = replace(cut, feed_per_tooth=t.speed * 1e3 * 60.0 / (spec.spindle_rpm * cut.teeth))
-        feed = pose_ref[:3, 3] - prev_pos
-        axis = pose_ref[:3, 2]
-        feed = feed - axis * (feed @ axis)
-        if np.linalg.norm(feed) > 1e-9:
-            x = feed / np.linalg.norm(feed)
-            y = np.cross(axis, x)
-            fx, fy, fa = mean_force(material, cut)
-            # Axial force pushes the tool back towards the spindle: -z of the tool.
-            w[:3] += fx * x + fy * y - fa * axis
+        w += milling_wrench(material, cut, pose_ref, prev_pos)
     return w
 
 

@@ -13,12 +13,13 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, replace
+from types import SimpleNamespace
 from typing import Optional
 
 import numpy as np
 
-from .cutting import mean_force
-from .program import GRAVITY, ToolLoad
+from .cutting import milling_wrench
+from .program import ToolLoad, _weight_wrench
 from .target import JointMap, filter_target
 
 __all__ = ["CompensatingPost", "PostMotion", "compensating_post_class"]
@@ -26,6 +27,14 @@ __all__ = ["CompensatingPost", "PostMotion", "compensating_post_class"]
 _SPINDLE_ON = re.compile(r"\b(?:M0?3|M0?4|SPINDLE[_ ]?ON)\b", re.IGNORECASE)
 _SPINDLE_OFF = re.compile(r"\b(?:M0?5|SPINDLE[_ ]?OFF)\b", re.IGNORECASE)
 _RPM = re.compile(r"(?:\bS|SPINDLE[_ ]?ON\s*\(?\s*)(\d+(?:\.\d+)?)", re.IGNORECASE)
+
+
+def _six(v) -> np.ndarray:
+    """A force (3) or wrench (6) as a wrench, zero moment when not given."""
+    a = np.asarray(v, dtype=float).ravel()
+    if a.size not in (3, 6):
+        raise ValueError(f"a wrench has 3 or 6 values, got {a.size}")
+    return np.concatenate([a, np.zeros(6 - a.size)])
 
 
 def _mat_to_np(pose) -> np.ndarray:
@@ -70,8 +79,7 @@ class CompensatingPost:
                  joint_map: Optional[JointMap] = None):
         self._post = post
         self._model = model
-        self._force = None if force is None else np.resize(np.asarray(force, float), 6) * \
-            np.array([1, 1, 1, 0, 0, 0] if np.size(force) == 3 else [1] * 6)
+        self._force = None if force is None else _six(force)
         self._forces = force_file or {}
         self._milling = milling
         self._load = tool_load
@@ -120,31 +128,19 @@ class CompensatingPost:
         if kind != "MoveJ":
             self._process_count += 1
             if self._process_count in self._forces:
-                w[:] = np.resize(np.asarray(self._forces[self._process_count], float), 6)
+                w[:] = _six(self._forces[self._process_count])
             elif self._spindle:
                 if self._force is not None:
                     w += self._force
-                if self._milling is not None and self._previous is not None:
+                if self._milling is not None:
                     material, cut = self._milling
                     if self._speed and self._rpm:
                         cut = replace(cut, feed_per_tooth=self._speed * 60.0 /
                                       (self._rpm * cut.teeth))
-                    feed = pose[:3, 3] - self._previous
-                    axis = pose[:3, 2]
-                    feed = feed - axis * (feed @ axis)
-                    if np.linalg.norm(feed) > 1e-9:
-                        x = feed / np.linalg.norm(feed)
-                        fx, fy, fa = mean_force(material, cut)
-                        w[:3] += fx * x + fy * np.cross(axis, x) - fa * axis
+                    w += milling_wrench(material, cut, pose, self._previous)
         if self._load is not None:
-            from .program import _inv
-
-            fl = self._frame @ pose @ _inv(self._tool)
-            cog = (fl @ np.append(self._load.cog, 1.0))[:3]
-            f = self._load.mass * GRAVITY
-            rb = self._frame[:3, :3]
-            w[:3] += rb.T @ f
-            w[3:] += rb.T @ np.cross(cog - (self._frame @ pose)[:3, 3], f)
+            frames = SimpleNamespace(base=self._frame, tool=self._tool)
+            w += _weight_wrench(frames, pose, self._load)
         return w
 
     def _compensate(self, kind: str, pose, joints):
