@@ -218,6 +218,22 @@ def test_krl_golden(robot, model, programs, tmp_path):
     assert (out / "slot.dat").read_bytes().count(b"\r\n") == (src.with_suffix(".dat")).read_bytes().count(b"\r\n")
 
 
+def test_krl_binary_status_and_turn_are_kept(robot, model, programs, tmp_path):
+    """S 'B010' / T 'B101011' (binary strings) stay binary strings of the same width."""
+    m, _ = model
+    dat = programs / "kuka" / "slot.dat"
+    dat.write_text(dat.read_text(encoding="latin-1").replace("S 2,T 43", "S 'B00010',T 'B101011'"),
+                   encoding="latin-1", newline="")
+    prog = olp.read_program(programs / "kuka" / "slot.src")
+    assert prog.targets[1].config == (2, 43)
+    res = olp.filter_program(prog, m, olp.WrenchSpec(force=[0, 80, -120]))
+    (tmp_path / "o").mkdir()
+    res.write(tmp_path / "o")
+    text = (tmp_path / "o" / "slot.dat").read_text(encoding="latin-1")
+    assert text.count("S 'B00010',T 'B101011'") == 8
+    _check_program(robot, m, programs / "kuka" / "slot.src", tmp_path / "o", res)
+
+
 def test_rapid_golden_with_milling_model(robot, model, programs, tmp_path):
     m, _ = model
     src = programs / "abb" / "Slot.mod"
