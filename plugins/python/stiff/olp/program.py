@@ -65,6 +65,7 @@ class Target:
     speed: Optional[float] = None  # programmed TCP speed [m/s]
     decl_line: int = 0         # line of the declaration (data file) when not inline
     decl_file: str = ""
+    program_text: dict = field(default_factory=dict, repr=False)  # key -> text, for printing
 
 
 class Program:
