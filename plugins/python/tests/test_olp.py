@@ -322,6 +322,20 @@ def test_wrong_configuration_and_bad_programs_are_clear_errors(model, programs, 
         olp.read_program(p)
 
 
+def test_unreachable_targets_are_flagged_and_kept(model, tmp_path):
+    m, _ = model
+    p = tmp_path / "far.src"
+    text = ("DEF far()\n$BASE = {X 420.0, Y -100.0, Z -180.0, A 15.0, B 0.0, C 0.0}\n"
+            "LIN {X 0.0, Y 0.0, Z -2.0, A 0.0, B 10.0, C 180.0}\n"
+            "LIN {X 3000.0, Y 0.0, Z -2.0, A 0.0, B 10.0, C 180.0} ; out of reach\nEND\n")
+    p.write_text(text)
+    res = olp.filter_program(olp.read_program(p), m, olp.WrenchSpec(force=[0, 0, -100]))
+    assert [r.flags() for r in res.targets] == ["ok", "unreachable"]
+    assert res.summary()["problems"] == [(2, 4, "unreachable")]
+    out = res.texts["src"].splitlines()
+    assert out[3] == text.splitlines()[3] and out[2] != text.splitlines()[2]
+
+
 def test_filter_never_overwrites_the_input(model, programs):
     m, _ = model
     src = programs / "abb" / "Slot.mod"
