@@ -692,3 +692,31 @@ def test_circular_moves_controller_frames_and_fanuc_joints(robot, model, tmp_pat
     (tmp_path / "o2").mkdir()
     res.write(tmp_path / "o2")
     _check_program(robot, m, ls, tmp_path / "o2", res, **lsf)
+
+
+def test_tool_rotation_option_of_the_program_filter(model, programs, tmp_path):
+    """--tool-rotation on the angled-head program: rotations within the limit and the step,
+    deflection never above the programmed orientation's, the written orientation is the
+    programmed one turned about the tool axis (up to the compensation's small rotation)."""
+    m, _ = model
+    src = programs / "abb" / "AngledHead.mod"
+    prog = olp.read_program(src)
+    opts = olp.FilterOptions(tool_rotation_limit_deg=60, tool_rotation_max_step_deg=10)
+    res = olp.filter_program(prog, m, olp.WrenchSpec(force=[50, 60, -80], tool_weight=True), opts)
+    psi = np.array([r.tool_rotation for r in res.targets])
+    moves = [t.motion for t in prog.targets]
+    assert np.all(np.abs(psi) <= math.radians(60) + 1e-12)
+    assert all(p == 0 for p, mv in zip(psi, moves) if mv == "MoveJ")
+    cut = [p for p, mv in zip(psi, moves) if mv == "MoveL"]
+    assert np.all(np.abs(np.diff(cut)) <= math.radians(10) + 1e-9)
+    for r in res.targets:
+        assert np.linalg.norm(r.deflection[:3]) <= r.deflection_unrotated * (1 + 1e-12)
+    (tmp_path / "o").mkdir()
+    res.write(tmp_path / "o")
+    again = olp.read_program(tmp_path / "o" / src.name)
+    for t0, t1, r in zip(prog.targets, again.targets, res.targets):
+        r0, r1 = _oracle_pose("ABB RAPID", t0.values)[:3, :3], _oracle_pose("ABB RAPID", t1.values)[:3, :3]
+        rel = r0.T @ r1  # in the tool frame: a rotation about z by psi, plus < 1 mrad
+        angle = math.atan2(rel[1, 0], rel[0, 0])
+        assert abs(math.remainder(angle - r.tool_rotation, 2 * math.pi)) < 2e-3
+        assert abs(rel[2, 2] - 1) < 1e-5
