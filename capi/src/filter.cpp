@@ -5,8 +5,8 @@
 
 #include "boundary.hpp"
 #include "handles.hpp"
-#include "stiff/compensate.hpp"
-#include "stiff/ik.hpp"
+#include "stiff/compensate/compensate.hpp"
+#include "stiff/compensate/ik.hpp"
 #include "stiff/stiff_compensate.h"
 
 using namespace stiff;
