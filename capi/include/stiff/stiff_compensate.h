@@ -111,6 +111,46 @@ STIFF_API stiff_status stiff_truth_deviation(double* deviation,
                                              const double* wrench,
                                              size_t rows);
 
+/** The robot file's measured point and load point in the flange frame [m] (3 values each; either
+ *  may be NULL): the tool pose of stiff_robot_tool_pose is the measured point with the flange
+ *  orientation, so flange = tool_pose * Trans(-measured_point). @since 0.1 */
+STIFF_API stiff_status stiff_robot_tool_points(double measured_point[3],
+                                               double load_point[3],
+                                               const stiff_robot* robot);
+
+/** Filter one robot-program target, the call an offline-programming filter or post-processor
+ *  makes per motion: the compensated target that makes the loaded TCP reach the programmed one.
+ *
+ *  pose: programmed TCP pose in the program's reference frame (16 doubles, row-major, m);
+ *  base: reference frame (work object, $BASE, user frame) in the robot base frame, NULL =
+ *  identity; tool: TCP frame in the flange frame, NULL = identity (the TCP is then the flange,
+ *  not the robot file's measured point); q_seed: dof joint values [rad] near which the nominal
+ *  inverse kinematics solution is taken (e.g. the previous motion's or the configuration the
+ *  program asks for), NULL = zeros; wrench: process force [N] and moment [N*m] acting at the
+ *  TCP, reference-frame components, NULL = none.
+ *
+ *  Outputs: pose_out: compensated TCP pose in the reference frame, tool_pose(q_out) mapped
+ *  through base and tool (the input pose is copied when the target cannot be compensated);
+ *  q_out (capacity >= dof): compensated joints [rad] (the nominal joints when the compensation
+ *  did not converge, q_seed when unreachable); status: STIFF_POINT_* bits (SINGULAR,
+ *  UNREACHABLE, NOT_CONVERGED), target-level problems are reported here, not as a failure;
+ *  deflection (6 values, may be NULL): predicted deflection of the TCP at the nominal joints
+ *  (position [m], rotation vector [rad], reference-frame components), i.e. the error the
+ *  uncompensated program would have. Errors: INVALID_ARGUMENT (NULL, non-finite input, a
+ *  frame that is not a rigid transform), BUFFER_TOO_SMALL. @since 0.1 */
+STIFF_API stiff_status stiff_filter_target(double pose_out[16],
+                                           double* q_out,
+                                           size_t capacity,
+                                           size_t* needed,
+                                           int* status,
+                                           double deflection[6],
+                                           const stiff_model* model,
+                                           const double pose[16],
+                                           const double* q_seed,
+                                           const double wrench[6],
+                                           const double base[16],
+                                           const double tool[16]);
+
 /** Options of stiff_path_read. */
 typedef struct stiff_path_options {
   uint32_t struct_size;

@@ -287,6 +287,9 @@ _proto("stiff_ik", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, c_double_
 _proto("stiff_ik_path", S, c_double_p, C.c_size_t, c_size_p, c_int_p, H, c_double_p, C.c_size_t,
        c_double_p)
 _proto("stiff_compensate_pose", S, c_double_p, H, c_double_p, C.c_size_t, c_double_p)
+_proto("stiff_robot_tool_points", S, c_double_p, c_double_p, H)
+_proto("stiff_filter_target", S, c_double_p, c_double_p, C.c_size_t, c_size_p, c_int_p, c_double_p,
+       H, c_double_p, c_double_p, c_double_p, c_double_p, c_double_p)
 _proto("stiff_compensate_path", S, c_double_p, C.c_size_t, c_size_p, c_int_p, H, c_double_p,
        c_double_p, C.c_size_t, c_double_p)
 _proto("stiff_truth_deviation", S, c_double_p, C.c_size_t, c_size_p, H, C.c_char_p, c_double_p,

@@ -10,7 +10,7 @@ from ..errors import StiffError
 
 # Subcommand modules, in the order `stiff --help` lists them.
 COMMANDS = ["demo", "simulate", "identify", "predict", "effects", "import_"]
-OPTIONAL_COMMANDS = ["plan", "diagnose", "compensate", "fmu", "study"]
+OPTIONAL_COMMANDS = ["plan", "diagnose", "compensate", "filter", "fmu", "study"]
 
 
 class UserError(Exception):
