@@ -27,7 +27,9 @@ def test_noise_free_round_trip_recovers_stiffness(rokae_path, design_a):
     data = stiff.simulate(robot, stiff.Dataset.read(design_a, robot), stiffness=PAPER_K, tracker_sigma_m=0.0)
     fit = stiff.identify(robot, data)
     np.testing.assert_allclose(fit.stiffness[:5], PAPER_K[:5], rtol=1e-9)
-    assert np.isnan(fit.stiffness[5]) and not fit.identified[5]
+    assert np.isinf(fit.stiffness[5]) and not fit.identified[5]
+    assert fit.joint_status[5] == "not identified, held infinitely stiff (c = 0)"
+    assert "joint 6: not identified, held infinitely stiff (c = 0)" in fit.summary()
     assert "joint 6" in fit.warnings[0]
 
 
