@@ -592,8 +592,9 @@ ToolPath parse_gcode(const std::string& text, const std::string& file, const Pat
                                " m: check the units or the segment length");
         pieces = std::max(1, static_cast<int>(want));
       }
-      for (int k = 1; k <= pieces; ++k)
+      for (int k = 1; k < pieces; ++k)
         targets.push_back(pos + (end - pos) * (static_cast<double>(k) / pieces));
+      targets.push_back(end);  // exactly the programmed point
     }
     for (const Eigen::Vector3d& p : targets) {
       PathPoint pt;

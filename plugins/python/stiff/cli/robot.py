@@ -43,7 +43,7 @@ def run_show(args):
     lines += [f"  {note}" for note in robot.notes]
     rows = []
     for j, name in enumerate(robot.joint_names):
-        axis = jac[3:, j]
+        axis = np.round(jac[3:, j], 9) + 0.0  # no -0.000 from rounding noise
         rows.append([j + 1, name, f"{axis[0]:+.3f} {axis[1]:+.3f} {axis[2]:+.3f}",
                      f"{math.degrees(lo[j]):.1f}", f"{math.degrees(hi[j]):.1f}"])
     lines += ["", table(["#", "joint", "axis at q = 0 (base)", "lower [deg]", "upper [deg]"],
@@ -55,7 +55,7 @@ def run_show(args):
     rot = pose[:3, :3]
     lines.append(f"measured point at q = 0, base frame [mm]: {_mm(pose[:3, 3])}")
     lines.append("tip orientation at q = 0 (rows of R): " +
-                 "; ".join(" ".join(f"{x:+.4f}" for x in r) for r in rot))
+                 "; ".join(" ".join(f"{x:+.4f}" for x in r) for r in np.round(rot, 9) + 0.0))
     print("\n".join(lines))
     if args.yaml:
         atomic_write_text(args.yaml, robot.to_yaml())
