@@ -101,3 +101,17 @@ def test_plots_draw_real_data(rokae_path, design_a, tmp_path):
     plots.stiffness(fit, PAPER_K).figure.savefig(tmp_path / "k.png")
     assert (tmp_path / "k.png").stat().st_size > 1000
     plt.close("all")
+
+
+def test_dataframes_without_pandas_say_what_to_do(rokae_path, design_a, monkeypatch):
+    import sys
+
+    robot = stiff.Robot("rokae")  # built-in robots by name, as on the command line
+    assert robot.dof == 6 and robot.path.endswith("rokae.yaml")
+    data = stiff.simulate(robot, stiff.Dataset.read(design_a, robot), stiffness=PAPER_K)
+    fit = stiff.identify(robot, data)
+    monkeypatch.setitem(sys.modules, "pandas", None)  # as if pandas were not installed
+    with pytest.raises(ImportError, match="needs pandas.*Fit.parameter_table"):
+        fit.to_dataframe()
+    with pytest.raises(ImportError, match="needs pandas"):
+        data.to_dataframe()
