@@ -134,3 +134,54 @@ def test_help_texts_speak_of_the_product():
     pattern = re.compile(r"\bissues? #?\d+|\bsession\b|\bhelpers?\b|\bthe lead\b", re.I)
     bad = [m.group(0) for t in texts for m in pattern.finditer(t)]
     assert not bad, bad
+
+
+# ---------------------------------------------------------------- --help examples
+
+# Examples that do not run in a test: each says why.
+HELP_NOT_RUN = {
+    "stiff demo": "the whole demo; test_cli.test_demo_runs runs it into a temporary folder",
+    "stiff study": "a Monte-Carlo study of minutes; test_study.py runs a small one",
+    "--task machining.csv": "needs the user's own task file (poses and loads of use)",
+}
+# The order in which the examples build on each other's files (plan.csv, data.csv, fit.json).
+HELP_ORDER = ["examples", "robot", "effects", "plan", "simulate", "identify", "diagnose",
+              "predict", "compensate", "fmu", "demo", "study"]
+
+
+def _help_examples():
+    from stiff.cli import build_parser
+
+    parser = build_parser()
+    subs = next(a for a in parser._subparsers._group_actions).choices
+    out = []
+    for name in HELP_ORDER:
+        if name not in subs:
+            continue
+        epilog = subs[name].epilog or ""
+        lines, cmd = epilog.splitlines(), ""
+        for line in lines:
+            text = line.strip()
+            if not cmd and not (text.startswith("stiff ") or text.startswith("python -c")):
+                continue
+            cmd += (" " if cmd else "") + text.rstrip("\\").strip()
+            if not text.endswith("\\"):
+                out.append((name, cmd))
+                cmd = ""
+    return out
+
+
+def test_help_examples_run_as_written(tmp_path):
+    env = dict(os.environ)
+    env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
+    env["MPLBACKEND"] = "Agg"
+    ran = 0
+    for name, cmd in _help_examples():
+        if any(key in cmd for key in HELP_NOT_RUN):
+            continue
+        p = subprocess.run(["bash", "-e", "-c", cmd], cwd=tmp_path, env=env, capture_output=True,
+                           text=True)
+        assert p.returncode == 0, (f"stiff {name} --help example failed ({p.returncode}):\n{cmd}\n"
+                                   f"--- stderr\n{p.stderr[-3000:]}")
+        ran += 1
+    assert ran >= 20
