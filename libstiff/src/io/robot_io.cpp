@@ -405,6 +405,9 @@ RobotModel parse_robot_urdf(const std::string& text,
       pending = pending * origin;
     } else if (!is_moving(*joint)) {
       // lower = upper: the joint cannot move; it is a fixed transform at that angle.
+      if (!std::isfinite(joint->limits->lower))
+        throw ParseError(file, 0, 0,
+                         "URDF joint '" + joint->name + "' is locked at a non-finite angle");
       Eigen::Matrix4d rot = Eigen::Matrix4d::Identity();
       rot.block<3, 3>(0, 0) = Eigen::AngleAxisd(joint->limits->lower, axis).toRotationMatrix();
       pending = pending * origin * rot;
