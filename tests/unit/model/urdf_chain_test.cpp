@@ -7,7 +7,7 @@
 #include <string>
 
 #include "stiff/error.hpp"
-#include "stiff/robot_io.hpp"
+#include "stiff/io/robot_io.hpp"
 #include "test_support.hpp"
 
 namespace stiff {
