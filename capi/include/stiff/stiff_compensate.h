@@ -173,7 +173,9 @@ typedef struct stiff_path_options {
  *  zeros when has_wrench is 0) and lines (capacity source line numbers) may each be NULL;
  *  capacity counts points: when it is below the point count nothing is written, *rows holds
  *  the count and STIFF_E_BUFFER_TOO_SMALL is returned. Errors: IO, PARSE ("path:line:column:
- *  reason", e.g. for G2/G3 arcs). @since 0.1 */
+ *  reason"). G-code (docs/compensation.md): G2/G3 arcs in G17/G18/G19 are split into
+ *  points, G43/G49 tool length compensation and rotary words at zero are accepted, no point
+ *  is made before X, Y and Z are all known. @since 0.1 */
 STIFF_API stiff_status stiff_path_read(double* poses,
                                        double* wrench,
                                        uint32_t* lines,
@@ -182,6 +184,17 @@ STIFF_API stiff_status stiff_path_read(double* poses,
                                        int* has_wrench,
                                        const char* path,
                                        const stiff_path_options* options);
+
+/** Bits of stiff_path_read_flags. */
+#define STIFF_PATH_POINT_RAPID 1u /**< a G0 (rapid) move: positioning, no process force */
+
+/** Per-point flags of the path stiff_path_read reads with the same options: flags (capacity
+ *  values, STIFF_PATH_POINT_* bits), rows and buffer semantics as there. @since 0.1 */
+STIFF_API stiff_status stiff_path_read_flags(uint32_t* flags,
+                                             size_t capacity,
+                                             size_t* rows,
+                                             const char* path,
+                                             const stiff_path_options* options);
 
 #ifdef __cplusplus
 }

@@ -5,14 +5,14 @@ import json
 import math
 
 from .. import api
-from .common import Formatter, add_robot, fmt, robot_path, table
+from .common import Formatter, add_robot, fmt, load_robot, robot_path, table
 
 EXAMPLE = """example:
   stiff identify --robot rokae --data data.csv -o fit.json
   stiff identify --robot rokae --data data.csv --model joint+link+point_offset --loss huber -o fit.json
 
 --model takes effect names joined by '+' (see `stiff effects`). The model 'joint' without a
-robust loss is solved by linear least squares (method.md eq. 5); anything else by Ceres."""
+robust loss is solved by linear least squares (Jiang & Fang 2023); anything else by Ceres."""
 
 
 def register(sub):
@@ -76,7 +76,7 @@ def print_fit(fit: api.Fit, truth_stiffness=None) -> None:
 
 
 def run(args):
-    robot = api.Robot(robot_path(args.robot))
+    robot = load_robot(args)
     data = api.Dataset.read(args.data, robot)
     fit = api.identify(robot, data, model=args.model, loss=args.loss,
                        loss_scale_m=args.loss_scale_um * 1e-6, method=args.method)
