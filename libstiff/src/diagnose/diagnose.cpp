@@ -273,9 +273,7 @@ std::vector<bool> improbable_rows(
     std::vector<double> comps;
     for (int r : in)
       for (int k = 0; k < 3; ++k) comps.push_back(res(3 * r + k));
-    const double med = median(comps);
-    for (auto& v : comps) v = std::abs(v - med);
-    double scale = 1.4826 * median(comps);
+    double scale = robust::mad_sigma(comps);
     if (known) scale = std::max(1.0, scale);
     if (!(scale > 0)) break;
     std::vector<bool> next(rows, false);
@@ -1048,7 +1046,7 @@ struct Chain {
     }
     if (!L.rival.empty()) {
       levels[i].group = {top.effect, L.rival};
-      levels[i].experiment = experiment_for(levels[i].group);
+      levels[i].experiment = experiment_for(*cx, levels[i].group);
       *why = top.effect + " and " + L.rival +
              " each explain the misfit and predict the validation poses equally well: this data "
              "cannot tell them apart";

@@ -62,14 +62,6 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
   std::vector<std::string> experiment_hints() const override {
     return {effects::kHintLoadReversal, effects::kHintLoadLevel, effects::kHintGravityVariety};
   }
-  bool example_parameters(const Eigen::VectorXd& c, double* p) const override {
-    for (int j = 0; j < 5 && j < c.size(); ++j)
-      set_parameter(p, "e" + std::to_string(j + 1), 0.5 * c(j));
-    return true;
-  }
-  std::vector<std::string> experiment_hints() const override {
-    return {effects::kHintLoadReversal, effects::kHintLoadLevel, effects::kHintGravityVariety};
-  }
   std::string description() const override {
     return "nonlinear reducer: dtheta_j += e_j [phi(tau_g+tau_F) - phi(tau_g)] + s_j "
            "tau_F|tau_F|/T0 + a_j tau_F^2/T0 (arm joints), phi = T1 tanh(tau/T1), T0 = 100 N*m: "
