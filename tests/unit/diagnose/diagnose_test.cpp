@@ -277,7 +277,9 @@ TEST(DiagnoseHonesty, CommonForceScaleIsUnidentifiable) {
   for (const auto& c : d.candidates)
     if (c.effect == "force_frame") {
       EXPECT_FALSE(c.identifiable);
-      EXPECT_EQ(c.df, c.parameters - 1) << c.reason;
+      // The common gain of the flange sensor and that of a base-fixed load are both exactly
+      // a compliance scale: two directions the displacements cannot see.
+      EXPECT_EQ(c.df, c.parameters - 2) << c.reason;
     }
 }
 
@@ -290,6 +292,13 @@ TEST(DiagnoseHonesty, LeftOutEffectIsUnexplainedNotMisattributed) {
         if (n != hidden && n != "joint") o.candidates.push_back(n);
       const Diagnosis d = run(make_scenario(hidden, seed), o);
       print("left out " + hidden, seed, d);
+      // A small preloaded gap is an asymmetric compliance (stiffer in one load direction):
+      // nonlinear_joint's asymmetric term is its smooth relative, and at 0.5 arcmin the two
+      // can fit the data equally (docs/diagnosis.md, limits).
+      if (hidden == "backlash" && d.verdict == "missing_effect") {
+        EXPECT_EQ(d.candidates[0].effect, "nonlinear_joint") << d.summary;
+        continue;
+      }
       EXPECT_TRUE(d.verdict == "unexplained" || d.verdict == "ambiguous") << d.summary;
       if (d.verdict == "unexplained") {
         EXPECT_FALSE(d.unexplained_signature.empty());
@@ -363,6 +372,66 @@ TEST(DiagnoseNoise, UnknownNoiseAndReplicates) {
   EXPECT_EQ(dr.noise_source, "replicates");
   EXPECT_NEAR(dr.noise_floor_m, kTrackerSigma, 0.25 * kTrackerSigma);
   EXPECT_EQ(dr.verdict, "adequate");
+}
+
+// ---------------------------------------------------------------- noise statements
+
+/// Per-axis displacement sigma of a row with a stated tracker sigma and force error, written
+/// here from the specification convention (independent of diagnose's code).
+double spec_sigma(const Measurement& m, double tracker, double rel, double abs_n, bool linear) {
+  double s2 = 0;
+  for (int k = 0; k < 3; ++k) {
+    const double a = rel * std::abs(m.force(k));
+    const double sk = linear ? a + abs_n : std::sqrt(a * a + abs_n * abs_n);
+    s2 += sk * sk;
+  }
+  const double f2 = m.force.squaredNorm();
+  return std::sqrt(tracker * tracker + m.displacement.squaredNorm() * s2 / (3 * f2));
+}
+
+// "1 % + 0.3 N" is a linear sum (instrument-specification convention); a file may state a
+// quadrature sum instead. The floor is the RMS of the per-row sigmas.
+TEST(DiagnoseNoise, ForceSpecificationIsALinearSumUnlessStated) {
+  Scenario s = make_scenario("link", 3);
+  s.calib.has_sigma = false;
+  s.calib.set_meta("tracker_sigma_m", "2e-05");
+  s.calib.set_meta("force_relative", "0.01");
+  s.calib.set_meta("force_absolute_N", "0.3");
+  for (const bool linear : {true, false}) {
+    s.calib.set_meta("force_error_sum", linear ? "linear" : "quadrature");
+    double ss = 0;
+    for (const auto& m : s.calib.rows) ss += std::pow(spec_sigma(m, 2e-5, 0.01, 0.3, linear), 2);
+    const double expected = std::sqrt(ss / s.calib.rows.size());
+    const Diagnosis d = run(s);
+    EXPECT_NEAR(d.noise_floor_m, expected, 1e-9 * expected) << (linear ? "linear" : "quadrature");
+  }
+  s.calib.set_meta("force_error_sum", "");  // unstated: the specification convention
+  const Diagnosis d = run(s);
+  double ss = 0;
+  for (const auto& m : s.calib.rows) ss += std::pow(spec_sigma(m, 2e-5, 0.01, 0.3, true), 2);
+  EXPECT_NEAR(d.noise_floor_m, std::sqrt(ss / s.calib.rows.size()), 1e-12);
+}
+
+// A stated noise level is itself uncertain: a clean control whose stated sigma is 7 % below
+// the actual one (well inside a data sheet's 10-25 %) is not `unexplained`, and the report
+// says how far the residual sits from the floor.
+TEST(DiagnoseNoise, StatedNoiseSlightlyLowIsAllowedAndReported) {
+  int claims = 0, adequate = 0;
+  for (int seed = 1; seed <= 4; ++seed) {
+    Scenario s = make_scenario("joint", 400 + seed);
+    for (auto& m : s.calib.rows) m.sigma_d /= 1.07;
+    for (auto& m : s.valid.rows) m.sigma_d /= 1.07;
+    const Diagnosis d = run(s);
+    print("sigma 7 % low", seed, d);
+    claims += d.verdict == "missing_effect";
+    adequate += d.verdict == "adequate";
+    // sqrt(chi2/dof) estimates actual/stated sigma: 1.07 give or take the chi2 scatter
+    // (sd sqrt(1/(2 dof)) ~ 0.055) and the force part of the floor, which is not scaled.
+    EXPECT_GT(d.fit.residual_to_floor, 1.07 - 4 * 0.055);
+    EXPECT_LT(d.fit.residual_to_floor, 1.07 + 4 * 0.055);
+  }
+  EXPECT_EQ(claims, 0);
+  EXPECT_GE(adequate, 3);
 }
 
 TEST(DiagnoseApi, RejectsBadInputAndWritesJson) {
