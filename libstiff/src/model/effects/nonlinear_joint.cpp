@@ -45,7 +45,9 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
               " at 100 N*m of load torque, symmetric (< 0 hardening, > 0 softening)",
           -1e-2, 1e-2, 1e-6, 0.0, 0.0));
     }
-    for (int j = 0; j < n; ++j) {
+    // Only the arm joints carry the asymmetric term (see above): a parameter without a regressor
+    // would count as a degree of freedom in the F tests and cost them power.
+    for (int j = 0; j < arm_; ++j) {
       const std::string jn = std::to_string(j + 1);
       params_.push_back(effects::parameter("a" + jn, "rad/(N*m)",
                                            "asymmetry of the compliance of joint " + jn +
