@@ -18,7 +18,6 @@ from ._capi import check, lib
 __all__ = ["Robot", "Dataset", "Fit", "Model", "identify", "simulate", "random_design",
            "predict", "effects", "describe_effect", "library_version"]
 
-PathLike = "str | os.PathLike[str]"
 
 
 def library_version() -> str:

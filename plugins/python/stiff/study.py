@@ -351,7 +351,7 @@ def _spearman(x, y) -> float:
 
 
 def summarize(study: dict) -> dict:
-    """Every number the report prints (also handy for tests and for the lead)."""
+    """Every number the report prints (also what the tests check)."""
     cfg = study["config"]
     keys = [d.key for d in DESIGNS if d.key in cfg.designs]
     out = {"designs": keys, "variants": {}, "criteria": {}, "reductions": {}, "correlation": {}}
@@ -672,8 +672,8 @@ def findings_text(s: dict) -> str:
   loads capped at 35 N per axis the small eigenvalues cannot be raised much, so the optimum
   lowers the large ones: folded poses with short lever arms, small torques on joints 1-3,
   small deflections (the table above). tr(M) falls faster than tr(M^-1) grows, so the criterion
-  improves while the information log det M and the deflection fall. This is the lead's
-  observation (a kappa_a = 0.89 set with k3 at 200% standard error): the better the kappa_a
+  improves while the information log det M and the deflection fall. It shows in practice (a
+  kappa_a = 0.89 set identified k3 with a 200% standard error): the better the kappa_a
   optimum, the less the set measures.
 - **The paper's bound is relative and worst case.** ||dc||/||c|| <= kappa (||dA||/||A|| +
   ||dX||/||X||) holds for relative errors. A laser tracker's error is absolute (~10 um +
