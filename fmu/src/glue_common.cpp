@@ -227,7 +227,8 @@ Status for_each_variable(Instance& inst,
 // A model outcome other than ok, logged with the prefix "<f>: " (an error enters the Error
 // state).
 Status outcome(Instance& inst, const char* f, Status s, const std::string& msg) {
-  return s == Status::ok ? s : inst.from(s, std::string(f) + ": " + msg);
+  if (s == Status::ok || (s == Status::warning && msg.empty())) return s;  // told already
+  return inst.from(s, std::string(f) + ": " + msg);
 }
 
 }  // namespace

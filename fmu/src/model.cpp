@@ -391,9 +391,14 @@ Status Model::compensation(const double** qcmd, std::string* msg) {
     }
     for (int i = 0; i < n; ++i) qcmd_[static_cast<size_t>(i)] = qc(i);
     compensation_valid_ = true;
+    compensation_reported_ = false;
   }
   *qcmd = qcmd_.data();
-  if (compensation_status_ != Status::ok) *msg = compensation_message_;
+  // A warning is told once per evaluation, not once per q_cmd output read (the status stays).
+  if (compensation_status_ == Status::error ||
+      (compensation_status_ == Status::warning && !compensation_reported_))
+    *msg = compensation_message_;
+  compensation_reported_ = true;
   return compensation_status_;
 }
 

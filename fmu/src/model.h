@@ -111,6 +111,7 @@ class Model {
   bool compensation_valid_ = false;
   Status compensation_status_ = Status::ok;
   std::string compensation_message_;
+  bool compensation_reported_ = false;  ///< the warning of this evaluation was logged
   double out_[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};  ///< d (6) and loaded tool position (3)
   Eigen::Matrix3d flange_rotation_ = Eigen::Matrix3d::Identity();  ///< unloaded, at q
   Eigen::Vector3d p_unloaded_ = Eigen::Vector3d::Zero();           ///< tool point at q

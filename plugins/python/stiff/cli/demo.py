@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import api
-from .common import Formatter, atomic_write_text, data_dir, fmt, robot_path, table
+from .common import Formatter, atomic_write_text, data_dir, fmt, robot_path, table, whole
 from .identify import print_fit
 
 EXAMPLE = """example:
@@ -33,7 +33,7 @@ def register(sub):
                        description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
     p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--count", type=int, default=10, help="planned measurements (default 10)")
+    p.add_argument("--count", type=whole, default=10, help="planned measurements (default 10)")
     p.add_argument("--criterion", default=None, help="planning criterion (default: the planner's)")
     p.set_defaults(func=run)
 
