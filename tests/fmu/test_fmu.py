@@ -712,4 +712,4 @@ def test_compensation_warning_is_logged_once_per_evaluation(fmu):
         pass
     warnings = [m for s, _, m in a.log.messages if s == 1]
     a.free()
-    assert len(warnings) <= 1, warnings
+    assert len(warnings) == 1, warnings

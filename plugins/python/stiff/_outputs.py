@@ -43,6 +43,14 @@ def target(path) -> str:
     return _current.stage(path) if _current is not None else os.fspath(path)
 
 
+def written(path) -> str:
+    """Where an output this command already wrote can be read back: its staged copy inside a
+    command (it is committed only at the end), else the path itself."""
+    if _current is not None and os.fspath(path) in _current.outputs:
+        return _current.outputs[os.fspath(path)]
+    return os.fspath(path)
+
+
 def write_bytes(path, data: bytes) -> None:
     if _current is None:
         write_now(path, data)
