@@ -88,7 +88,9 @@ class Model {
   /// Pointer-free, versioned, size-checked blob of the values (FMU state).
   std::vector<uint8_t> serialize() const;
   /// Restore from serialize(); false (and a message) for a truncated or foreign blob.
-  bool deserialize(const uint8_t* data, size_t size, std::string* msg);
+  /// `trailer`: bytes of the caller's blob after the model's part (sizes in messages are the
+  /// blob's).
+  bool deserialize(const uint8_t* data, size_t size, std::string* msg, size_t trailer = 0);
   /// Copy of the values / restore from a copy (fmi*GetFMUstate / SetFMUstate).
   Values save() const { return values_; }
   void restore(const Values& v);

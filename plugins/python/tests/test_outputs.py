@@ -255,3 +255,23 @@ def test_study_save_and_load_round_trip(tmp_path):
     assert r.returncode == 0, r.stderr
     # The same report, up to the folder of its plots (named after the report).
     assert a.read_text() == b.read_text().replace("](b/", "](a/")
+
+
+def test_identify_warns_about_implausible_data(good, tmp_path):
+    """Displacements in mm declared _m: stiffness ~50 N*m/rad, far below any robot's; an axis
+    that is zero in every row is a missing tracker axis, not a perfect fit."""
+    text = good["data"].read_text().splitlines()
+    head = [i for i, l in enumerate(text) if not l.startswith("#")][0]
+    cols = text[head].split(",")
+    rows = [l.split(",") for l in text[head + 1:]]
+    dz = cols.index("dz_m")
+    for r in rows:
+        for c in (cols.index("dx_m"), cols.index("dy_m")):
+            r[c] = repr(float(r[c]) * 1e3)
+        r[dz] = "0"
+    bad = tmp_path / "mm_as_m.csv"
+    bad.write_text("\n".join(text[:head + 1] + [",".join(r) for r in rows]) + "\n")
+    r = cli("identify", "--robot", "rokae", "--data", bad)
+    assert r.returncode == 0, r.stderr
+    assert "is outside 1e2..1e8 N*m/rad" in r.stdout, r.stdout
+    assert "dz is zero in every measurement" in r.stdout, r.stdout

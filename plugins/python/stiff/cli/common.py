@@ -104,6 +104,11 @@ def plausibility_warnings(robot, data, fit) -> list:
                        "(mm declared _m?)")
     d = data.displacement
     if d is not None and len(data):
+        for k, axis in enumerate("xyz"):
+            if not np.any(d[:, k]):
+                out.append(f"the displacement d{axis} is zero in every measurement: a tracker axis "
+                           "that was not recorded? The fit and its noise-floor verdict treat it "
+                           "as measured")
         reach = max(float(np.linalg.norm(robot.tool_pose(q)[:3, 3])) for q in data.q)
         worst = float(np.max(np.linalg.norm(d, axis=1)))
         if reach > 0 and worst > reach:
