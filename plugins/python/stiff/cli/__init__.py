@@ -64,7 +64,10 @@ def main(argv=None) -> int:
     def on_sigterm(signum, frame):
         raise Terminated()
 
-    signal.signal(signal.SIGTERM, on_sigterm)
+    try:
+        previous = signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:  # not the main thread: leave signals to the host
+        previous = None
     t = None
     try:
         # Outputs are committed only when the whole command has succeeded.
@@ -91,6 +94,9 @@ def main(argv=None) -> int:
     except Terminated:
         print(f"stiff {args.command}: terminated", file=sys.stderr)
         return 143
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":
