@@ -423,14 +423,15 @@ Status deserialize_fmu_state(
     // Exactly one state bit, a known state.
     const bool state_ok = st != 0 && (st & (st - 1)) == 0 && st <= kError;
     const std::string invalid_state = std::string(f) + ": invalid state in blob";
-    if (order == BlobOrder::state_first && !state_ok) return inst.reject(invalid_state);
     const Values now = inst.model->save();
     std::string msg;
-    // The blob is the model's part and the 4-byte state word: sizes are told for the whole.
-    if (!inst.model->deserialize(bytes, size - 4, &msg, 4))
-      return inst.reject(std::string(f) + ": " + msg);
+    // The blob is the model's part and the 4-byte state word: sizes are told for the whole. A
+    // blob of the wrong size is told as such (its "state word" is then any 4 bytes).
+    const bool model_ok = inst.model->deserialize(bytes, size - 4, &msg, 4);
     const StateCopy copy{inst.model->save(), st, inst.kind};
     inst.model->restore(now);
+    if (order == BlobOrder::state_first && !state_ok && model_ok) return inst.reject(invalid_state);
+    if (!model_ok) return inst.reject(std::string(f) + ": " + msg);
     if (!state_ok) return inst.reject(invalid_state);
     if (!state_fits(st, inst.kind))
       return inst.reject(std::string(f) + ": the blob is a state of the other interface (not " +
