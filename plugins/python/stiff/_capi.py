@@ -212,7 +212,10 @@ def require_count(name: str, value, upper: int = 2**32 - 1) -> int:
     if not ok:
         from .errors import InvalidArgumentError
 
-        raise InvalidArgumentError(f"{name} must be a whole number in 1..{upper} (got {value})", -1)
+        too_big = isinstance(value, (int, float)) and value == value and value > upper
+        raise InvalidArgumentError(
+            f"{name} must be at most {upper} (got {value})" if too_big else
+            f"{name} must be an integer >= 1 (got {value})", -1)
     return v
 
 

@@ -149,7 +149,7 @@ def test_transaction_discards_on_error(tmp_path):
 def test_counts_must_be_positive(args, tmp_path):
     r = cli("plan", "--robot", "rokae", *args, "-o", tmp_path / "p.csv", timeout=60)
     assert r.returncode == 2, r.stderr
-    assert "must be a whole number in 1.." in r.stderr, r.stderr
+    assert "must be an integer >= 1" in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
 
 
