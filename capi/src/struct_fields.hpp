@@ -114,6 +114,14 @@ STIFF_FIELDS(stiff_plan_options,
              STIFF_FIELD(stiff_plan_options, annealing_initial_temperature),
              STIFF_FIELD(stiff_plan_options, annealing_initial_swap_count));
 
+STIFF_FIELDS(stiff_robot_options, STIFF_FIELD(stiff_robot_options, struct_size),
+             STIFF_FIELD(stiff_robot_options, base_link),
+             STIFF_FIELD(stiff_robot_options, tip_link), STIFF_FIELD(stiff_robot_options, set),
+             STIFF_FIELD(stiff_robot_options, measured_point_m),
+             STIFF_FIELD(stiff_robot_options, load_point_m),
+             STIFF_FIELD(stiff_robot_options, tool_mass_kg),
+             STIFF_FIELD(stiff_robot_options, tool_com_m));
+
 #undef STIFF_FIELDS
 #undef STIFF_FIELD
 
