@@ -395,7 +395,7 @@ CASES = [
     dict(id="cli-robot-urdf-upper-case-name", kind="cli", topic="bad URDF",
          files={"TREE.URDF": URDF_BRANCHING},
          args=["identify", "--robot", "{tmp}/TREE.URDF", "--data", "{data}", "-o", "{out}"],
-         message="URDF link 'base' branches"),
+         message="URDF chain from 'base' has several possible tip links"),
     # ------------------------------------------------------------------ C ABI (ctypes)
     dict(id="capi-dataset-zero-rows", kind="capi", topic="too few measurements",
          code="lib.stiff_dataset_create(out(), 0, 6, dbl([0]*6), dbl([0]*3), None, None, None)",

@@ -79,7 +79,9 @@ def _record_truth(output, truth, stiffness) -> None:
                 f"# truth_file: {truth}"]
     else:
         note = ["# truth_model: joint", f"# truth_stiffness_Nm_per_rad: {stiffness}"]
-    with open(output, encoding="utf-8") as f:
+    from .._outputs import written
+
+    with open(written(output), encoding="utf-8") as f:  # this command's output, not yet committed
         lines = f.read().splitlines()
     k = 0
     while k < len(lines) and lines[k].startswith("#"):
