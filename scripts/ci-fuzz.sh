@@ -51,7 +51,15 @@ if ((${#only[@]})); then targets=("${only[@]}"); fi
 export ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1
 export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
 export LSAN_OPTIONS=suppressions=$PWD/tests/fuzz/lsan.supp:print_suppressions=0
-common=(-timeout=20 -rss_limit_mb=2048 -max_len=8192)
+common=(-timeout=20 -rss_limit_mb=2048)
+# Inputs as large as a deep document that overflowed a parser's stack (50,000 nested URDF
+# elements, 150 kB; YAML at 400 levels is 800 bytes): the readers refuse nesting beyond 64
+# levels, and the fuzzers must be able to produce what would break that. The other targets keep
+# 8 kB (large inputs only slow them down).
+declare -A MAX_LEN=(
+  [robot_urdf]=262144 [robot_yaml]=262144 [truth_yaml]=262144 [noise_yaml]=262144 [fit_json]=262144
+)
+max_len() { echo "-max_len=${MAX_LEN[$1]:-8192}"; }
 # CI: no address-space randomisation, which would otherwise change which branches run
 # (pointer comparisons, hash orders) and so which inputs libFuzzer keeps.
 norandom=()
@@ -64,7 +72,7 @@ if [[ $mode == merge ]]; then
     [[ -d build-fuzz/corpus/$t ]] || continue
     before=$(find "tests/fuzz/corpus/$t" -type f | wc -l)
     # -use_counters=0: keep an input only for new edges, not new hit counts (a small corpus).
-    build-fuzz/tests/fuzz/stiff_fuzz_$t -merge=1 -use_counters=0 "${common[@]}" \
+    build-fuzz/tests/fuzz/stiff_fuzz_$t -merge=1 -use_counters=0 "${common[@]}" "$(max_len "$t")" \
       "tests/fuzz/corpus/$t" "build-fuzz/corpus/$t" > "build-fuzz/merge-$t.log" 2>&1 ||
       { tail -n 20 "build-fuzz/merge-$t.log"; exit 1; }
     echo "== ci-fuzz: $t: $before -> $(find "tests/fuzz/corpus/$t" -type f | wc -l) corpus files"
@@ -101,7 +109,7 @@ for t in "${targets[@]}"; do
   fi
   result=ok
   t1=$(date +%s.%N)
-  if ! "${norandom[@]}" "$bin" "${args[@]}" -print_final_stats=1 "${common[@]}" \
+  if ! "${norandom[@]}" "$bin" "${args[@]}" -print_final_stats=1 "${common[@]}" "$(max_len "$t")" \
        -artifact_prefix="$art/" > "$log" 2>&1; then
     result=FAILED failed+=("$t")
     grep -E "ERROR|finding|SUMMARY|Test unit written" "$log" | head -n 20 || true

@@ -12,6 +12,7 @@
 
 #include "stiff/error.hpp"
 #include "stiff/stiff.h"
+#include "struct_fields.hpp"
 
 namespace stiff::capi {
 
@@ -71,6 +72,15 @@ inline void require_finite(const double* v, size_t n, const char* what) {
       throw InvalidArgument(std::string(what) + "[" + std::to_string(i) + "] is not finite");
 }
 
+/// rows x width values; a product that wraps around size_t (a huge row count) is refused
+/// instead of passing a capacity check it should fail.
+inline size_t values_of(size_t rows, size_t width, const char* what) {
+  if (width != 0 && rows > static_cast<size_t>(-1) / width)
+    throw InvalidArgument(std::string(what) + ": " + std::to_string(rows) + " rows of " +
+                          std::to_string(width) + " values are more than memory can hold");
+  return rows * width;
+}
+
 /// Throw the buffer-too-small error (caught by guarded(), which names the C function).
 [[noreturn]] inline void too_small(size_t capacity, size_t n, const char* unit) {
   throw Error(Status::buffer_too_small, "buffer holds " + std::to_string(capacity) + " " + unit +
@@ -101,21 +111,31 @@ inline stiff_status copy_string(const std::string& s, char* dst, size_t capacity
   return STIFF_OK;
 }
 
-/// Read an option struct of the caller's size into the library's current layout: a smaller
-/// struct_size leaves later fields at their defaults (zero); a larger one is accepted only if
-/// the unknown trailing bytes are zero.
+/// Read a struct of the caller's version into the library's current layout. A struct_size
+/// must be where some version of the struct ends (a field boundary, see struct_fields.hpp): a
+/// smaller one leaves later fields at their defaults (zero). A larger one (a newer stiff.h) is
+/// accepted for input structs only if the unknown trailing bytes are zero; for output structs
+/// (`output`: the library writes the caller's part, never beyond) whatever they hold.
 template <typename Options>
-Options read_options(const Options* in) {
+Options read_options(const Options* in, bool output = false) {
   Options out{};
   if (!in) return out;
   const size_t size = in->struct_size;
-  if (size < sizeof(uint32_t)) throw InvalidArgument("options: struct_size is too small");
+  const char* what = output ? "output struct" : "options";
+  if (size < sizeof(uint32_t))
+    throw InvalidArgument(std::string(what) + ": struct_size " + std::to_string(size) +
+                          " is too small (set it to sizeof the struct)");
+  if (size < sizeof(Options) && !is_version_size<Options>(size))
+    throw InvalidArgument(std::string(what) + ": struct_size " + std::to_string(size) + " ends " +
+                          field_cut_by<Options>(size) +
+                          ", so it is no version of the struct (set it to sizeof the struct)");
   const unsigned char* bytes = reinterpret_cast<const unsigned char*>(in);
-  for (size_t i = sizeof(Options); i < size; ++i)
-    if (bytes[i] != 0)
-      throw InvalidArgument(
-          "options: struct_size is larger than this library knows and the "
-          "unknown fields are not zero (built against a newer stiff.h?)");
+  if (!output)
+    for (size_t i = sizeof(Options); i < size; ++i)
+      if (bytes[i] != 0)
+        throw InvalidArgument(
+            "options: struct_size is larger than this library knows and the "
+            "unknown fields are not zero (built against a newer stiff.h?)");
   const size_t n = size < sizeof(Options) ? size : sizeof(Options);
   std::memcpy(&out, in, n);
   out.struct_size = static_cast<uint32_t>(sizeof(Options));

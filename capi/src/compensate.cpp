@@ -56,7 +56,7 @@ Eigen::VectorXd joints_of(const RobotModel& r, const double* q, const char* what
 
 Eigen::MatrixXd rows_of(const double* v, size_t rows, Eigen::Index cols, const char* what) {
   require(v, what);
-  require_finite(v, rows * static_cast<size_t>(cols), what);
+  require_finite(v, stiff::capi::values_of(rows, static_cast<size_t>(cols), what), what);
   Eigen::MatrixXd m(static_cast<Eigen::Index>(rows), cols);
   for (Eigen::Index i = 0; i < m.rows(); ++i)
     for (Eigen::Index c = 0; c < cols; ++c) m(i, c) = v[i * cols + c];
@@ -79,6 +79,20 @@ stiff_status stiff_ik_analytic(int* analytic, const stiff_robot* robot) {
   });
 }
 
+namespace {
+void tool_poses_into(double* poses, size_t capacity, size_t* needed, const stiff_robot* robot,
+                     const double* q, size_t rows) {
+  const RobotModel& r = robot->model;
+  stiff::capi::require_capacity(stiff::capi::values_of(rows, 16, "poses"), poses, capacity, needed);
+  const Eigen::MatrixXd qm = rows_of(q, rows, r.dof(), "q");
+  for (Eigen::Index i = 0; i < qm.rows(); ++i) {
+    const Eigen::Matrix4d t = r.tool_pose(qm.row(i).transpose());
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b) poses[16 * i + 4 * a + b] = t(a, b);
+  }
+}
+}  // namespace
+
 stiff_status stiff_tool_pose_batch(double* poses,
                                    size_t capacity,
                                    size_t* needed,
@@ -87,14 +101,25 @@ stiff_status stiff_tool_pose_batch(double* poses,
                                    size_t rows) {
   return guarded(__func__, [&] {
     require(robot, "robot");
-    const RobotModel& r = robot->model;
-    stiff::capi::require_capacity(rows * 16, poses, capacity, needed);
-    const Eigen::MatrixXd qm = rows_of(q, rows, r.dof(), "q");
-    for (Eigen::Index i = 0; i < qm.rows(); ++i) {
-      const Eigen::Matrix4d t = r.tool_pose(qm.row(i).transpose());
-      for (int a = 0; a < 4; ++a)
-        for (int b = 0; b < 4; ++b) poses[16 * i + 4 * a + b] = t(a, b);
-    }
+    tool_poses_into(poses, capacity, needed, robot, q, rows);
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_tool_poses(double* poses,
+                              size_t capacity,
+                              size_t* needed,
+                              const stiff_robot* robot,
+                              const double* q,
+                              size_t rows,
+                              size_t n) {
+  return guarded(__func__, [&] {
+    require(robot, "robot");
+    const size_t dof = static_cast<size_t>(robot->model.dof());
+    if (n != dof)
+      throw InvalidArgument("q has " + std::to_string(n) + " values per row, the robot has " +
+                            std::to_string(dof) + " joints");
+    tool_poses_into(poses, capacity, needed, robot, q, rows);
     return STIFF_OK;
   });
 }
@@ -137,7 +162,7 @@ stiff_status stiff_ik_path(double* q_out,
   return guarded(__func__, [&] {
     require(robot, "robot");
     const RobotModel& r = robot->model;
-    stiff::capi::require_capacity(rows * static_cast<size_t>(r.dof()), q_out, capacity, needed);
+    stiff::capi::require_capacity(stiff::capi::values_of(rows, static_cast<size_t>(r.dof()), "q_out"), q_out, capacity, needed);
     const auto p = poses_of(poses, rows);
     const Eigen::VectorXd start = q_start ? joints_of(r, q_start, "q_start") : Eigen::VectorXd();
     const IkPath path = solve_path(InverseKinematics(r), p, start);
@@ -184,7 +209,7 @@ stiff_status stiff_compensate_path(double* q_cmd,
   return guarded(__func__, [&] {
     require(model, "model");
     const RobotModel& r = model->robot;
-    stiff::capi::require_capacity(rows * static_cast<size_t>(r.dof()), q_cmd, capacity, needed);
+    stiff::capi::require_capacity(stiff::capi::values_of(rows, static_cast<size_t>(r.dof()), "q_cmd"), q_cmd, capacity, needed);
     const auto p = poses_of(poses, rows);
     const Eigen::MatrixXd w = rows_of(wrench, rows, 6, "wrench");
     const Eigen::VectorXd start = q_start ? joints_of(r, q_start, "q_start") : Eigen::VectorXd();
@@ -210,7 +235,7 @@ stiff_status stiff_truth_deviation(double* deviation,
     require(robot, "robot");
     capi::require_string(truth_path, "truth_path");
     const RobotModel& r = robot->model;
-    stiff::capi::require_capacity(rows * 6, deviation, capacity, needed);
+    stiff::capi::require_capacity(stiff::capi::values_of(rows, 6, "deviation"), deviation, capacity, needed);
     const Truth truth = read_truth(truth_path, r);
     const DeflectionModel model(r, truth.effects);
     const auto p = poses_of(poses, rows);

@@ -4,6 +4,7 @@
 #include "boundary.hpp"
 #include "handles.hpp"
 #include "stiff/io/robot_io.hpp"
+#include "stiff/io/text_io.hpp"
 #include "stiff/sim/simulate.hpp"
 
 namespace stiff::capi {
@@ -186,8 +187,13 @@ stiff_status stiff_robot_limits(
   return guarded(__func__, [&] {
     require(robot, "robot");
     const size_t n = robot->model.dof();
-    require_capacity(n, lower, capacity, needed);
-    require_capacity(n, upper, capacity, needed);
+    if (needed) *needed = n;
+    if (capacity < n) too_small(capacity, n, "values");
+    // A NULL buffer counts as capacity 0 (stiff.h); say which one it was.
+    for (const auto& [buffer, name] : {std::pair{lower, "lower"}, std::pair{upper, "upper"}})
+      if (n > 0 && !buffer)
+        throw Error(Status::buffer_too_small, std::string(name) + " is NULL (capacity 0), " +
+                                                  std::to_string(n) + " values needed");
     for (size_t j = 0; j < n; ++j) {
       lower[j] = robot->model.joints[j].lower;
       upper[j] = robot->model.joints[j].upper;
@@ -258,6 +264,15 @@ stiff_status stiff_dataset_write_csv(const stiff_dataset* dataset, const char* p
   });
 }
 
+stiff_status stiff_file_write(const char* path, const void* data, size_t size) {
+  return guarded(__func__, [&] {
+    require_string(path, "path");
+    if (!data && size > 0) throw InvalidArgument("data is NULL");
+    write_file_atomic(path, static_cast<const char*>(data), size);
+    return STIFF_OK;
+  });
+}
+
 stiff_status stiff_dataset_create(stiff_dataset** out,
                                   size_t rows,
                                   size_t dof,
@@ -273,8 +288,8 @@ stiff_status stiff_dataset_create(stiff_dataset** out,
     require(force, "force");
     if (rows == 0) throw InvalidArgument("rows must be > 0");
     if (dof == 0 || dof > 64) throw InvalidArgument("dof must be in 1..64");
-    require_finite(q, rows * dof, "q");
-    require_finite(force, rows * 3, "force");
+    require_finite(q, values_of(rows, dof, "q"), "q");
+    require_finite(force, values_of(rows, 3, "force"), "force");
     if (moment) require_finite(moment, rows * 3, "moment");
     if (displacement) require_finite(displacement, rows * 3, "displacement");
     if (sigma_d) {
@@ -395,7 +410,7 @@ stiff_status stiff_dataset_set_displacement(stiff_dataset* dataset,
     if (rows != dataset->data.rows.size())
       throw InvalidArgument("displacement has " + std::to_string(rows) + " rows, the dataset " +
                             std::to_string(dataset->data.rows.size()));
-    require_finite(displacement, 3 * rows, "displacement");
+    require_finite(displacement, values_of(rows, 3, "displacement"), "displacement");
     for (size_t r = 0; r < rows; ++r)
       dataset->data.rows[r].displacement = Eigen::Map<const Eigen::Vector3d>(displacement + 3 * r);
     dataset->data.has_displacement = true;
@@ -418,8 +433,8 @@ stiff_status stiff_noise_read(stiff_noise_options* noise, const char* path) {
   return guarded(__func__, [&] {
     require(noise, "noise");
     require_string(path, "path");
+    stiff_noise_options o = read_options(noise, true);
     const NoiseModel n = read_noise(path);
-    stiff_noise_options o = read_options(noise);
     o.tracker_sigma_m = n.tracker_sigma_m;
     o.tracker_ppm = n.tracker_ppm;
     for (int k = 0; k < 3; ++k) o.tracker_position_m[k] = n.tracker_position_m(k);

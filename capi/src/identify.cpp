@@ -168,7 +168,7 @@ stiff_status stiff_result_statistics(stiff_fit_statistics* statistics, const sti
   return guarded(__func__, [&] {
     require(statistics, "statistics");
     const FitResult& f = fit_of(result);
-    stiff_fit_statistics s = read_options(statistics);
+    stiff_fit_statistics s = read_options(statistics, true);
     s.measurements = static_cast<uint32_t>(f.measurements);
     s.rank = static_cast<uint32_t>(f.rank);
     s.dof = static_cast<uint32_t>(f.dof);
@@ -210,11 +210,7 @@ stiff_status stiff_model_create(stiff_model** out,
     m->robot = robot->model;
     m->fit = f;
     m->model = std::make_unique<DeflectionModel>(m->robot, f.model);
-    if (m->model->parameter_count() != static_cast<int>(f.parameters.size()))
-      throw InvalidArgument(
-          "the fit has " + std::to_string(f.parameters.size()) + " parameters, model '" +
-          m->model->model_string() + "' on robot '" + m->robot.name + "' needs " +
-          std::to_string(m->model->parameter_count()) + " (identified for another robot?)");
+    check_fit_applies(f, m->robot, *m->model, "");
     m->theta = f.theta();
     *out = m.release();
     return STIFF_OK;
@@ -276,7 +272,7 @@ stiff_status stiff_predict_batch(double* deflection,
     require(model, "model");
     require(q, "q");
     require(wrench, "wrench");
-    require_capacity(6 * rows, deflection, capacity, needed);
+    require_capacity(values_of(rows, 6, "deflection"), deflection, capacity, needed);
     for (size_t r = 0; r < rows; ++r) {
       try {
         predict_one(model, q + r * n, n, wrench + 6 * r, deflection + 6 * r, r);

@@ -49,6 +49,8 @@ class Fmi3Instance final : public Instance {
 };
 
 fmi3Instance instantiate(fmu::Kind kind,
+                         const char* function,
+                         bool event_mode_used,
                          fmi3String instanceName,
                          fmi3String token,
                          fmi3String resourcePath,
@@ -63,6 +65,8 @@ fmi3Instance instantiate(fmu::Kind kind,
   a.resources = resourcePath;
   a.kind = kind;
   a.logging_on = loggingOn;
+  a.function = function;
+  a.event_mode_used = event_mode_used;
   return fmu::instantiate(staged, a);
 }
 
@@ -97,8 +101,8 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName,
                                           fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage) {
-  return instantiate(fmu::Kind::me, instanceName, instantiationToken, resourcePath, loggingOn,
-                     instanceEnvironment, logMessage);
+  return instantiate(fmu::Kind::me, "fmi3InstantiateModelExchange", false, instanceName,
+                     instantiationToken, resourcePath, loggingOn, instanceEnvironment, logMessage);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName,
@@ -106,15 +110,15 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName,
                                          fmi3String resourcePath,
                                          fmi3Boolean /*visible*/,
                                          fmi3Boolean loggingOn,
-                                         fmi3Boolean /*eventModeUsed*/,
+                                         fmi3Boolean eventModeUsed,
                                          fmi3Boolean /*earlyReturnAllowed*/,
                                          const fmi3ValueReference /*requiredIntermediate*/[],
                                          size_t /*nRequiredIntermediateVariables*/,
                                          fmi3InstanceEnvironment instanceEnvironment,
                                          fmi3LogMessageCallback logMessage,
                                          fmi3IntermediateUpdateCallback /*intermediateUpdate*/) {
-  return instantiate(fmu::Kind::cs, instanceName, instantiationToken, resourcePath, loggingOn,
-                     instanceEnvironment, logMessage);
+  return instantiate(fmu::Kind::cs, "fmi3InstantiateCoSimulation", eventModeUsed, instanceName,
+                     instantiationToken, resourcePath, loggingOn, instanceEnvironment, logMessage);
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String,

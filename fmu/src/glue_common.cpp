@@ -44,7 +44,7 @@ bool Instance::allowed(const char* f, unsigned mask) {
 }
 
 Instance* instantiate(Instance& staged, const InstantiateArgs& a) {
-  const char* f = a.fmi == 2 ? "fmi2Instantiate" : "fmi3Instantiate";
+  const char* f = a.function ? a.function : a.fmi == 2 ? "fmi2Instantiate" : "fmi3Instantiate";
   // The token's name in messages, and in the resources.
   const char* token = a.fmi == 2 ? "GUID" : "instantiationToken";
   const char* resources_token = a.fmi == 2 ? "GUID" : "token";
@@ -57,6 +57,8 @@ Instance* instantiate(Instance& staged, const InstantiateArgs& a) {
     if (staged.name.empty()) return say("missing instance name");
     if (!a.token || !*a.token) return say(std::string("missing ") + token);
     if (!a.known_type) return say("unknown FMU type");
+    if (a.event_mode_used)
+      return say("eventModeUsed = true, but this FMU has no Event Mode (hasEventMode = false)");
     std::string dir;
     if (a.fmi == 2) {
       dir = uri_to_path(a.resources);
@@ -87,10 +89,13 @@ Instance* instantiate(Instance& staged, const InstantiateArgs& a) {
   return nullptr;
 }
 
+void delete_states(Instance& inst);  // below, with the state copies
+
 void free_instance(void* c, const char* f) {
   if (!c) return;
   auto* inst = static_cast<Instance*>(c);
   inst->log(Status::ok, kLogCalls, f);
+  delete_states(*inst);
   delete inst;
 }
 
@@ -227,7 +232,8 @@ Status for_each_variable(Instance& inst,
 // A model outcome other than ok, logged with the prefix "<f>: " (an error enters the Error
 // state).
 Status outcome(Instance& inst, const char* f, Status s, const std::string& msg) {
-  return s == Status::ok ? s : inst.from(s, std::string(f) + ": " + msg);
+  if (s == Status::ok || (s == Status::warning && msg.empty())) return s;  // told already
+  return inst.from(s, std::string(f) + ": " + msg);
 }
 
 }  // namespace
@@ -290,7 +296,38 @@ namespace {
 struct StateCopy {
   Values values;
   unsigned state;
+  Kind kind;
 };
+
+}  // namespace
+
+// States the host did not free die with their instance.
+void delete_states(Instance& inst) {
+  for (void* s : inst.live_states) delete static_cast<StateCopy*>(s);
+  inst.live_states.clear();
+}
+
+namespace {
+
+const char* kind_name(Kind k) { return k == Kind::cs ? "Co-Simulation" : "Model Exchange"; }
+
+// The interface a state word belongs to: Step Mode only exists in Co-Simulation, Event and
+// Continuous-Time Mode only in Model Exchange; the others in both.
+bool state_fits(unsigned st, Kind k) {
+  if (st == kStepMode) return k == Kind::cs;
+  if (st == kEventMode || st == kContinuousTimeMode) return k == Kind::me;
+  return true;
+}
+
+// A handle this instance handed out and has not freed, or nullptr after rejecting it.
+StateCopy* live(Instance& inst, const char* f, void* handle) {
+  if (!inst.live_states.count(handle)) {
+    inst.reject(std::string(f) + ": not an FMU state of this instance (freed already, or "
+                                 "another instance's)");
+    return nullptr;
+  }
+  return static_cast<StateCopy*>(handle);
+}
 
 std::vector<uint8_t> serialize_state(Instance& inst, const StateCopy& copy) {
   const Values now = inst.model->save();
@@ -308,12 +345,14 @@ std::vector<uint8_t> serialize_state(Instance& inst, const StateCopy& copy) {
 Status get_fmu_state(void* c, const char* f, const char* arg, void** fmu_state) {
   return guarded(c, f, kAnyState, [&](Instance& inst) {
     if (!fmu_state) return inst.reject(std::string(f) + ": NULL " + arg);
-    auto* copy = static_cast<StateCopy*>(*fmu_state);
-    if (copy) {
-      copy->values = inst.model->save();
-      copy->state = inst.state;
+    if (*fmu_state) {
+      StateCopy* copy = live(inst, f, *fmu_state);
+      if (!copy) return Status::error;
+      *copy = StateCopy{inst.model->save(), inst.state, inst.kind};
     } else {
-      *fmu_state = new StateCopy{inst.model->save(), inst.state};
+      auto* copy = new StateCopy{inst.model->save(), inst.state, inst.kind};
+      inst.live_states.insert(copy);
+      *fmu_state = copy;
     }
     return Status::ok;
   });
@@ -322,7 +361,11 @@ Status get_fmu_state(void* c, const char* f, const char* arg, void** fmu_state) 
 Status set_fmu_state(void* c, const char* f, const char* arg, void* fmu_state) {
   return guarded(c, f, kAnyState, [&](Instance& inst) {
     if (!fmu_state) return inst.reject(std::string(f) + ": NULL " + arg);
-    const auto* copy = static_cast<const StateCopy*>(fmu_state);
+    const StateCopy* copy = live(inst, f, fmu_state);
+    if (!copy) return Status::error;
+    if (copy->kind != inst.kind || !state_fits(copy->state, inst.kind))
+      return inst.reject(std::string(f) + ": a " + kind_name(copy->kind) +
+                         " state cannot be restored into a " + kind_name(inst.kind) + " instance");
     if (copy->values.q.size() != static_cast<size_t>(inst.model->dof()) ||
         copy->values.theta.size() != inst.model->values().theta.size())
       return inst.reject(std::string(f) + ": state of another model");
@@ -335,7 +378,11 @@ Status set_fmu_state(void* c, const char* f, const char* arg, void* fmu_state) {
 Status free_fmu_state(void* c, const char* f, const char* arg, void** fmu_state) {
   return guarded(c, f, kAnyState, [&](Instance& inst) {
     if (!fmu_state) return inst.reject(std::string(f) + ": NULL " + arg);
-    delete static_cast<StateCopy*>(*fmu_state);
+    if (!*fmu_state) return Status::ok;  // freeing NULL does nothing
+    StateCopy* copy = live(inst, f, *fmu_state);
+    if (!copy) return Status::error;
+    inst.live_states.erase(copy);
+    delete copy;
     *fmu_state = nullptr;
     return Status::ok;
   });
@@ -344,7 +391,9 @@ Status free_fmu_state(void* c, const char* f, const char* arg, void** fmu_state)
 Status serialized_fmu_state_size(void* c, const char* f, void* fmu_state, size_t* size) {
   return guarded(c, f, kAnyState, [&](Instance& inst) {
     if (!fmu_state || !size) return inst.reject(std::string(f) + ": NULL argument");
-    *size = serialize_state(inst, *static_cast<const StateCopy*>(fmu_state)).size();
+    const StateCopy* copy = live(inst, f, fmu_state);
+    if (!copy) return Status::error;
+    *size = serialize_state(inst, *copy).size();
     return Status::ok;
   });
 }
@@ -352,7 +401,9 @@ Status serialized_fmu_state_size(void* c, const char* f, void* fmu_state, size_t
 Status serialize_fmu_state(void* c, const char* f, void* fmu_state, void* blob, size_t size) {
   return guarded(c, f, kAnyState, [&](Instance& inst) {
     if (!fmu_state || !blob) return inst.reject(std::string(f) + ": NULL argument");
-    const auto b = serialize_state(inst, *static_cast<const StateCopy*>(fmu_state));
+    const StateCopy* copy = live(inst, f, fmu_state);
+    if (!copy) return Status::error;
+    const auto b = serialize_state(inst, *copy);
     if (size < b.size())
       return inst.reject(std::string(f) + ": buffer of " + std::to_string(size) + " bytes, " +
                          std::to_string(b.size()) + " needed");
@@ -372,18 +423,28 @@ Status deserialize_fmu_state(
     // Exactly one state bit, a known state.
     const bool state_ok = st != 0 && (st & (st - 1)) == 0 && st <= kError;
     const std::string invalid_state = std::string(f) + ": invalid state in blob";
-    if (order == BlobOrder::state_first && !state_ok) return inst.reject(invalid_state);
     const Values now = inst.model->save();
     std::string msg;
-    if (!inst.model->deserialize(bytes, size - 4, &msg))
-      return inst.reject(std::string(f) + ": " + msg);
-    const StateCopy copy{inst.model->save(), st};
+    // The blob is the model's part and the 4-byte state word: sizes are told for the whole. A
+    // blob of the wrong size is told as such (its "state word" is then any 4 bytes).
+    const bool model_ok = inst.model->deserialize(bytes, size - 4, &msg, 4);
+    const StateCopy copy{inst.model->save(), st, inst.kind};
     inst.model->restore(now);
+    if (order == BlobOrder::state_first && !state_ok && model_ok) return inst.reject(invalid_state);
+    if (!model_ok) return inst.reject(std::string(f) + ": " + msg);
     if (!state_ok) return inst.reject(invalid_state);
-    if (*fmu_state)
-      *static_cast<StateCopy*>(*fmu_state) = copy;
-    else
-      *fmu_state = new StateCopy(copy);
+    if (!state_fits(st, inst.kind))
+      return inst.reject(std::string(f) + ": the blob is a state of the other interface (not " +
+                         kind_name(inst.kind) + ")");
+    if (*fmu_state) {
+      StateCopy* target = live(inst, f, *fmu_state);
+      if (!target) return Status::error;
+      *target = copy;
+    } else {
+      auto* fresh = new StateCopy(copy);
+      inst.live_states.insert(fresh);
+      *fmu_state = fresh;
+    }
     return Status::ok;
   });
 }

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <exception>
 #include <memory>
+#include <set>
 #include <new>
 #include <string>
 
@@ -59,6 +60,9 @@ class Instance {
   bool category_on[kCategoryCount] = {true, true, true};
   unsigned state = kInstantiated;
   std::unique_ptr<Model> model;
+  /// FMU states this instance handed out and not yet freed: a handle not in here (freed
+  /// twice, another instance's, garbage) is an Error, never a dereference.
+  std::set<void*> live_states;
 
   /// Errors and warnings are always reported; OK-level messages only when asked for.
   void log(Status status, Category c, const std::string& msg) const;
@@ -105,6 +109,10 @@ struct InstantiateArgs {
   bool known_type = true;           ///< FMI 2: fmuType is ModelExchange or CoSimulation
   Kind kind = Kind::cs;
   bool logging_on = false;
+  /// The function called, for messages (fmi2Instantiate, fmi3InstantiateCoSimulation, ...).
+  const char* function = nullptr;
+  /// FMI 3 Co-Simulation: the importer asks for Event Mode, which this FMU does not have.
+  bool event_mode_used = false;
 };
 
 /// Check the arguments, read resources/model.txt and check it against the version and the

@@ -338,9 +338,21 @@ Status Model::deflection(const double** d6, std::string* msg) {
     for (int i = 0; i < 3; ++i) out_[6 + i] = p(i) + d(i);
     for (double x : out_)
       if (!std::isfinite(x)) {
-        *msg = "the deflection is not finite (parameters or pose out of range)";
+        *msg = "the deflection overflows (not finite): parameters, pose or wrench out of range";
         return Status::error;
       }
+    // A deflection of a kilometre is no arm's: the linear model was fed an absurd wrench (1e308 N
+    // gave 1e303 m), and what follows from it (q_cmd) is overflow, not a singular pose.
+    const double moved = d.head<3>().norm();
+    if (moved > 1e3 || d.tail<3>().norm() > 1e3) {
+      char b[200];
+      std::snprintf(b, sizeof b,
+                    "the deflection overflows: %.3g m (%.3g rad) under this wrench is beyond any "
+                    "arm; check the wrench and parameter units",
+                    moved, d.tail<3>().norm());
+      *msg = b;
+      return Status::error;
+    }
     deflection_valid_ = true;
   }
   *d6 = out_;
@@ -391,9 +403,14 @@ Status Model::compensation(const double** qcmd, std::string* msg) {
     }
     for (int i = 0; i < n; ++i) qcmd_[static_cast<size_t>(i)] = qc(i);
     compensation_valid_ = true;
+    compensation_reported_ = false;
   }
   *qcmd = qcmd_.data();
-  if (compensation_status_ != Status::ok) *msg = compensation_message_;
+  // A warning is told once per evaluation, not once per q_cmd output read (the status stays).
+  if (compensation_status_ == Status::error ||
+      (compensation_status_ == Status::warning && !compensation_reported_))
+    *msg = compensation_message_;
+  compensation_reported_ = true;
   return compensation_status_;
 }
 
@@ -486,7 +503,7 @@ std::vector<uint8_t> Model::serialize() const {
   return b;
 }
 
-bool Model::deserialize(const uint8_t* d, size_t size, std::string* msg) {
+bool Model::deserialize(const uint8_t* d, size_t size, std::string* msg, size_t trailer) {
   const size_t header = 4 + 4 + 4 + 8 + 4 + 4;
   if (!d || size < header || std::memcmp(d, "STFS", 4) != 0) {
     *msg = "not a stiff FMU state (bad magic or too short)";
@@ -508,8 +525,9 @@ bool Model::deserialize(const uint8_t* d, size_t size, std::string* msg) {
   }
   const size_t expected = header + 8 * (2 + size_t{n} + 6 + size_t{p});
   if (total != size || size != expected) {
-    *msg = "FMU state has " + std::to_string(size) + " bytes, expected " +
-           std::to_string(expected) + " (truncated?)";
+    *msg = "FMU state has " + std::to_string(size + trailer) + " bytes, expected " +
+           std::to_string(expected + trailer) +
+           (size < expected ? " (truncated?)" : " (extra bytes at the end)");
     return false;
   }
   Values v;

@@ -88,7 +88,9 @@ class Model {
   /// Pointer-free, versioned, size-checked blob of the values (FMU state).
   std::vector<uint8_t> serialize() const;
   /// Restore from serialize(); false (and a message) for a truncated or foreign blob.
-  bool deserialize(const uint8_t* data, size_t size, std::string* msg);
+  /// `trailer`: bytes of the caller's blob after the model's part (sizes in messages are the
+  /// blob's).
+  bool deserialize(const uint8_t* data, size_t size, std::string* msg, size_t trailer = 0);
   /// Copy of the values / restore from a copy (fmi*GetFMUstate / SetFMUstate).
   Values save() const { return values_; }
   void restore(const Values& v);
@@ -111,6 +113,7 @@ class Model {
   bool compensation_valid_ = false;
   Status compensation_status_ = Status::ok;
   std::string compensation_message_;
+  bool compensation_reported_ = false;  ///< the warning of this evaluation was logged
   double out_[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};  ///< d (6) and loaded tool position (3)
   Eigen::Matrix3d flange_rotation_ = Eigen::Matrix3d::Identity();  ///< unloaded, at q
   Eigen::Vector3d p_unloaded_ = Eigen::Vector3d::Zero();           ///< tool point at q

@@ -114,9 +114,15 @@ class CApi:
         self.keep.append(ds)
         return h
 
-    def options(self, struct_size_extra=0, poison=False, **fields):
+    def noise_options(self, struct_size):
+        o = _capi.NoiseOptions()
+        o.struct_size = struct_size
+        self.keep.append(o)
+        return C.byref(o)
+
+    def options(self, struct_size_extra=0, poison=False, struct_size=None, **fields):
         o = _capi.IdentifyOptions()
-        o.struct_size = C.sizeof(o) + struct_size_extra
+        o.struct_size = C.sizeof(o) + struct_size_extra if struct_size is None else struct_size
         for k, v in fields.items():
             setattr(o, k, v)
         buf = C.create_string_buffer(C.sizeof(o) + struct_size_extra)
@@ -139,6 +145,7 @@ class CApi:
     def namespace(self):
         return {"lib": _capi.lib, "out": self.out, "dbl": self.dbl, "robot": self.robot,
                 "dataset": self.dataset, "options": self.options, "model": self.model,
+                "noise_options": self.noise_options,
                 "fit": self.fit,
                 "NAN": NAN, "INF": INF}
 
@@ -243,6 +250,25 @@ class Fmu:
                 "fmu_instantiate": self.fmu_instantiate, "NAN": NAN, "INF": INF}
 
 
+def fit_edit(path, tmp, edit):
+    """A copy of the fit file at `path` changed by edit(json) (a bad fit for a case)."""
+    import json
+
+    j = json.loads(pathlib.Path(path).read_text())
+    edit(j)
+    out = pathlib.Path(tmp) / "edited_fit.json"
+    out.write_text(json.dumps(j))
+    return str(out)
+
+
+def swap(lst, a, b):
+    lst[a], lst[b] = lst[b], lst[a]
+
+
+def put(obj, key, value):
+    obj[key] = value
+
+
 # ---------------------------------------------------------------- the runner
 def fill(text: str, subs: dict) -> str:
     for k, v in subs.items():
@@ -259,6 +285,7 @@ def test_bad_input(case, env, tmp_path):
             subs[f"fmu{v}"] = env[f"fmu{v}"] or ""
     for name, text in case.get("files", {}).items():
         text = text.replace("@FIVE_JOINT_URDF@", five_joint_urdf())
+        text = text.replace("@ROKAE@", ROBOT.read_text())
         (tmp_path / name).write_text(fill(text, subs) if "{tmp}" in text else text)
     out = tmp_path / "existing_output.keep"
     out.write_text(SENTINEL)
@@ -281,7 +308,8 @@ def test_bad_input(case, env, tmp_path):
         assert message in err, err
     elif case["kind"] == "python":
         with pytest.raises(Exception) as e:
-            eval(fill(case["code"], subs), {"stiff": stiff, "np": np, "NAN": NAN, "INF": INF})
+            eval(fill(case["code"], subs), {"stiff": stiff, "np": np, "NAN": NAN, "INF": INF,
+                                            "fit_edit": fit_edit, "swap": swap, "put": put})
         names = [k.__name__ for k in type(e.value).__mro__]
         assert case["error"] in names, (type(e.value), e.value)
         if "status" in case:

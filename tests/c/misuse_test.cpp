@@ -241,6 +241,12 @@ TEST(CApiMisuse, EveryFunctionReturnsItsStatusAndNamesItself) {
        [&] { return stiff_ik_analytic(&flag, nullptr); }},
       {"stiff_tool_pose_batch", STIFF_E_BUFFER_TOO_SMALL,
        [&] { return stiff_tool_pose_batch(out, 15, &needed, f.robot, q, 1); }},
+      {"stiff_tool_poses", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_tool_poses(out, 64, &needed, f.robot, q, 1, 5); }},
+      {"stiff_file_write", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_file_write(nullptr, "x", 1); }},
+      {"stiff_file_write", STIFF_E_IO,
+       [&] { return stiff_file_write("/nonexistent-dir/x.txt", "x", 1); }},
       {"stiff_ik", STIFF_E_INVALID_ARGUMENT,
        [&] {
          double bad[16];
@@ -358,3 +364,68 @@ TEST(CApiMisuse, LastErrorIsPerThread) {
 }
 
 }  // namespace
+
+// A struct_size must be where a version of the struct ends. One that ends inside a field was
+// read as half a pointer (a crash in strlen) or written back as a torn double.
+TEST(CApiMisuse, StructSizeEndingInsideAFieldIsRefused) {
+  Fixture f;
+  stiff_result* res = nullptr;
+  for (uint32_t size : {5u, 10u, 15u, 20u, 30u}) {
+    auto o = zeroed<stiff_identify_options>();
+    o.model = "joint";
+    o.struct_size = size;
+    EXPECT_EQ(stiff_identify(&res, f.robot, f.data, &o), STIFF_E_INVALID_ARGUMENT) << size;
+    EXPECT_NE(std::string(stiff_last_error()).find("no version of the struct"), std::string::npos)
+        << stiff_last_error();
+    EXPECT_EQ(res, nullptr);
+  }
+  // Sizes that end on a field: the fields after it keep their defaults.
+  for (uint32_t size : {4u, 8u, 16u, 24u, static_cast<uint32_t>(sizeof(stiff_identify_options))}) {
+    auto o = zeroed<stiff_identify_options>();
+    o.struct_size = size;
+    EXPECT_EQ(stiff_identify(&res, f.robot, f.data, &o), STIFF_OK) << size << stiff_last_error();
+    stiff_result_destroy(res);
+    res = nullptr;
+  }
+  // Output structs: the caller's bytes are left as they were when the size is refused.
+  stiff_noise_options noise;
+  std::memset(&noise, 0xab, sizeof noise);
+  noise.struct_size = 12;
+  const std::string path = src("examples/truths/noise_realistic.yaml");
+  EXPECT_EQ(stiff_noise_read(&noise, path.c_str()), STIFF_E_INVALID_ARGUMENT);
+  unsigned char expected[sizeof noise];
+  std::memset(expected, 0xab, sizeof expected);
+  EXPECT_EQ(std::memcmp(reinterpret_cast<unsigned char*>(&noise) + 4, expected + 4, sizeof noise - 4),
+            0);
+  stiff_fit_statistics st;
+  std::memset(&st, 0, sizeof st);
+  st.struct_size = 6;
+  EXPECT_EQ(stiff_result_statistics(&st, f.fit), STIFF_E_INVALID_ARGUMENT);
+  // A newer caller's larger output struct: its unknown tail is its own business.
+  struct Bigger {
+    stiff_fit_statistics s;
+    double future;
+  } b;
+  std::memset(&b, 0, sizeof b);
+  b.s.struct_size = sizeof b;
+  b.future = 7.0;
+  EXPECT_EQ(stiff_result_statistics(&b.s, f.fit), STIFF_OK) << stiff_last_error();
+  EXPECT_EQ(b.future, 7.0);
+  EXPECT_GT(b.s.measurements, 0u);
+}
+
+// rows x width products that wrap around size_t must not pass the capacity check.
+TEST(CApiMisuse, RowCountsThatOverflowAreRefused) {
+  Fixture f;
+  const double q[6] = {0.1, 1.2, 0.5, -1.0, 1.3, 0.0};
+  const double w[6] = {20, -30, 25, 0, 0, 0};
+  double out[16];
+  size_t needed = 0;
+  const size_t huge = std::numeric_limits<size_t>::max() / 6 + 2;  // 6 * huge wraps to 6
+  EXPECT_EQ(stiff_predict_batch(out, 16, &needed, f.model, q, w, huge, 6),
+            STIFF_E_INVALID_ARGUMENT);
+  EXPECT_NE(std::string(stiff_last_error()).find("more than memory"), std::string::npos)
+      << stiff_last_error();
+  const size_t huge16 = std::numeric_limits<size_t>::max() / 16 + 2;
+  EXPECT_EQ(stiff_tool_pose_batch(out, 16, &needed, f.robot, q, huge16), STIFF_E_INVALID_ARGUMENT);
+}

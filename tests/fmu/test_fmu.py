@@ -695,3 +695,96 @@ def test_valgrind_clean(fmu2, tmp_path):
                         "--error-exitcode=9", str(exe), extract(fmu2), md.guid, "500"],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr[-3000:]
+
+
+def test_compensation_warning_is_logged_once_per_evaluation(fmu):
+    """At the all-zero pose (a wrist singularity) a load makes compensation fail to converge:
+    one warning per evaluation, not one per q_cmd output read (fmusim showed 6 per read)."""
+    a = Instance(fmu).start()
+    a.set_inputs([0.0] * 6, [200.0, -150.0, 300.0, 0.0, 0.0, 0.0])
+    try:
+        a.qcmd()
+    except Exception:  # fmpy raises on a Warning only in strict modes
+        pass
+    try:
+        a.qcmd()  # the same evaluation read again: nothing new to say
+    except Exception:
+        pass
+    warnings = [m for s, _, m in a.log.messages if s == 1]
+    a.free()
+    assert len(warnings) == 1, warnings
+
+
+def _state_calls(a):
+    if a.v3:
+        return (a.fmu.getFMUState, a.fmu.setFMUState, a.fmu.freeFMUState,
+                a.fmu.serializeFMUState, a.fmu.deserializeFMUState)
+    return (a.fmu.getFMUstate, a.fmu.setFMUstate, a.fmu.freeFMUstate, a.fmu.serializeFMUstate,
+            a.fmu.deSerializeFMUstate)
+
+
+def test_fmu_state_sizes_are_told_for_the_whole_blob(fmu):
+    a = Instance(fmu).start()
+    get_state, _, free_state, ser, deser = _state_calls(a)
+    s = get_state()
+    blob = ser(s)
+    for bad, said in ((blob[:-1], f"has {len(blob) - 1} bytes, expected {len(blob)} (truncated?)"),
+                      (blob + b"\0", f"has {len(blob) + 1} bytes, expected {len(blob)} (extra")):
+        with pytest.raises(FMICallException):
+            deser(bad)
+        assert any(said in m for m in a.log.errors()), (said, a.log.errors())
+    free_state(s)
+    a.free()
+
+
+def test_fmu_state_freed_twice_is_an_error_not_a_crash(fmu):
+    """fmusim frees a state twice; the second call must be an Error."""
+    a = Instance(fmu).start()
+    get_state, set_state, free_state, ser, _ = _state_calls(a)
+    s = get_state()
+    stale = ctypes.c_void_p(s.value)
+    free_state(s)
+    for call in (lambda: free_state(stale), lambda: set_state(stale), lambda: ser(stale)):
+        with pytest.raises(FMICallException):
+            call()
+    assert any("not an FMU state of this instance" in m for m in a.log.errors())
+    a.free()
+
+
+def test_co_simulation_state_is_refused_by_model_exchange(fmu):
+    cs = Instance(fmu, kind="cs").start()
+    get_cs, _, free_cs, ser_cs, _ = _state_calls(cs)
+    s = get_cs()
+    blob = ser_cs(s)
+    me = Instance(fmu, kind="me").start()
+    _, _, _, _, deser_me = _state_calls(me)
+    with pytest.raises(FMICallException):
+        deser_me(blob)
+    assert any("state of the other interface" in m for m in me.log.errors()), me.log.errors()
+    free_cs(s)
+    cs.free()
+    me.free()
+
+
+def test_fmi3_event_mode_is_refused_when_the_fmu_has_none(fmu3):
+    from fmpy import extract, read_model_description
+    from fmpy.fmi3 import FMU3Slave
+
+    md = read_model_description(fmu3)
+    log = Log()
+    f = FMU3Slave(guid=md.guid, unzipDirectory=extract(fmu3),
+                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName="ev")
+    with pytest.raises(Exception):
+        f.instantiate(eventModeUsed=True, logMessage=log.fmi3)
+    assert any("fmi3InstantiateCoSimulation: eventModeUsed = true" in m
+               for m in log.errors()), log.messages
+
+
+def test_absurd_wrench_is_reported_as_overflow(fmu):
+    """1e308 N gave a deflection of 1e303 m with status OK and q_cmd == q 'singular pose'."""
+    a = Instance(fmu).start()
+    a.set_inputs(Q, [1e308, 0, 0, 0, 0, 0])
+    with pytest.raises(FMICallException):
+        a.deflection()
+    assert any("the deflection overflows" in m for m in a.log.errors()), a.log.messages
+    a.fmu.freeInstance()

@@ -185,6 +185,12 @@ STIFF_API stiff_status stiff_dataset_read_csv(stiff_dataset** out,
                                               const char* path);
 /** Write in SI units, atomically (temporary file renamed when complete). @since 0.1 */
 STIFF_API stiff_status stiff_dataset_write_csv(const stiff_dataset* dataset, const char* path);
+/** Write size bytes to path the way every stiff output is written: a regular file is replaced
+ *  atomically (temporary file next to it, renamed when complete; a replaced file keeps its
+ *  mode); symbolic links are followed; character devices and named pipes are written through;
+ *  "-" is standard output; a read-only file, a directory or another non-regular file is
+ *  refused (IO), never replaced. Errors name path, never the temporary file. @since 0.1 */
+STIFF_API stiff_status stiff_file_write(const char* path, const void* data, size_t size);
 /** Build a dataset from arrays (copied): q rows x dof [rad], force rows x 3 [N] (base frame,
  *  at the load point); moment, displacement (rows x 3) and sigma_d (rows) may be NULL.
  *  @since 0.1 */

@@ -46,6 +46,17 @@ STIFF_API stiff_status stiff_tool_pose_batch(double* poses,
                                              const double* q,
                                              size_t rows);
 
+/** stiff_tool_pose_batch with the width of q: n values per row, which must be the robot's dof
+ *  (INVALID_ARGUMENT otherwise), so that a caller's array of the wrong shape is refused
+ *  instead of read misaligned. @since 0.1 */
+STIFF_API stiff_status stiff_tool_poses(double* poses,
+                                        size_t capacity,
+                                        size_t* needed,
+                                        const stiff_robot* robot,
+                                        const double* q,
+                                        size_t rows,
+                                        size_t n);
+
 /** Every inverse kinematics solution of the tool pose within the joint limits: solutions x
  *  dof values [rad], nearest q_seed first (q_seed: dof values, may be NULL = zeros; each joint
  *  takes the representation q + 2 pi k within its limits nearest the seed). Analytic robots

@@ -517,29 +517,22 @@ void export_fmu(const RobotModel& robot,
   if (options.fmi_version != 2 && options.fmi_version != 3)
     throw InvalidArgument("fmu export: fmi_version must be 2 or 3, not " +
                           std::to_string(options.fmi_version));
+  // It names binaries/<platform>/<id>.so inside the zip: a file name (at most 255 bytes on the
+  // importers' file systems; 200 leaves room for the extension and the platform's prefix).
+  if (options.model_identifier.size() > 200)
+    throw InvalidArgument("fmu export: model identifier is " +
+                          std::to_string(options.model_identifier.size()) +
+                          " characters long; at most 200 (it names the FMU's binary file)");
   if (!is_identifier(options.model_identifier))
     throw InvalidArgument("fmu export: model identifier '" + options.model_identifier +
                           "' is not a C identifier");
   if (path.empty()) throw InvalidArgument("fmu export: output path is empty");
   const DeflectionModel model(robot, fit.model);
-  if (static_cast<int>(fit.parameters.size()) != model.parameter_count())
-    throw InvalidArgument("fmu export: the fit has " + std::to_string(fit.parameters.size()) +
-                          " parameters, model '" + model.model_string() + "' of robot '" +
-                          robot.name + "' has " + std::to_string(model.parameter_count()));
+  check_fit_applies(fit, robot, model, "fmu export");
   std::vector<Var> vars = build_variables(model, options.fmi_version);
   for (auto& v : vars) {
     if (v.role != Role::parameter) continue;
-    const FitParameter& p = fit.parameters[static_cast<size_t>(v.index)];
-    const ParameterSpec& s = model.spec(v.index);
-    if (p.effect != model.owner(v.index).name() || p.name != s.name)
-      throw InvalidArgument("fmu export: fit parameter " + std::to_string(v.index + 1) + " is " +
-                            p.effect + "." + p.name + ", the model expects " +
-                            model.owner(v.index).name() + "." + s.name);
-    if (!std::isfinite(p.value) || p.value < s.lower || p.value > s.upper)
-      throw InvalidArgument("fmu export: parameter " + v.name + " = " + num(p.value) +
-                            " is not finite or outside [" + num(s.lower) + ", " + num(s.upper) +
-                            "]");
-    v.start = p.value;
+    v.start = fit.parameters[static_cast<size_t>(v.index)].value;
   }
 
   const std::string platform = options.fmi_version == 2 ? "linux64" : "x86_64-linux";

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
 #include <nlohmann/json.hpp>
 
 #include "stiff/error.hpp"
@@ -51,6 +53,7 @@ std::string fit_to_json(const FitResult& f) {
   j["format"] = "stiff-fit";
   j["version"] = 1;
   j["robot"] = {{"name", f.robot_name}, {"file", f.robot_path}};
+  if (!f.robot_digest.empty()) j["robot"]["kinematics_digest"] = f.robot_digest;
   j["model"] = f.model;
   j["method"] = f.method;
   j["loss"] = {{"name", f.loss}, {"scale_m", f.loss_scale_m}};
@@ -120,6 +123,7 @@ FitResult fit_from_json(const std::string& text, const std::string& file) {
     FitResult f;
     f.robot_name = need(j, "robot").value("name", "");
     f.robot_path = need(j, "robot").value("file", "");
+    f.robot_digest = need(j, "robot").value("kinematics_digest", "");
     f.model = need(j, "model").get<std::vector<std::string>>();
     if (f.model.empty()) throw ParseError(file, 0, 0, "fit file has an empty model");
     f.method = j.value("method", "");
@@ -155,14 +159,102 @@ FitResult fit_from_json(const std::string& text, const std::string& file) {
     }
     const int p = static_cast<int>(f.parameters.size());
     f.covariance = Eigen::MatrixXd::Constant(p, p, NAN);
-    if (j.contains("covariance") && j["covariance"].size() == static_cast<size_t>(p))
-      for (int r = 0; r < p; ++r)
-        for (int c = 0; c < p && c < static_cast<int>(j["covariance"][r].size()); ++c)
-          f.covariance(r, c) = number_from(j["covariance"][r][c]);
+    if (j.contains("covariance")) {
+      // p x p, symmetric, a variance >= 0 on the diagonal; null for unidentified parameters.
+      const json& cj = j["covariance"];
+      auto bad = [&](const std::string& why) {
+        throw ParseError(file, 0, 0, "malformed covariance: " + why);
+      };
+      if (!cj.is_array() || cj.size() != static_cast<size_t>(p))
+        bad("it must be " + std::to_string(p) + " rows for the " + std::to_string(p) +
+            " parameters");
+      for (int r = 0; r < p; ++r) {
+        if (!cj[r].is_array() || cj[r].size() != static_cast<size_t>(p))
+          bad("row " + std::to_string(r + 1) + " must hold " + std::to_string(p) + " values");
+        for (int c = 0; c < p; ++c) {
+          if (!cj[r][c].is_number() && !cj[r][c].is_null())
+            bad("entry (" + std::to_string(r + 1) + ", " + std::to_string(c + 1) +
+                ") is not a number");
+          f.covariance(r, c) = number_from(cj[r][c]);
+        }
+      }
+      for (int r = 0; r < p; ++r) {
+        if (f.covariance(r, r) < 0) bad("variance " + std::to_string(r + 1) + " is negative");
+        for (int c = 0; c < r; ++c) {
+          const double a = f.covariance(r, c), b = f.covariance(c, r);
+          if ((std::isnan(a) != std::isnan(b)) ||
+              (!std::isnan(a) && std::abs(a - b) > 1e-9 * std::max(std::abs(a), std::abs(b))))
+            bad("it is not symmetric at (" + std::to_string(r + 1) + ", " +
+                std::to_string(c + 1) + ")");
+        }
+      }
+    }
     if (j.contains("warnings")) f.warnings = j["warnings"].get<std::vector<std::string>>();
     return f;
   } catch (const json::exception& e) {
     throw ParseError(file, 0, 0, std::string("malformed fit file: ") + e.what());
+  }
+}
+
+std::string kinematics_digest(const RobotModel& robot) {
+  // FNV-1a over the rounded numbers: the same arm read from YAML, URDF or the robot.yaml inside
+  // an FMU gives the same digest; another arm (or another measured point) does not.
+  uint64_t h = 1469598103934665603ULL;
+  auto mix = [&](double v) {
+    const long long q = std::isfinite(v) ? std::llround(v * 1e9) : 0;
+    for (int b = 0; b < 8; ++b) {
+      h ^= static_cast<uint64_t>(q >> (8 * b)) & 0xff;
+      h *= 1099511628211ULL;
+    }
+  };
+  mix(robot.dof());
+  for (const auto& jt : robot.joints) {
+    for (int k = 0; k < 16; ++k) mix(jt.pre(k / 4, k % 4));
+    for (int k = 0; k < 3; ++k) mix(jt.axis(k));
+    for (int k = 0; k < 16; ++k) mix(jt.post(k / 4, k % 4));
+  }
+  for (int k = 0; k < 3; ++k) mix(robot.measured_point(k));
+  for (int k = 0; k < 3; ++k) mix(robot.load_point(k));
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "fnv1a64:%016llx", static_cast<unsigned long long>(h));
+  return buf;
+}
+
+void check_fit_applies(const FitResult& fit,
+                       const RobotModel& robot,
+                       const DeflectionModel& model,
+                       const std::string& what) {
+  const std::string w = what.empty() ? std::string() : what + ": ";
+  if (!fit.robot_digest.empty()) {
+    const std::string mine = kinematics_digest(robot);
+    if (fit.robot_digest != mine)
+      throw InvalidArgument(w + "the fit was identified on robot '" + fit.robot_name +
+                            "' (kinematics " + fit.robot_digest + "), robot '" + robot.name +
+                            "' has other kinematics (" + mine + "); identify it on this robot");
+  } else if (!fit.robot_name.empty() && fit.robot_name != robot.name) {
+    throw InvalidArgument(w + "the fit was identified on robot '" + fit.robot_name +
+                          "', not '" + robot.name + "'");
+  }
+  if (model.parameter_count() != static_cast<int>(fit.parameters.size()))
+    throw InvalidArgument(w + "the fit has " + std::to_string(fit.parameters.size()) +
+                          " parameters, model '" + model.model_string() + "' of robot '" +
+                          robot.name + "' has " + std::to_string(model.parameter_count()));
+  for (int k = 0; k < model.parameter_count(); ++k) {
+    const FitParameter& p = fit.parameters[static_cast<size_t>(k)];
+    const ParameterSpec& sp = model.spec(k);
+    const std::string expected = model.owner(k).name() + "." + sp.name;
+    if (p.effect != model.owner(k).name() || p.name != sp.name)
+      throw InvalidArgument(w + "fit parameter " + std::to_string(k + 1) + " is " + p.effect +
+                            "." + p.name + ", the model expects " + expected +
+                            " (parameters are matched by name and order)");
+    if (!std::isfinite(p.value) || p.value < sp.lower || p.value > sp.upper) {
+      char range[96];
+      std::snprintf(range, sizeof range, "[%.6g, %.6g]", sp.lower, sp.upper);
+      char val[32];
+      std::snprintf(val, sizeof val, "%.6g", p.value);
+      throw InvalidArgument(w + "fit parameter " + expected + " = " + val + " " + sp.unit +
+                            " is outside its physical range " + range);
+    }
   }
 }
 
@@ -193,16 +285,7 @@ Eigen::MatrixXd predict_dataset(const RobotModel& robot,
                                 const Dataset& data) {
   validate_dataset(data, robot.dof(), false);
   DeflectionModel model(robot, fit.model, &data);
-  if (model.parameter_count() != static_cast<int>(fit.parameters.size()))
-    throw InvalidArgument("fit has " + std::to_string(fit.parameters.size()) +
-                          " parameters but model '" + model.model_string() + "' on robot '" +
-                          robot.name + "' has " + std::to_string(model.parameter_count()) +
-                          " (was it identified for another robot?)");
-  for (int k = 0; k < model.parameter_count(); ++k)
-    if (model.spec(k).name != fit.parameters[k].name)
-      throw InvalidArgument("fit parameter " + std::to_string(k + 1) + " is '" +
-                            fit.parameters[k].name + "', the model expects '" + model.spec(k).name +
-                            "'");
+  check_fit_applies(fit, robot, model, "predict");
   const Eigen::VectorXd theta = fit.theta();
   Eigen::MatrixXd out(data.rows.size(), 6);
   const auto ctx = model.contexts(data);  // the one time axis (model.cpp)

@@ -952,17 +952,22 @@ FitResult identify(const RobotModel& robot,
   { robust_sigma = robust::mad_sigma(std::vector<double>(raw.data(), raw.data() + raw.size())); }
   const double noise = stated > 0 ? stated : (robust_sigma > 0 ? robust_sigma : 1e-6);
   for (int r = 0; r < n; ++r) s.row_weight(r) = 1.0 / (weighted ? data.rows[r].sigma_d : noise);
-  // Robust threshold on each row's residual norm, in that row's sigma units.
-  const double scale_m = opt.loss_scale_m > 0 ? opt.loss_scale_m : 3.0 * noise;
+  // Robust threshold on each row's residual norm, in that row's sigma units: 3 sigma for the
+  // monotone losses. Tukey's biweight gets the same Gaussian efficiency as Huber's: the classical
+  // constants for 95 % are 1.345 sigma (Huber) and 4.685 sigma (Tukey) (Holland & Welsch 1977),
+  // so 3 * 4.685 / 1.345 = 10.4 sigma; at 3 sigma it gives clean rows weights below one half.
+  const double c_sigma = opt.loss == "tukey" ? 3.0 * 4.685 / 1.345 : 3.0;
+  const double scale_m = opt.loss_scale_m > 0 ? opt.loss_scale_m : c_sigma * noise;
   Eigen::VectorXd loss_scale(n);
   for (int r = 0; r < n; ++r)
     loss_scale(r) = opt.loss_scale_m > 0 ? opt.loss_scale_m * s.row_weight(r)
-                                         : (weighted ? 3.0 : 3.0 * noise * s.row_weight(r));
+                                         : (weighted ? c_sigma : c_sigma * noise * s.row_weight(r));
 
   // ---- identifiability, solve, re-check at the solution (offsets can make c6 visible).
   Identifiability idf;
   std::vector<int> free;
   int iterations = 0;
+  const IdentifyOptions* solving = &opt;
   SolveOutcome last;
   Eigen::MatrixXd last_jacobian;
   Eigen::VectorXd last_jacobian_theta;
@@ -1001,7 +1006,7 @@ FitResult identify(const RobotModel& robot,
           if (idf.fixed[k] && !a.fixed[k]) return true;
         return false;
       };
-      last = solve(s, free, theta, opt, loss_scale, pass < 2 ? &visible : nullptr);
+      last = solve(s, free, theta, *solving, loss_scale, pass < 2 ? &visible : nullptr);
       iterations += last.iterations;
       last_jacobian = weighted_jacobian(s, theta);
       last_jacobian_theta = theta;
@@ -1014,6 +1019,19 @@ FitResult identify(const RobotModel& robot,
       idf = again;
     }
   };
+  // A redescending loss (Tukey) has many local minima and gives zero weight beyond its scale:
+  // from the least-squares start, whose residuals carry the outliers' pull, it can stop where it
+  // started with every row rejected. Start it from the Huber fit (convex: one minimum).
+  if (opt.loss == "tukey") {
+    IdentifyOptions huber = opt;
+    huber.loss = "huber";
+    const Eigen::VectorXd tukey_scale = loss_scale;
+    loss_scale *= 1.345 / 4.685;
+    solving = &huber;
+    fit_passes();
+    solving = &opt;
+    loss_scale = tukey_scale;
+  }
   fit_passes();
   // Without a stated noise the robust scale comes from the residuals; the start's residuals
   // are inflated by the outliers' pull, so re-estimate it from the robust fit (MAD) and refit.
@@ -1022,8 +1040,8 @@ FitResult identify(const RobotModel& robot,
     for (int round = 0; round < 3; ++round) {
       const Eigen::VectorXd e = weighted_residuals(s, theta) * noise;  // metres
       const double sigma = robust::mad_sigma(std::vector<double>(e.data(), e.data() + e.size()));
-      if (!(sigma > 0) || std::abs(3.0 * sigma - scale_used_m) < 0.05 * scale_used_m) break;
-      scale_used_m = 3.0 * sigma;
+      if (!(sigma > 0) || std::abs(c_sigma * sigma - scale_used_m) < 0.05 * scale_used_m) break;
+      scale_used_m = c_sigma * sigma;
       for (int r = 0; r < n; ++r) loss_scale(r) = scale_used_m * s.row_weight(r);
       fit_passes();
     }
@@ -1098,7 +1116,22 @@ FitResult identify(const RobotModel& robot,
   for (int i = 0; i < rank; ++i) inv_sv2(i) = 1.0 / (sv(i) * sv(i));
   const Eigen::MatrixXd cov_s = v * inv_sv2.asDiagonal() * v.transpose();
 
+  // A fit that identified nothing, or a robust fit that rejected most of the data, is a failure:
+  // its parameters are the start, not an estimate (an M-estimator breaks down beyond half).
+  if (rank == 0)
+    throw NumericalError("identify: the fit identified no parameter (the Jacobian at the "
+                         "solution has rank 0); check the loads and the units");
+  if (opt.loss != "none") {
+    int rejected = 0;
+    for (int r = 0; r < n; ++r) rejected += f.weights(r) < opt.outlier_weight;
+    if (2 * rejected > n)
+      throw NumericalError("identify: the " + opt.loss + " loss rejected " +
+                           std::to_string(rejected) + " of " + std::to_string(n) +
+                           " measurements; a robust fit needs most rows to be good (check the "
+                           "units, or give --loss-scale-um)");
+  }
   f.robot_name = robot.name;
+  f.robot_digest = kinematics_digest(robot);
   f.robot_path = robot.source_path;
   f.model = model.effect_names();
   f.method = "ceres";

@@ -69,6 +69,14 @@ void validate_identification_data(const Dataset& data, int dof) {
     }
   }
   if (bad) validate_dataset(data, dof, true);  // throws the exact message
+  // An uncertainty beyond a metre is no tracker's: a unit mistake (um read as m). It would
+  // weight every row to nothing and read as "no load".
+  if (data.has_sigma)
+    for (size_t r = 0; r < n; ++r)
+      if (data.rows[r].sigma_d > 1.0)
+        throw InvalidArgument("measurement " + std::to_string(r + 1) + " (id '" + data.rows[r].id +
+                              "'): sigma_d = " + std::to_string(data.rows[r].sigma_d) +
+                              " m is larger than any robot; check the unit of the sigma_d column");
 }
 
 }  // namespace detail
@@ -420,6 +428,7 @@ FitResult identify_joint_linear(const RobotModel& robot,
   const double s2 = rss_w / dof;
 
   f.robot_name = robot.name;
+  f.robot_digest = kinematics_digest(robot);
   f.robot_path = robot.source_path;
   f.model = {"joint"};
   f.method = "linear_least_squares";

@@ -235,6 +235,12 @@ int Dataset::extra_index(const std::string& name) const {
 Dataset parse_measurements_csv(const std::string& text_in, const std::string& file, int dof) {
   std::string text = text_in;
   if (text.compare(0, 3, "\xEF\xBB\xBF") == 0) text.erase(0, 3);  // UTF-8 byte-order mark
+  // Lines that end in CR alone (classic Mac) read as one long line: say so, not "unknown unit".
+  for (size_t i = text.find('\r'); i != std::string::npos; i = text.find('\r', i + 1))
+    if (i + 1 < text.size() && text[i + 1] != '\n')
+      throw ParseError(file, 1, 1,
+                       "lines end in a carriage return alone (CR); save the file with LF or "
+                       "CRLF line ends");
   Dataset data;
   std::vector<Column> columns;
   std::set<std::string> ids;
@@ -270,6 +276,7 @@ Dataset parse_measurements_csv(const std::string& text_in, const std::string& fi
       have_header = true;
       header_line = line_no;
       std::set<std::string> seen;
+      std::map<std::pair<int, int>, std::string> quantity_column;
       int max_q = 0;
       std::set<int> qs;
       for (const auto& f : fields) {
@@ -277,6 +284,16 @@ Dataset parse_measurements_csv(const std::string& text_in, const std::string& fi
         if (!seen.insert(f.text).second)
           throw ParseError(file, line_no, f.col, "duplicate column '" + f.text + "'");
         Column c = classify(f.text, file, line_no, f.col);
+        if (c.kind != Kind::q && c.kind != Kind::extra && c.kind != Kind::id &&
+            c.kind != Kind::session) {
+          // dx_mm beside dx_m: the same quantity in two units; which is meant is a guess.
+          const auto [it, fresh] = quantity_column.emplace(
+              std::make_pair(static_cast<int>(c.kind), c.index), f.text);
+          if (!fresh)
+            throw ParseError(file, line_no, f.col,
+                             "columns '" + it->second + "' and '" + f.text +
+                                 "' give the same quantity twice; keep one");
+        }
         if (c.kind == Kind::q) {
           if (!qs.insert(c.index).second)
             throw ParseError(file, line_no, f.col,
@@ -293,14 +310,32 @@ Dataset parse_measurements_csv(const std::string& text_in, const std::string& fi
         }
         columns.push_back(c);
       }
+      // What a header that names no joint usually is: another separator or another case.
+      std::string hint;
+      if (fields.size() == 1 && line.find_first_of(";\t") != std::string::npos)
+        hint = " (the header has one column: columns are separated by commas, this file uses " +
+               std::string(line.find(';') != std::string::npos ? "semicolons" : "tabs") + ")";
+      else
+        for (const auto& f : fields)
+          if (hint.empty() && f.text.size() > 1 && f.text[0] == 'Q' &&
+              std::isdigit(static_cast<unsigned char>(f.text[1])))
+            hint = " (column names are lower case: '" + f.text + "' must be written '" +
+                   [&] {
+                     std::string l = f.text;
+                     for (char& ch : l) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+                     return l;
+                   }() +
+                   "')";
       const int n = dof > 0 ? dof : max_q;
-      if (n == 0) throw ParseError(file, line_no, 1, "missing joint columns q1.. (e.g. q1_deg)");
+      if (n == 0)
+        throw ParseError(file, line_no, 1, "missing joint columns q1.. (e.g. q1_deg)" + hint);
       for (int j = 0; j < n; ++j)
         if (!qs.count(j))
           throw ParseError(file, line_no, 1,
                            "missing required column q" + std::to_string(j + 1) +
                                (dof > 0 ? " (the robot has " + std::to_string(dof) + " joints)"
-                                        : std::string()));
+                                        : std::string()) +
+                               hint);
       data.dof = n;
       std::set<std::pair<Kind, int>> have;
       for (const auto& c : columns) have.insert({c.kind, c.index});

@@ -16,6 +16,7 @@
 
 #include "stiff/error.hpp"
 #include "stiff/io/text_io.hpp"
+#include "yaml_load.hpp"
 
 namespace stiff {
 namespace {
@@ -101,12 +102,7 @@ RobotModel parse_robot_yaml(const std::string& text, const std::string& file) {
 namespace {
 RobotModel parse_robot_yaml_unguarded(const std::string& text, const std::string& file) {
   YamlReader r{file};
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::ParserException& e) {
-    throw ParseError(file, e.mark.line + 1, e.mark.column + 1, e.msg);
-  }
+  const YAML::Node root = detail::load_yaml_document(text, file);
   if (!root.IsMap()) throw ParseError(file, 1, 1, "a robot file must be a YAML mapping");
   r.check_keys(root,
                {"name", "convention", "units", "joints", "measured_point", "load_point", "tool",
@@ -258,6 +254,7 @@ RobotModel parse_robot_urdf(const std::string& text,
         first_error = text;
     }
   } capture;
+  check_xml_nesting(text, file);
   urdf::ModelInterfaceSharedPtr model;
   {
     static std::mutex handler_mutex;  // the output handler is process-wide
@@ -279,6 +276,21 @@ RobotModel parse_robot_urdf(const std::string& text,
             (capture.first_error.empty() ? std::string() : " (" + capture.first_error + ")"));
   auto root = model->getRoot();
   if (!root) throw ParseError(file, 0, 0, "URDF has no root link");
+  // A link that is the child of two joints closes a kinematic loop (urdfdom keeps the last
+  // parent and leaves the cycle in the child lists): walking it would never end.
+  {
+    std::map<std::string, std::string> parent_joint;
+    for (const auto& [name, joint] : model->joints_) {
+      if (!joint) continue;
+      const auto [it, fresh] = parent_joint.emplace(joint->child_link_name, name);
+      if (!fresh)
+        throw ParseError(file, 0, 0,
+                         "kinematic loop: link '" + joint->child_link_name +
+                             "' is the child of joints '" + it->second + "' and '" + name +
+                             "'; stiff models serial chains (a tree without loops)");
+    }
+  }
+
   auto find_link = [&](const std::string& name, const char* role) {
     urdf::LinkConstSharedPtr l = model->getLink(name);
     if (!l)
@@ -481,7 +493,11 @@ RobotModel load_robot(const std::string& path,
                       const RobotLoadOptions& options,
                       RobotFileReport* report) {
   const std::string text = read_text_file(path);
-  const bool urdf_file = path.size() > 5 && path.substr(path.size() - 5) == ".urdf";
+  // By content, not by name: a URDF is XML (.URDF, .xml and .urdf.xacro output alike), and a
+  // YAML robot file never starts with '<'.
+  size_t i = text.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0;
+  while (i < text.size() && std::isspace(static_cast<unsigned char>(text[i]))) ++i;
+  const bool urdf_file = i < text.size() && text[i] == '<';
   RobotFileReport local;
   RobotModel robot;
   if (urdf_file) {

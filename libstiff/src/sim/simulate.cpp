@@ -3,12 +3,14 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
+#include <map>
 #include <set>
 #include <sstream>
 
 #include "stiff/error.hpp"
 #include "stiff/io/text_io.hpp"
 #include "stiff/random.hpp"
+#include "../io/yaml_load.hpp"
 
 namespace stiff {
 namespace {
@@ -30,13 +32,9 @@ double yaml_number(const std::string& file, const YAML::Node& n, const std::stri
 }
 
 YAML::Node load_yaml(const std::string& text, const std::string& file) {
-  try {
-    YAML::Node root = YAML::Load(text);
-    if (!root.IsMap()) throw ParseError(file, 1, 1, "expected a YAML mapping");
-    return root;
-  } catch (const YAML::ParserException& e) {
-    throw ParseError(file, e.mark.line + 1, e.mark.column + 1, e.msg);
-  }
+  YAML::Node root = detail::load_yaml_document(text, file);
+  if (!root.IsMap()) throw ParseError(file, 1, 1, "expected a YAML mapping");
+  return root;
 }
 
 std::string fmt(double v) {
@@ -145,9 +143,18 @@ Truth read_truth(const std::string& path, const RobotModel& robot) {
 static NoiseModel parse_noise_yaml_unguarded(const std::string& text, const std::string& file) {
   const YAML::Node root = load_yaml(text, file);
   NoiseModel n;
+  // One quantity, two units: which one is meant is a guess; refuse it.
+  std::map<std::string, std::string> quantity_key;
   for (const auto& kv : root) {
     const auto key = kv.first.as<std::string>();
     const auto& v = kv.second;
+    for (const char* q : {"tracker_sigma", "joint_sigma"})
+      if (key.rfind(q, 0) == 0) {
+        const auto [it, fresh] = quantity_key.emplace(q, key);
+        if (!fresh)
+          fail_at(file, kv.first,
+                  "'" + key + "' and '" + it->second + "' give the same quantity twice; keep one");
+      }
     auto nonneg = [&](double x) {
       if (x < 0) fail_at(file, v, key + " must be >= 0");
       return x;
@@ -284,6 +291,12 @@ Dataset simulate(const RobotModel& robot,
     }
     for (int j = 0; j < m.q.size(); ++j) m.q(j) += noise.joint_sigma_rad * rng.normal();
     if (m.id.empty()) m.id = std::to_string(r + 1);
+    // Absurd inputs (a link of 1e300 m, a tracker at 1e300 m) overflow: never write inf/NaN.
+    if (!m.displacement.allFinite() || !std::isfinite(m.sigma_d) || !m.force.allFinite() ||
+        !m.q.allFinite())
+      throw NumericalError("simulate: measurement " + std::to_string(r + 1) +
+                           " is not finite (the robot, truth or noise values overflow; check "
+                           "their units)");
   }
   out.set_meta("robot", robot.name);
   out.set_meta("source", "stiff virtual robot");

@@ -125,6 +125,7 @@ _proto("stiff_robot_tool_pose", S, c_double_p, H, c_double_p, C.c_size_t)
 _proto("stiff_robot_jacobian", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, C.c_size_t)
 _proto("stiff_dataset_read_csv", S, HP, H, C.c_char_p)
 _proto("stiff_dataset_write_csv", S, H, C.c_char_p)
+_proto("stiff_file_write", S, C.c_char_p, C.c_void_p, C.c_size_t)
 _proto("stiff_dataset_create", S, HP, C.c_size_t, C.c_size_t, c_double_p, c_double_p, c_double_p,
        c_double_p, c_double_p)
 _proto("stiff_dataset_destroy", None, H)
@@ -200,8 +201,35 @@ def get_string(fn, *args) -> str:
     return buf.value.decode("utf-8")
 
 
+def require_count(name: str, value, upper: int = 2**32 - 1) -> int:
+    """A count (measurements, iterations, pool sizes, trials): a whole number in 1..upper. The C
+    options read 0 as "default" and a negative number would wrap to 4 billion."""
+    try:
+        v = int(value)
+        ok = v == value and 1 <= v <= upper
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        from .errors import InvalidArgumentError
+
+        too_big = isinstance(value, (int, float)) and value == value and value > upper
+        raise InvalidArgumentError(
+            f"{name} must be at most {upper} (got {value})" if too_big else
+            f"{name} must be an integer >= 1 (got {value})", -1)
+    return v
+
+
 def encode(s):
-    return None if s is None else os.fsencode(s) if isinstance(s, os.PathLike) else str(s).encode("utf-8")
+    """A string for the C ABI. C strings end at the first NUL byte, so one inside the text
+    would silently cut it ('joint\\0+link' would mean 'joint'): refused."""
+    if s is None:
+        return None
+    b = os.fsencode(s) if isinstance(s, os.PathLike) else str(s).encode("utf-8")
+    if b"\0" in b:
+        from .errors import InvalidArgumentError
+
+        raise InvalidArgumentError(f"{os.fsdecode(b)!r} contains a NUL byte", -1)
+    return b
 
 # ---------------------------------------------------------------- planning (stiff_plan.h)
 PLAN_PROGRESS_FN = C.CFUNCTYPE(C.c_int, C.c_char_p, C.c_uint64, C.c_uint64, C.c_double, C.c_void_p)
@@ -301,6 +329,7 @@ PATH_TOOL_RPY = 1
 c_int_p = C.POINTER(C.c_int)
 _proto("stiff_ik_analytic", S, c_int_p, H)
 _proto("stiff_tool_pose_batch", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, C.c_size_t)
+_proto("stiff_tool_poses", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, C.c_size_t, C.c_size_t)
 _proto("stiff_ik", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, c_double_p)
 _proto("stiff_ik_path", S, c_double_p, C.c_size_t, c_size_p, c_int_p, H, c_double_p, C.c_size_t,
        c_double_p)

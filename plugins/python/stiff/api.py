@@ -13,12 +13,12 @@ from typing import Optional, Sequence
 import numpy as np
 
 from . import _capi as _c
+from . import _outputs
 from ._capi import check, lib
 
 __all__ = ["Robot", "Dataset", "Fit", "Model", "identify", "simulate", "random_design",
            "predict", "effects", "describe_effect", "library_version"]
 
-PathLike = "str | os.PathLike[str]"
 
 
 def library_version() -> str:
@@ -81,6 +81,7 @@ class Robot(_Handle):
             o.tool_mass_kg = float(tool_mass)
             o.set |= 4
         h = C.c_void_p()
+        _outputs.note_input(path)
         check(lib.stiff_robot_load_with(C.byref(h), _c.encode(os.fspath(path)), C.byref(o)))
         self._own(h)
         self.path = os.fspath(path)
@@ -171,6 +172,7 @@ class Dataset(_Handle):
     def read(cls, path, robot: Optional[Robot] = None) -> "Dataset":
         """Read a measurement CSV (docs/formats.md); ParseError carries path, line, column."""
         h = C.c_void_p()
+        _outputs.note_input(path)
         check(lib.stiff_dataset_read_csv(C.byref(h), robot, _c.encode(os.fspath(path))))
         return cls(h)
 
@@ -190,7 +192,7 @@ class Dataset(_Handle):
 
     def write(self, path) -> None:
         """Write in SI units, atomically."""
-        check(lib.stiff_dataset_write_csv(self, _c.encode(os.fspath(path))))
+        check(lib.stiff_dataset_write_csv(self, _c.encode(_outputs.target(path))))
 
     def __len__(self) -> int:
         rows = C.c_size_t()
@@ -293,11 +295,12 @@ class Fit(_Handle):
     @classmethod
     def read(cls, path) -> "Fit":
         h = C.c_void_p()
+        _outputs.note_input(path)
         check(lib.stiff_result_read_json(C.byref(h), _c.encode(os.fspath(path))))
         return cls(h)
 
     def write(self, path) -> None:
-        check(lib.stiff_result_write_json(self, _c.encode(os.fspath(path))))
+        check(lib.stiff_result_write_json(self, _c.encode(_outputs.target(path))))
 
     @property
     def json(self) -> dict:
@@ -420,6 +423,18 @@ class Model(_Handle):
         at the load point, base frame; a 3-vector is a pure force)."""
         qa = np.atleast_2d(_c.as_array(q))
         w = np.atleast_2d(_c.as_array(wrench))
+        if qa.ndim != 2 or w.ndim != 2:
+            raise ValueError(f"q must be n or N x n and wrench 3, 6, N x 3 or N x 6; got shapes "
+                             f"{np.shape(q)} and {np.shape(wrench)}")
+        dof = self.robot.dof
+        if qa.shape[1] != dof:
+            raise ValueError(f"q has {qa.shape[1]} columns, the robot has {dof} joints")
+        if w.shape[1] not in (3, 6):
+            raise ValueError(f"wrench has {w.shape[1]} columns; give 3 (force [N]) or 6 (force "
+                             "[N], moment [N*m])")
+        if w.shape[0] != qa.shape[0] and w.shape[0] != 1:
+            raise ValueError(f"q has {qa.shape[0]} rows and wrench {w.shape[0]}: give one "
+                             "wrench per pose, or one for all")
         if w.shape[1] == 3:
             w = np.hstack([w, np.zeros((w.shape[0], 3))])
         if w.shape[0] == 1 and qa.shape[0] > 1:
@@ -441,8 +456,11 @@ def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "non
         raise ValueError(f"unknown method {method!r} (use auto, linear, ceres)")
     o = _c.IdentifyOptions()
     o.struct_size = C.sizeof(o)
-    o.model = model.encode()
-    o.loss = loss.encode()
+    for name, v in (("model", model), ("loss", loss)):
+        if not isinstance(v, str):
+            raise TypeError(f"{name} must be a string such as 'joint+link', not {type(v).__name__}")
+    o.model = _c.encode(model)
+    o.loss = _c.encode(loss)
     o.loss_scale_m = loss_scale_m
     o.max_iterations = max_iterations
     o.method = methods[method]
@@ -453,6 +471,7 @@ def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "non
 
 def random_design(robot: Robot, count: int = 20, seed: int = 1) -> Dataset:
     """Random poses in 95% of the joint ranges with loads of 15-35 N per axis."""
+    count = _c.require_count("count", count, 1000000)
     h = C.c_void_p()
     check(lib.stiff_design_random(C.byref(h), robot, count, seed))
     return Dataset(h)
@@ -479,6 +498,9 @@ def simulate(robot: Robot, design: Optional[Dataset] = None, *, stiffness=None, 
         from .data import find
 
         truth = find("truths", truth)
+    if k is not None and k.ndim != 1:
+        raise ValueError(f"stiffness must be one value per joint, got shape {k.shape}")
+    _outputs.note_input(truth)
     h = C.c_void_p()
     check(lib.stiff_simulate(C.byref(h), robot, design,
                              None if truth is None else _c.encode(os.fspath(truth)),
@@ -494,6 +516,7 @@ def read_noise(path) -> dict:
     path = find("truths", path)
     o = _c.NoiseOptions()
     o.struct_size = C.sizeof(o)
+    _outputs.note_input(path)
     check(lib.stiff_noise_read(C.byref(o), _c.encode(os.fspath(path))))
     return dict(tracker_sigma_m=o.tracker_sigma_m, tracker_ppm=o.tracker_ppm,
                 tracker_position_m=list(o.tracker_position_m), force_relative=o.force_relative,
@@ -513,4 +536,4 @@ def effects() -> list[str]:
 
 def describe_effect(name: str, robot: Optional[Robot] = None) -> dict:
     """Description, reference and parameters (name, unit, meaning, bounds) of an effect."""
-    return json.loads(_c.get_string(lib.stiff_effect_describe, robot, name.encode()))
+    return json.loads(_c.get_string(lib.stiff_effect_describe, robot, _c.encode(name)))

@@ -14,6 +14,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from . import _capi as _c
+from . import _outputs
 from ._capi import check, lib
 from .api import Model, Robot
 
@@ -132,6 +133,7 @@ def read_path(path, frame: Optional[Sequence[float]] = None,
         o.tool_rpy[:] = [float(v) for v in tool_rpy]
         o.flags |= _c.PATH_TOOL_RPY
     o.segment_m = float(segment_m)
+    _outputs.note_input(path)
     name = _c.encode(os.fspath(path))
     rows, has_w = C.c_size_t(0), C.c_int(0)
     st = lib.stiff_path_read(None, None, None, 0, C.byref(rows), C.byref(has_w), name, C.byref(o))
@@ -167,10 +169,12 @@ def _poses(poses) -> np.ndarray:
 def tool_poses(robot: Robot, q) -> np.ndarray:
     """(N, 4, 4) tool poses at joint rows q (N x n) [rad]: e.g. FK(q_cmd)."""
     qa = np.ascontiguousarray(np.atleast_2d(q), dtype=np.float64)
+    if qa.ndim != 2:
+        raise ValueError(f"q must be n or N x n joint values, got shape {np.shape(q)}")
     out = np.empty((qa.shape[0], 4, 4))
     needed = C.c_size_t()
-    check(lib.stiff_tool_pose_batch(_c.ptr(out), out.size, C.byref(needed), robot, _c.ptr(qa),
-                                    qa.shape[0]))
+    check(lib.stiff_tool_poses(_c.ptr(out), out.size, C.byref(needed), robot, _c.ptr(qa),
+                               qa.shape[0], qa.shape[1]))
     return out
 
 
@@ -324,7 +328,9 @@ def plot_deviation(path_xyz: np.ndarray, curves: dict, output, title: str = "") 
     ax1.legend(fontsize=8)
     ax1.set_title(title or "deviation of the loaded tool from the nominal path")
     fig.tight_layout()
-    tmp = f"{os.fspath(output)}.tmp.png"
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    os.replace(tmp, output)
+    from ._outputs import save_figure
+
+    try:
+        save_figure(fig, output, dpi=110)
+    finally:
+        plt.close(fig)

@@ -6,6 +6,7 @@ import os
 from pathlib import Path
 
 from . import _capi as _c
+from . import _outputs
 from ._capi import check, lib
 from .api import Fit, Robot
 
@@ -23,8 +24,8 @@ def export_fmu(robot: Robot, fit: Fit, path, fmi_version: int = 2,
     o = _c.FmuOptions()
     o.struct_size = C.sizeof(o)
     o.fmi_version = fmi_version
-    o.model_identifier = model_identifier.encode()
+    o.model_identifier = _c.encode(model_identifier)
     b = binaries_dir if binaries_dir is not None else _default_binaries()
     o.binaries_dir = None if b is None else _c.encode(os.fspath(b))
-    check(lib.stiff_fmu_export(_c.encode(os.fspath(path)), robot, fit, C.byref(o)))
+    check(lib.stiff_fmu_export(_c.encode(_outputs.target(path)), robot, fit, C.byref(o)))
     return Path(path)

@@ -10,6 +10,7 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from . import _capi as _c
+from . import _outputs
 from ._capi import check, lib
 from .api import Dataset, Robot, _Handle
 from .errors import CancelledError, InvalidArgumentError
@@ -115,16 +116,14 @@ def plan(robot: Robot, count: Optional[int] = None, criterion: Optional[str] = N
     check(lib.stiff_plan_options_init(C.byref(o), C.sizeof(o)))
 
     def count_arg(name, v):
-        # The C fields read 0 as "default": an explicit 0 or a negative count is refused here
-        # with the library's wording rather than silently replaced.
-        if int(v) != v or not 1 <= v <= 2**32 - 1:
-            raise InvalidArgumentError(f"plan: {name} must be an integer >= 1 (got {v})")
-        return int(v)
+        # The C fields read 0 as "default": an explicit 0 or a negative count is refused with
+        # the one message every count gets.
+        return _c.require_count(name, v)
 
     if count is not None:
         o.count = count_arg("count", count)
     if criterion is not None:
-        o.criterion = criterion.encode()
+        o.criterion = _c.encode(criterion)
     if seed is not None:
         o.seed = seed
     if pool_poses is not None:
@@ -159,6 +158,15 @@ def plan(robot: Robot, count: Optional[int] = None, criterion: Optional[str] = N
     keep = []
     if q_fixed is not None:
         qf = _c.as_array(q_fixed)
+        lo, hi = robot.limits
+        if qf.shape != lo.shape:
+            raise InvalidArgumentError(f"plan: q_fixed has {qf.size} values, the robot has "
+                                       f"{lo.size} joints")
+        for j, v in enumerate(qf):
+            if not math.isnan(v) and not (math.isfinite(v) and lo[j] <= v <= hi[j]):
+                raise InvalidArgumentError(
+                    f"plan: joint {j + 1} fixed at {math.degrees(v):.6g} deg is outside its "
+                    f"limits [{math.degrees(lo[j]):.6g}, {math.degrees(hi[j]):.6g}] deg")
         keep.append(qf)
         o.q_fixed, o.q_fixed_count = _c.ptr(qf), qf.size
     if optimizers is not None:
@@ -169,6 +177,7 @@ def plan(robot: Robot, count: Optional[int] = None, criterion: Optional[str] = N
             mask |= OPTIMIZERS[name]
         o.optimizers = mask
     if candidate_file is not None:
+        _outputs.note_input(candidate_file)
         o.candidate_file = _c.encode(os.fspath(candidate_file))
     if task is not None:
         o.task = task._h

@@ -202,7 +202,13 @@ def random_loaded_poses(robot: Robot, rng: np.random.Generator, count: int,
 _W: dict = {}
 
 
-def _init_worker(cfg: StudyConfig) -> None:
+def _init_worker(cfg: StudyConfig, pooled: bool = False) -> None:
+    if pooled:
+        # The parent alone reports Ctrl-C and SIGTERM; a worker just stops (Pool.terminate).
+        import signal
+
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
     _W["cfg"] = cfg
     _W["robot"] = Robot(cfg.robot_path)
     _W["printed"] = {d.key: Dataset.read(os.path.join(cfg.paper_dir, d.printed), _W["robot"])
@@ -296,7 +302,7 @@ def run_study(cfg: StudyConfig, progress: Optional[Callable[[int, int], bool]] =
         import multiprocessing as mp
 
         ctx = mp.get_context("fork")
-        with ctx.Pool(cfg.jobs, initializer=_init_worker, initargs=(cfg,)) as pool:
+        with ctx.Pool(cfg.jobs, initializer=_init_worker, initargs=(cfg, True)) as pool:
             for r in pool.imap_unordered(run_trial, range(cfg.trials), chunksize=1):
                 results.append(r)
                 if progress and progress(len(results), cfg.trials) is False:
@@ -304,6 +310,63 @@ def run_study(cfg: StudyConfig, progress: Optional[Callable[[int, int], bool]] =
                     raise KeyboardInterrupt
     results.sort(key=lambda r: r["trial"])
     return {"config": cfg, "results": results, "seconds": time.perf_counter() - t0}
+
+
+STUDY_FORMAT = "stiff-study"
+
+
+def _plain(x):
+    """numpy scalars and arrays as JSON numbers and lists."""
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"{type(x).__name__} is not saved in a study file")
+
+
+def save_study(study: dict, path) -> None:
+    """Raw trial results as JSON (data only: loading runs no code, unlike a pickle)."""
+    import dataclasses
+    import json
+
+    from ._outputs import write_text
+
+    doc = {"format": STUDY_FORMAT, "version": 1, "config": dataclasses.asdict(study["config"]),
+           "seconds": study["seconds"], "results": study["results"]}
+    write_text(path, json.dumps(doc, default=_plain) + "\n")
+
+
+def load_study(path) -> dict:
+    """A study saved by save_study; ParseError naming the file when it is not one."""
+    import dataclasses
+    import json
+
+    from ._outputs import note_input
+    from .errors import ParseError
+
+    note_input(path)
+    with open(path, "rb") as f:
+        text = f.read()
+    try:
+        doc = json.loads(text.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as e:
+        raise ParseError(f"{path}: not a study file saved with --save (not JSON: {e})", -3)
+    if not isinstance(doc, dict) or doc.get("format") != STUDY_FORMAT:
+        raise ParseError(f"{path}: not a study file saved with --save (format is not "
+                         f"'{STUDY_FORMAT}')", -3)
+    if doc.get("version") != 1:
+        raise ParseError(f"{path}: study file version {doc.get('version')!r}; this stiff reads "
+                         "version 1", -3)
+    names = {f.name for f in dataclasses.fields(StudyConfig)}
+    cfg = doc.get("config")
+    if not isinstance(cfg, dict) or set(cfg) - names:
+        raise ParseError(f"{path}: 'config' must hold only {', '.join(sorted(names))}", -3)
+    results = doc.get("results")
+    if not isinstance(results, list) or not all(
+            isinstance(r, dict) and isinstance(r.get("designs"), dict) for r in results):
+        raise ParseError(f"{path}: 'results' must be a list of trials with their designs", -3)
+    return {"config": StudyConfig(**cfg), "results": results,
+            "seconds": float(doc.get("seconds", 0.0))}
 
 
 def column(study: dict, design: str, name: str) -> np.ndarray:
@@ -351,7 +414,7 @@ def _spearman(x, y) -> float:
 
 
 def summarize(study: dict) -> dict:
-    """Every number the report prints (also handy for tests and for the lead)."""
+    """Every number the report prints (also what the tests check)."""
     cfg = study["config"]
     keys = [d.key for d in DESIGNS if d.key in cfg.designs]
     out = {"designs": keys, "variants": {}, "criteria": {}, "reductions": {}, "correlation": {}}
@@ -403,6 +466,8 @@ def _plots(study: dict, summary: dict, plot_dir: Path) -> list[str]:
         import matplotlib.pyplot as plt
     except ImportError:  # pragma: no cover - matplotlib is optional
         return []
+    from ._outputs import save_figure
+
     plot_dir.mkdir(parents=True, exist_ok=True)
     keys = summary["designs"]
     files = []
@@ -417,7 +482,7 @@ def _plots(study: dict, summary: dict, plot_dir: Path) -> list[str]:
         ax.grid(alpha=0.3, which="both")
     np.atleast_1d(axes)[0].set_ylabel("mean validation error [um]")
     fig.tight_layout()
-    fig.savefig(plot_dir / "error_by_design.png", dpi=110)
+    save_figure(fig, plot_dir / "error_by_design.png", dpi=110)
     plt.close(fig)
     files.append("error_by_design.png")
 
@@ -438,7 +503,7 @@ def _plots(study: dict, summary: dict, plot_dir: Path) -> list[str]:
     axes[0].set_ylabel("mean validation error, realistic noise [um]")
     axes[-1].legend(markerscale=3, fontsize=7)
     fig.tight_layout()
-    fig.savefig(plot_dir / "criterion_vs_error.png", dpi=110)
+    save_figure(fig, plot_dir / "criterion_vs_error.png", dpi=110)
     plt.close(fig)
     files.append("criterion_vs_error.png")
 
@@ -458,7 +523,7 @@ def _plots(study: dict, summary: dict, plot_dir: Path) -> list[str]:
     ax.legend(fontsize=7, ncol=5)
     ax.grid(alpha=0.3, axis="y", which="both")
     fig.tight_layout()
-    fig.savefig(plot_dir / "stiffness_error.png", dpi=110)
+    save_figure(fig, plot_dir / "stiffness_error.png", dpi=110)
     plt.close(fig)
     files.append("stiffness_error.png")
     return files
@@ -672,8 +737,8 @@ def findings_text(s: dict) -> str:
   loads capped at 35 N per axis the small eigenvalues cannot be raised much, so the optimum
   lowers the large ones: folded poses with short lever arms, small torques on joints 1-3,
   small deflections (the table above). tr(M) falls faster than tr(M^-1) grows, so the criterion
-  improves while the information log det M and the deflection fall. This is the lead's
-  observation (a kappa_a = 0.89 set with k3 at 200% standard error): the better the kappa_a
+  improves while the information log det M and the deflection fall. It shows in practice (a
+  kappa_a = 0.89 set identified k3 with a 200% standard error): the better the kappa_a
   optimum, the less the set measures.
 - **The paper's bound is relative and worst case.** ||dc||/||c|| <= kappa (||dA||/||A|| +
   ||dX||/||X||) holds for relative errors. A laser tracker's error is absolute (~10 um +

@@ -427,3 +427,53 @@ TEST(IdentifyCeres, ParameterOnItsBoundIsOptimal) {
 
 }  // namespace
 }  // namespace stiff
+
+namespace stiff {
+namespace {
+
+// Tukey's biweight from the least-squares start stopped where it started when 4 of 40 rows were
+// 2 mm off (rank 0, stiffness = the start, "at the noise floor"); on clean data it flagged 12
+// of 40 rows (its scale was Huber's). It now starts from the Huber fit with the scale of equal
+// Gaussian efficiency.
+TEST(IdentifyCeres, TukeyStartsFromHuberAndFlagsOnlyTheOutliers) {
+  const Truth truth = joint_truth(test::paper_stiffness());
+  for (int seed = 1; seed <= 3; ++seed) {
+    const Dataset clean = simulated(truth, seed, 0.0, nullptr, 40);
+    Dataset dirty = clean;
+    const std::set<int> bad = {3, 11, 20, 33};
+    for (int r : bad) dirty.rows[r].displacement(0) += 2e-3;
+    const Dataset val = simulated(truth, 600 + seed);
+    IdentifyOptions tukey;
+    tukey.loss = "tukey";
+    const FitResult fc = identify(test::rokae(), clean, {"joint"});
+    const FitResult ft = identify(test::rokae(), dirty, {"joint"}, tukey);
+    EXPECT_EQ(ft.rank, fc.rank) << "seed " << seed;
+    EXPECT_LT(validation_rms(ft, val), 1.2 * validation_rms(fc, val)) << "seed " << seed;
+    std::set<int> flagged;
+    for (const auto& o : ft.outliers) flagged.insert(o.row);
+    EXPECT_EQ(flagged, bad) << "seed " << seed;
+    // Clean data: a clean row is below the weight 1/2 of a 10.4 sigma biweight unless its
+    // 3-D residual exceeds 5.6 sigma (probability ~1e-6): none is flagged.
+    const FitResult ftc = identify(test::rokae(), clean, {"joint"}, tukey);
+    EXPECT_TRUE(ftc.outliers.empty()) << ftc.outliers.size() << " clean rows flagged, seed "
+                                      << seed;
+  }
+}
+
+// A robust fit that rejects most rows is not a fit.
+TEST(IdentifyCeres, RobustFitRejectingMostRowsIsAnError) {
+  const Truth truth = joint_truth(test::paper_stiffness());
+  Dataset d = simulated(truth, 4, 0.0, nullptr, 40);
+  IdentifyOptions huber;
+  huber.loss = "huber";
+  huber.loss_scale_m = 1e-9;  // 1 nm: every row is 10^4 scales off
+  try {
+    identify(test::rokae(), d, {"joint"}, huber);
+    FAIL() << "accepted";
+  } catch (const NumericalError& e) {
+    EXPECT_NE(std::string(e.what()).find("rejected"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace stiff

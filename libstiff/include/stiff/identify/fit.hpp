@@ -34,6 +34,8 @@ struct Outlier {
 struct FitResult {
   std::string robot_name;
   std::string robot_path;
+  /// kinematics_digest() of the robot the fit was identified on; empty in older files.
+  std::string robot_digest;
   std::vector<std::string> model;  ///< effect names
   std::string method;              ///< "linear_least_squares" or "ceres"
   std::string loss = "none";
@@ -72,6 +74,18 @@ void write_fit(const std::string& path, const FitResult& fit);
 
 /// Noise level stated by the data: median sigma_d, else metadata tracker_sigma_m; 0 if none.
 double stated_noise_m(const Dataset& data);
+
+/// A digest of the robot's kinematics (every joint's placement and axis, the measured and load
+/// points, rounded to 1e-9 m and rad): a fit identified on one robot is refused on another.
+std::string kinematics_digest(const RobotModel& robot);
+
+/// Throws InvalidArgument (prefixed by `what`) unless the fit applies to this robot and model:
+/// the same robot (digest, or name for files without one), the model's parameters by effect and
+/// name in order, every value finite and within its physical range.
+void check_fit_applies(const FitResult& fit,
+                       const RobotModel& robot,
+                       const DeflectionModel& model,
+                       const std::string& what);
 
 /// Predicted (dx, dy, dz, rx, ry, rz) of every row of `data` under a fit. The model is rebuilt
 /// from the fit's effect names for this robot.

@@ -17,6 +17,15 @@ class UserError(Exception):
     """A mistake of the user (bad option, missing file): one line, exit code 2."""
 
 
+class Terminated(BaseException):
+    """SIGTERM: stop like Ctrl-C (outputs discarded, workers stopped), exit code 143."""
+
+
+class _Failed(Exception):
+    def __init__(self, code: int):
+        self.code = code
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .. import __version__
     from ..api import library_version
@@ -48,19 +57,46 @@ def main(argv=None) -> int:
     if not getattr(args, "command", None):
         parser.print_help()
         return 2
+    import signal
+
+    from .. import _outputs
+
+    def on_sigterm(signum, frame):
+        raise Terminated()
+
     try:
-        return int(args.func(args) or 0)
-    except (UserError, StiffError, FileNotFoundError, PermissionError, IsADirectoryError, ValueError) as e:
+        previous = signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:  # not the main thread: leave signals to the host
+        previous = None
+    t = None
+    try:
+        # Outputs are committed only when the whole command has succeeded.
+        with _outputs.transaction() as t:
+            code = int(args.func(args) or 0)
+            if code != 0:
+                raise _Failed(code)
+        return code
+    except _Failed as e:
+        return e.code
+    except BrokenPipeError:
+        return 0
+    except (UserError, StiffError, OSError, ValueError) as e:
         msg = str(e)
-        if isinstance(e, (FileNotFoundError, PermissionError, IsADirectoryError)) and e.filename:
+        if isinstance(e, OSError) and not isinstance(e, StiffError) and e.filename:
             msg = f"{e.filename}: {e.strerror}"
+        if t is not None:
+            msg = t.public(msg)
         print(f"stiff {args.command}: error: {msg}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"stiff {args.command}: interrupted", file=sys.stderr)
         return 130
-    except BrokenPipeError:
-        return 0
+    except Terminated:
+        print(f"stiff {args.command}: terminated", file=sys.stderr)
+        return 143
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -4,8 +4,9 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import tempfile
 from pathlib import Path
+
+import numpy as np
 
 def data_dir() -> Path:
     """Built-in robots and example designs: bundled into the package, or the source tree."""
@@ -46,6 +47,74 @@ def _vec3(text: str) -> list:
     if len(v) != 3 or not all(math.isfinite(x) for x in v):
         raise argparse.ArgumentTypeError(f"expected 3 finite numbers x,y,z, got {text!r}")
     return v
+
+
+def whole(text: str) -> int:
+    """A count on the command line: 100000, or 1e5 as the help texts write it. Its range is
+    checked by the library (one message for every count)."""
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number")
+    if not math.isfinite(v) or v != int(v):
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number")
+    return int(v)
+
+
+def add_limits_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--ignore-limits", action="store_true",
+                   help="accept joint angles outside the robot file's limits (when the file's "
+                   "limits are wrong; angles outside them usually mean degrees declared _rad)")
+
+
+def check_joint_limits(robot, data, path, ignore: bool = False) -> None:
+    """Measured joint angles must lie within the robot's limits: a file in degrees declared
+    `_rad` gives angles of 170 rad that no arm reaches."""
+    if ignore or len(data) == 0:
+        return
+    from . import UserError
+
+    lo, hi = robot.limits
+    q = data.q
+    tol = 1e-9
+    bad = np.argwhere((q < lo - tol) | (q > hi + tol))
+    if bad.size:
+        r, j = (int(x) for x in bad[0])
+        raise UserError(
+            f"{path}: measurement {data.ids[r]} (row {r + 1}): q{j + 1} = "
+            f"{np.degrees(q[r, j]):.6g} deg is outside the limits [{np.degrees(lo[j]):.6g}, "
+            f"{np.degrees(hi[j]):.6g}] deg of robot '{robot.name}' ({len(bad)} value(s) outside; "
+            "check the angle unit of the columns, or --ignore-limits if the robot file's limits "
+            "are wrong)")
+
+
+def plausibility_warnings(robot, data, fit) -> list:
+    """Warnings for results no robot gives: a joint stiffness far outside the range of
+    industrial arms (1e2..1e8 N*m/rad, a decade beyond the softest and stiffest joints), or a
+    displacement larger than the reach (a unit mistake in the displacement columns)."""
+    out = []
+    for j, (k, ok) in enumerate(zip(fit.stiffness, fit.identified)):
+        if ok and np.isfinite(k) and not 1e2 <= k <= 1e8:
+            out.append(f"joint {j + 1}: stiffness {k:.3g} N*m/rad is outside 1e2..1e8 N*m/rad, "
+                       "the range of industrial robots: check the displacement and force units "
+                       "(mm declared _m?)")
+    d = data.displacement
+    if d is not None and len(data):
+        for k, axis in enumerate("xyz"):
+            if not np.any(d[:, k]):
+                out.append(f"the displacement d{axis} is zero in every measurement: a tracker axis "
+                           "that was not recorded? The fit and its noise-floor verdict treat it "
+                           "as measured")
+        reach = max(float(np.linalg.norm(robot.tool_pose(q)[:3, 3])) for q in data.q)
+        worst = float(np.max(np.linalg.norm(d, axis=1)))
+        if reach > 0 and worst > reach:
+            out.append(f"a displacement of {worst:.3g} m is larger than the reach of the arm "
+                       f"({reach:.3g} m): check the displacement units")
+    return out
 
 
 def add_robot(p: argparse.ArgumentParser) -> None:
@@ -103,18 +172,11 @@ def fmt(v, spec=".4g", unit="") -> str:
 
 
 def atomic_write_text(path, text: str) -> None:
-    """Write a file atomically: temporary file in the same folder, renamed when complete."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent or ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """Write a text output like every other (stiff._outputs: atomic, committed with the
+    command)."""
+    from .._outputs import write_text
+
+    write_text(path, text)
 
 
 class ProgressBar:

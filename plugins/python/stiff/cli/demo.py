@@ -10,13 +10,15 @@ import base64
 import html
 import io
 import json
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 
 from .. import api
-from .common import Formatter, atomic_write_text, data_dir, fmt, robot_path, table
+from .._outputs import written
+from .common import Formatter, atomic_write_text, data_dir, fmt, robot_path, table, whole
 from .identify import print_fit
 
 EXAMPLE = """example:
@@ -33,7 +35,7 @@ def register(sub):
                        description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
     p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--count", type=int, default=10, help="planned measurements (default 10)")
+    p.add_argument("--count", type=whole, default=10, help="planned measurements (default 10)")
     p.add_argument("--criterion", default=None, help="planning criterion (default: the planner's)")
     p.set_defaults(func=run)
 
@@ -195,27 +197,28 @@ def run(args):
         cp.plot_deviation(poses[:, :3, 3], {k: np.linalg.norm(v[:, :3], axis=1) for k, v in dev.items()},
                           out / "path_deviation.png", "deviation of the loaded tool along the path")
         story.html("<img src='data:image/png;base64," + base64.b64encode(
-            (out / "path_deviation.png").read_bytes()).decode() + "'/>")
+            Path(written(out / "path_deviation.png")).read_bytes()).decode() + "'/>")
 
     # 7. FMU.
     story.step(7, "export the identified model as an FMU and check it with fmpy")
     from ..fmu import export_fmu
 
     fmu_path = export_fmu(robot, fit2, out / "arm.fmu")
+    fmu_file = written(fmu_path)  # checked before the command commits it
     try:
         from fmpy import simulate_fmu
         from fmpy.validation import validate_fmu
 
-        problems = validate_fmu(str(fmu_path))
+        problems = validate_fmu(fmu_file)
         q0 = valid.q[0]
         w0 = valid.wrench[0]
         start = {f"q{j + 1}": float(q0[j]) for j in range(robot.dof)}
         start.update({k: float(v) for k, v in zip(["fx", "fy", "fz", "mx", "my", "mz"], w0)})
-        res = simulate_fmu(str(fmu_path), stop_time=0.01, output_interval=0.01,
+        res = simulate_fmu(fmu_file, stop_time=0.01, output_interval=0.01,
                            start_values=start, output=["dx", "dy", "dz"])
         fmu_d = np.array([res[-1]["dx"], res[-1]["dy"], res[-1]["dz"]])
         lib_d = api.Model(robot, fit2).predict(q0, w0)[:3]
-        story.text(f"wrote {fmu_path} (FMI 2.0, {fmu_path.stat().st_size / 1e6:.1f} MB); fmpy "
+        story.text(f"wrote {fmu_path} (FMI 2.0, {os.path.getsize(fmu_file) / 1e6:.1f} MB); fmpy "
                    f"validate_fmu: {'clean' if not problems else problems}; FMU deflection "
                    f"{np.linalg.norm(fmu_d) * 1e6:.2f} um, library {np.linalg.norm(lib_d) * 1e6:.2f} um, "
                    f"difference {np.abs(fmu_d - lib_d).max():.1e} m")

@@ -8,7 +8,8 @@ import shlex
 from .. import api
 from ..diagnose import diagnose
 from . import UserError
-from .common import Formatter, add_robot, atomic_write_text, fmt, load_robot, robot_path, table
+from .common import (Formatter, add_robot, atomic_write_text, fmt, load_robot, robot_path, table,
+                     whole)
 
 EXAMPLE = """worked example (a hidden force-sensor clocking error on the virtual robot):
   stiff simulate --robot rokae --count 60 --seed 1 --truth rokae_force_clocking -o calib.csv
@@ -39,7 +40,7 @@ def register(sub):
     p.add_argument("--candidates", help="effects to test, joined by '+' (default: all not in the model)")
     p.add_argument("--alpha", type=float, default=0.05, help="family-wise error rate (Holm, default 0.05)")
     p.add_argument("--auto", action="store_true", help="add the top effect while the evidence holds, re-fit, repeat")
-    p.add_argument("--max-steps", type=int, default=4, help="steps of --auto (default 4)")
+    p.add_argument("--max-steps", type=whole, default=4, help="steps of --auto (default 4)")
     p.add_argument("--report", help="HTML report to write (self-contained, with plots)")
     p.add_argument("--json", help="diagnosis JSON to write (docs/diagnosis.md)")
     p.set_defaults(func=run)

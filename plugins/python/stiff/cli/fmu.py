@@ -5,6 +5,7 @@ from pathlib import Path
 
 from .. import api
 from ..fmu import export_fmu
+from .._outputs import written
 from .common import Formatter, add_robot, load_robot, robot_path
 
 EXAMPLE = """example:
@@ -37,7 +38,7 @@ def run(args):
     robot = load_robot(args)
     fit = api.Fit.read(args.fit)
     path = export_fmu(robot, fit, args.output, fmi_version=args.fmi, model_identifier=args.identifier)
-    size = Path(path).stat().st_size
+    size = Path(written(path)).stat().st_size  # committed when the command ends
     print(f"wrote {path} (FMI {args.fmi}.0, model '{args.identifier}', {len(fit.parameters)} "
           f"tunable parameters, {size / 1e6:.1f} MB)")
     return 0

@@ -5,7 +5,8 @@ import json
 import math
 
 from .. import api
-from .common import Formatter, add_robot, fmt, load_robot, robot_path, table
+from .common import (Formatter, add_limits_flag, add_robot, check_joint_limits, fmt, load_robot,
+                     plausibility_warnings, robot_path, table)
 
 EXAMPLE = """example:
   stiff identify --robot rokae --data data.csv -o fit.json
@@ -27,6 +28,7 @@ def register(sub):
     p.add_argument("--method", default="auto", choices=["auto", "linear", "ceres"])
     p.add_argument("-o", "--output", help="fit JSON to write")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of tables")
+    add_limits_flag(p)
     p.set_defaults(func=run)
 
 
@@ -78,6 +80,7 @@ def print_fit(fit: api.Fit, truth_stiffness=None) -> None:
 def run(args):
     robot = load_robot(args)
     data = api.Dataset.read(args.data, robot)
+    check_joint_limits(robot, data, args.data, args.ignore_limits)
     fit = api.identify(robot, data, model=args.model, loss=args.loss,
                        loss_scale_m=args.loss_scale_um * 1e-6, method=args.method)
     if args.output:
@@ -86,6 +89,8 @@ def run(args):
         print(json.dumps(fit.json, indent=2))
     else:
         print_fit(fit)
+        for w in plausibility_warnings(robot, data, fit):
+            print(f"warning: {w}")
         if args.output:
             print(f"wrote {args.output}")
     return 0

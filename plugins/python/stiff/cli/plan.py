@@ -11,7 +11,7 @@ from ..errors import CancelledError
 from ..plan import criteria as criterion_names
 from ..plan import evaluate_criteria, plan, plan_defaults
 from .common import (Formatter, ProgressBar, add_robot, atomic_write_text, builtin_path, fmt,
-                     load_robot, robot_path, table)
+                     load_robot, robot_path, table, whole)
 
 EXAMPLE = """example:
   stiff plan --robot rokae --count 10 --fix 6=0 -o plan.csv                        # d_opt
@@ -38,13 +38,13 @@ def register(sub):
                        description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
     add_robot(p)
     d = plan_defaults()  # the library's defaults: one source for C, Python and this CLI
-    p.add_argument("--count", "-n", type=int, help=f"measurements N (default {d['count']})")
+    p.add_argument("--count", "-n", type=whole, help=f"measurements N (default {d['count']})")
     p.add_argument("--criterion", "-c",
                    help=f"design criterion (default {d['criterion']}; the paper's is kappa_a; see "
                         "docs/paper-study.md)")
     p.add_argument("--seed", type=int, help=f"random seed (default {d['seed']})")
-    p.add_argument("--pool-poses", type=int, help=f"random candidate poses (default {d['pool_poses']})")
-    p.add_argument("--pool-loads", type=int, help=f"candidate loads (default {d['pool_loads']})")
+    p.add_argument("--pool-poses", type=whole, help=f"random candidate poses (default {d['pool_poses']})")
+    p.add_argument("--pool-loads", type=whole, help=f"candidate loads (default {d['pool_loads']})")
     p.add_argument("--range", type=float,
                    help=f"fraction of each joint range (default {d['range_fraction']:g})")
     p.add_argument("--load-range", help="per-axis load magnitude range [N] (default "
@@ -57,13 +57,13 @@ def register(sub):
                         f"(default {d['min_sigma_m']:g})")
     p.add_argument("--fix", action="append", default=[], metavar="J=DEG",
                    help="hold joint J at DEG degrees (the paper holds 6=0); repeatable")
-    p.add_argument("--iterations", type=int,
+    p.add_argument("--iterations", type=whole,
                    help=f"annealing iterations (default {d['annealing_iterations']})")
     p.add_argument("--t0", type=float, metavar="T0",
                    help="annealing initial temperature in cost units (cost = 1/score for "
                         "kappa_a and kappa_j, -score otherwise; default 0 = automatic: from the "
                         "cost increases of random swaps of the start set)")
-    p.add_argument("--k0", type=int, metavar="K0",
+    p.add_argument("--k0", type=whole, metavar="K0",
                    help="elements the annealing swaps per step at the start, falling to 1 "
                         "(default 0 = automatic: max(1, N/3))")
     p.add_argument("--optimizers",
@@ -92,11 +92,14 @@ def _fixed(args, dof):
         try:
             j, v = item.split("=")
             j = int(j.lstrip("qQ"))
-            q[j - 1] = math.radians(float(v))
             if not 1 <= j <= dof:
                 raise IndexError
+            deg = float(v)
         except (ValueError, IndexError):
             raise UserError(f"--fix {item}: expected J=DEG with J in 1..{dof}, e.g. --fix 6=0")
+        if not math.isfinite(deg):
+            raise UserError(f"--fix {item}: the angle must be a finite number of degrees")
+        q[j - 1] = math.radians(deg)
     return q if args.fix else None
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import api
-from .common import Formatter, add_robot, load_robot, robot_path
+from .common import Formatter, add_limits_flag, add_robot, check_joint_limits, load_robot, robot_path
 
 EXAMPLE = """example:
   stiff predict --robot rokae --fit fit.json --data valid.csv -o predicted.csv
@@ -20,6 +20,7 @@ def register(sub):
     p.add_argument("--fit", "-f", required=True, help="fit JSON from `stiff identify`")
     p.add_argument("--data", "-d", required=True, help="measurement or plan CSV")
     p.add_argument("-o", "--output", help="CSV of predicted displacements to write")
+    add_limits_flag(p)
     p.set_defaults(func=run)
 
 
@@ -27,6 +28,7 @@ def run(args):
     robot = load_robot(args)
     fit = api.Fit.read(args.fit)
     data = api.Dataset.read(args.data, robot)
+    check_joint_limits(robot, data, args.data, args.ignore_limits)
     pred = api.Model(robot, fit).predict(data.q, data.wrench)
     measured = data.displacement
     if measured is not None:

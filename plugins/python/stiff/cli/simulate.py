@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 from .. import api
-from .common import Formatter, add_robot, atomic_write_text, builtin_path, load_robot, robot_path
+from .common import (Formatter, add_robot, atomic_write_text, builtin_path, load_robot, robot_path,
+                     whole)
 
 EXAMPLE = """example:
   stiff simulate --robot rokae --plan plan.csv --stiffness 50914,16382,31311,7791,5614,4000 \\
@@ -21,7 +22,7 @@ def register(sub):
                        description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
     add_robot(p)
     p.add_argument("--plan", help="plan or measurement CSV giving poses and loads")
-    p.add_argument("--count", type=int, default=20, help="random poses when no --plan (default 20)")
+    p.add_argument("--count", type=whole, default=20, help="random poses when no --plan (default 20)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--truth", help="truth YAML (stiffness and hidden effects)")
     g.add_argument("--stiffness", help="true joint stiffness, comma-separated [N*m/rad]")
@@ -78,7 +79,9 @@ def _record_truth(output, truth, stiffness) -> None:
                 f"# truth_file: {truth}"]
     else:
         note = ["# truth_model: joint", f"# truth_stiffness_Nm_per_rad: {stiffness}"]
-    with open(output, encoding="utf-8") as f:
+    from .._outputs import written
+
+    with open(written(output), encoding="utf-8") as f:  # this command's output, not yet committed
         lines = f.read().splitlines()
     k = 0
     while k < len(lines) and lines[k].startswith("#"):

@@ -4,7 +4,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from .common import Formatter, ProgressBar, data_dir, robot_path
+from .common import Formatter, ProgressBar, data_dir, robot_path, whole
 
 EXAMPLE = """example:
   stiff study paper                       # 500 trials, writes paper-study.md + paper-study/*.png
@@ -23,19 +23,19 @@ def register(sub):
     p = sub.add_parser("study", help="Monte-Carlo study of the paper's claim (planning criteria)",
                        description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
     p.add_argument("which", choices=["paper"], help="the study to run (paper: the kappa_F^-1(A) criterion of Jiang & Fang 2023 against D-optimal designs, docs/paper-study.md)")
-    p.add_argument("--trials", "-n", type=int, default=500, help="Monte-Carlo trials (default 500)")
+    p.add_argument("--trials", "-n", type=whole, default=500, help="Monte-Carlo trials (default 500)")
     p.add_argument("--seed", type=int, default=1, help="seed of the whole study (default 1)")
-    p.add_argument("--jobs", "-j", type=int, default=min(2, os.cpu_count() or 1),
+    p.add_argument("--jobs", "-j", type=whole, default=min(2, os.cpu_count() or 1),
                    help="worker processes (default 2)")
     p.add_argument("--robot", "-r", default="rokae", help="robot (default: the built-in rokae)")
-    p.add_argument("--iterations", type=int, default=20000,
+    p.add_argument("--iterations", type=whole, default=20000,
                    help="annealing iterations per set (default 2e4)")
-    p.add_argument("--pool-poses", type=int, default=200, help="candidate poses (default 200)")
-    p.add_argument("--pool-loads", type=int, default=50, help="candidate loads (default 50)")
+    p.add_argument("--pool-poses", type=whole, default=200, help="candidate poses (default 200)")
+    p.add_argument("--pool-loads", type=whole, default=50, help="candidate loads (default 50)")
     p.add_argument("-o", "--output", default="paper-study.md", help="markdown report to write")
     p.add_argument("--plots", help="folder of the PNG plots (default: the report's name "
                    "without .md)")
-    p.add_argument("--save", help="also pickle the raw trial results here (to re-render)")
+    p.add_argument("--save", help="also save the raw trial results here (JSON, to re-render with --load)")
     p.add_argument("--load", help="re-render the report from results saved with --save "
                    "(no trials are run)")
     p.set_defaults(func=run)
@@ -43,22 +43,24 @@ def register(sub):
 
 def run(args):
     from . import UserError
-    from ..study import StudyConfig, run_study, write_report
+    from .. import _outputs
+    from ..study import StudyConfig, load_study, run_study, save_study, write_report
 
     if args.trials < 2:
         raise UserError("--trials must be at least 2 (confidence intervals need 2 trials)")
     out = Path(args.output)
-    if out.parent and not out.parent.exists():
-        raise UserError(f"{out.parent}: no such folder")
+    if out.suffix.lower() != ".md":
+        raise UserError(f"-o {args.output}: the report is Markdown; give a name ending in .md")
+    # Refuse unwritable outputs before minutes of trials, not after.
+    for o in (args.output, args.save):
+        if o:
+            _outputs.target(o)
     cfg = StudyConfig(trials=args.trials, seed=args.seed, jobs=max(1, args.jobs),
                       robot_path=robot_path(args.robot), paper_dir=str(data_dir() / "paper"),
                       annealing_iterations=args.iterations, pool_poses=args.pool_poses,
                       pool_loads=args.pool_loads)
-    import pickle
-
     if args.load:
-        with open(args.load, "rb") as f:
-            study = pickle.load(f)
+        study = load_study(args.load)
         cfg = study["config"]
     else:
         with ProgressBar("study") as bar:
@@ -68,8 +70,7 @@ def run(args):
             except KeyboardInterrupt:
                 raise UserError("stopped (Ctrl-C); nothing written")
     if args.save:
-        with open(args.save, "wb") as f:
-            pickle.dump(study, f)
+        save_study(study, args.save)
     cmd = f"stiff study paper --trials {cfg.trials} --seed {cfg.seed}"
     s = write_report(study, out, args.plots, command=cmd)
     print(f"{cfg.trials} trials in {study['seconds']:.0f} s; wrote {out}")
