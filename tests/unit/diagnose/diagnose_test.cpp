@@ -301,8 +301,9 @@ TEST(DiagnoseHonesty, LeftOutEffectIsUnexplainedNotMisattributed) {
       const Diagnosis d = run(make_scenario(hidden, seed), o);
       print("left out " + hidden, seed, d);
       // A small preloaded gap is an asymmetric compliance (stiffer in one load direction):
-      // nonlinear_joint's asymmetric term is its smooth relative, and at 0.5 arcmin the two
-      // can fit the data equally (docs/diagnosis.md, limits).
+      // nonlinear_joint's secant about the gravity preload (softer on one side of it) is its
+      // smooth relative, and at 0.5 arcmin the two can fit the data equally
+      // (docs/diagnosis.md, limits).
       if (hidden == "backlash" && d.verdict == "missing_effect") {
         EXPECT_EQ(d.candidates[0].effect, "nonlinear_joint") << d.summary;
         continue;
