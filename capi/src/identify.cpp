@@ -220,8 +220,14 @@ stiff_status stiff_model_create(stiff_model** out,
 void stiff_model_destroy(stiff_model* model) { delete model; }
 
 namespace {
-void predict_one(
-    const stiff_model* model, const double* q, size_t n, const double* wrench, double* out) {
+/// `row`: the reading's place in a batch, its time for effects that drift with time (the row
+/// order is the time axis of data without a `t` column, as in identify and diagnose).
+void predict_one(const stiff_model* model,
+                 const double* q,
+                 size_t n,
+                 const double* wrench,
+                 double* out,
+                 size_t row = 0) {
   const RobotModel& r = model->robot;
   if (n != static_cast<size_t>(r.dof()))
     throw InvalidArgument("q has " + std::to_string(n) + " values, the robot has " +
@@ -232,7 +238,7 @@ void predict_one(
   m.q = Eigen::Map<const Eigen::VectorXd>(q, static_cast<Eigen::Index>(n));
   m.force = Eigen::Map<const Eigen::Vector3d>(wrench);
   m.moment = Eigen::Map<const Eigen::Vector3d>(wrench + 3);
-  const MeasurementContext c = model->model->context(m, 0);
+  const MeasurementContext c = model->model->context(m, static_cast<int>(row));
   const Eigen::Matrix<double, 6, 1> d = model->model->predict(model->theta, m, c);
   if (!d.allFinite()) throw NumericalError("the predicted deflection is not finite");
   for (int k = 0; k < 6; ++k) out[k] = d(k);
@@ -269,7 +275,7 @@ stiff_status stiff_predict_batch(double* deflection,
     require_capacity(values_of(rows, 6, "deflection"), deflection, capacity, needed);
     for (size_t r = 0; r < rows; ++r) {
       try {
-        predict_one(model, q + r * n, n, wrench + 6 * r, deflection + 6 * r);
+        predict_one(model, q + r * n, n, wrench + 6 * r, deflection + 6 * r, r);
       } catch (const stiff::Error& e) {
         throw stiff::Error(e.status(), "row " + std::to_string(r) + ": " + e.what());
       }

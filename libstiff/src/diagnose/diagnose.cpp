@@ -2,9 +2,11 @@
 // candidate effects, verdict and the forward-stepwise loop (diagnose.hpp, docs/diagnosis.md).
 #include "stiff/diagnose/diagnose.hpp"
 
+#include <Eigen/QR>
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <map>
 #include <memory>
@@ -76,19 +78,35 @@ double meta_number(const Dataset& data, const std::string& key) {
   return end != meta.c_str() && std::isfinite(v) && v > 0 ? v : 0.0;
 }
 
+/// How the data states its force error: "a + b x" as a linear sum (the default, the convention
+/// of instrument specifications) unless `# force_error_sum: quadrature`.
+bool force_error_sum_is_linear(const Dataset& data) {
+  return data.meta("force_error_sum") != "quadrature";
+}
+
 /// Add the displacement error caused by the stated force-sensor error (metadata
-/// force_relative, force_absolute_N): a force error dF moves the measured point by about
-/// |d| |dF| / |F|, so per axis sigma_F^2 = |d|^2 (rel^2 + 3 abs^2 / |F|^2) / 3.
+/// force_relative, force_absolute_N). Instrument specifications written "a + b x" are linear
+/// sums (the convention of force-sensor data sheets and of ISO 10360 / ASME B89.4.19 MPEs):
+/// per force component sigma_k = rel |F_k| + abs. `# force_error_sum: quadrature` states
+/// sqrt((rel F_k)^2 + abs^2) instead. A force error dF moves the measured point by about
+/// |d| |dF| / |F|, so per displacement axis sigma_F^2 = |d|^2 sum_k sigma_k^2 / (3 |F|^2).
 void add_force_noise(const Dataset& data, Noise& n) {
   const double rel = meta_number(data, "force_relative");
   const double abs_n = meta_number(data, "force_absolute_N");
   if (!(rel > 0 || abs_n > 0)) return;
+  const bool linear = force_error_sum_is_linear(data);
   double sum = 0;
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const auto& m = data.rows[r];
     const double f = m.force.norm();
     if (!(f > 0)) continue;
-    const double v = m.displacement.squaredNorm() * (rel * rel + 3 * abs_n * abs_n / (f * f)) / 3;
+    double s2 = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double a = rel * std::abs(m.force(k));
+      const double sk = linear ? a + abs_n : std::hypot(a, abs_n);
+      s2 += sk * sk;
+    }
+    const double v = m.displacement.squaredNorm() * s2 / (3 * f * f);
     n.sigma(r) = std::sqrt(n.sigma(r) * n.sigma(r) + v);
     sum += std::sqrt(v);
   }
@@ -225,10 +243,65 @@ struct Context {
   bool had_time = true;  ///< the calibration data has a `t` column
 };
 
-/// `fixed` (may be null): use these outlier flags instead of detecting them.
+/// Rows improbable under the linear model y ~ M beta (weighted, 3 rows per measurement):
+/// least squares on the rows not yet flagged, robust scale (MAD of the residual components,
+/// never below 1 when the noise is stated), flag rows with P(chi2_3 > |r_i|^2/s^2) < alpha/N;
+/// repeat until stable. More than N/5 flagged rows are structure, not outliers: none flagged.
+std::vector<bool> improbable_rows(
+    const MatrixXd& m, const VectorXd& y, double alpha, bool known, int* too_many) {
+  const int rows = static_cast<int>(y.size() / 3);
+  std::vector<bool> flag(rows, false);
+  for (int round = 0; round < 4; ++round) {
+    std::vector<int> in;
+    for (int r = 0; r < rows; ++r)
+      if (!flag[r]) in.push_back(r);
+    MatrixXd ms(3 * in.size(), m.cols());
+    VectorXd ys(3 * in.size());
+    for (size_t i = 0; i < in.size(); ++i) {
+      ms.middleRows(3 * i, 3) = m.middleRows(3 * in[i], 3);
+      ys.segment<3>(3 * i) = y.segment<3>(3 * in[i]);
+    }
+    VectorXd beta = VectorXd::Zero(m.cols());
+    if (m.cols() > 0) {
+      VectorXd norms = ms.colwise().norm().transpose();
+      for (int k = 0; k < norms.size(); ++k) norms(k) = norms(k) > 0 ? 1.0 / norms(k) : 0.0;
+      Eigen::CompleteOrthogonalDecomposition<MatrixXd> cod(ms * norms.asDiagonal());
+      cod.setThreshold(1e-8);
+      beta = norms.asDiagonal() * cod.solve(ys);
+    }
+    const VectorXd res = y - m * beta;
+    std::vector<double> comps;
+    for (int r : in)
+      for (int k = 0; k < 3; ++k) comps.push_back(res(3 * r + k));
+    double scale = robust::mad_sigma(comps);
+    if (known) scale = std::max(1.0, scale);
+    if (!(scale > 0)) break;
+    std::vector<bool> next(rows, false);
+    int flagged = 0;
+    for (int r = 0; r < rows; ++r)
+      if (stats::log_chi2_sf(res.segment<3>(3 * r).squaredNorm() / (scale * scale), 3.0) <
+          std::log(alpha / rows)) {
+        next[r] = true;
+        ++flagged;
+      }
+    if (flagged > rows / 5) {
+      *too_many = std::max(*too_many, flagged);
+      return std::vector<bool>(rows, false);
+    }
+    if (next == flag) break;
+    flag = next;
+  }
+  return flag;
+}
+
+/// `fixed` (may be null): use these outlier flags instead of detecting them. Otherwise a row
+/// is an outlier only when it is improbable under the current model AND under the current
+/// model plus each candidate (linearised about the current fit): rows that an effect
+/// explains are that effect's evidence, not outliers.
 Analysis analyse(const Context& cx,
                  const std::vector<std::string>& effects,
-                 const std::vector<bool>* fixed = nullptr) {
+                 const std::vector<bool>* fixed = nullptr,
+                 const std::vector<std::string>& candidates = {}) {
   const Dataset& calib = *cx.calib;
   const int rows = static_cast<int>(calib.rows.size());
   const Noise& noise = *cx.noise;
@@ -237,7 +310,7 @@ Analysis analyse(const Context& cx,
   a.outlier.assign(rows, false);
   if (fixed) a.outlier = *fixed;
   FitResult fit;
-  for (int round = 0; round < 4; ++round) {
+  for (int round = 0; round < 2; ++round) {
     a.used_rows.clear();
     for (int r = 0; r < rows; ++r)
       if (!a.outlier[r]) a.used_rows.push_back(r);
@@ -245,40 +318,50 @@ Analysis analyse(const Context& cx,
     fit = fit_model(*cx.robot, a.used, effects);
     a.model = std::make_unique<DeflectionModel>(*cx.robot, effects, &a.used);
     a.theta = fit.theta();
-    // Residuals of every calibration row, in sigma units.
     const auto ctx_all = a.model->contexts(calib);
     a.pred_all.resize(rows, 3);
-    std::vector<double> e2(rows), comps;
+    VectorXd y(3 * rows);
+    MatrixXd x(3 * rows, a.model->parameter_count());
     for (int r = 0; r < rows; ++r) {
       const Eigen::Vector3d d = a.model->predict(a.theta, calib.rows[r], ctx_all[r]).head<3>();
       a.pred_all.row(r) = d.transpose();
-      const Eigen::Vector3d e = (calib.rows[r].displacement - d) / noise.sigma(r);
-      e2[r] = e.squaredNorm();
-      if (!a.outlier[r])
-        for (int k = 0; k < 3; ++k) comps.push_back(e(k));
+      y.segment<3>(3 * r) = (calib.rows[r].displacement - d) / noise.sigma(r);
+      if (round == 0 && !fixed)
+        x.middleRows(3 * r, 3) =
+            a.model->displacement_jacobian(a.theta, calib.rows[r], ctx_all[r]) / noise.sigma(r);
     }
-    if (fixed || !(cx.opt->outlier_alpha > 0)) break;
-    // Robust scale of the inlier residual components (MAD); never below the stated noise.
-    double scale = robust::mad_sigma(comps);
-    if (noise.known) scale = std::max(1.0, scale);
-    if (!(scale > 0)) break;
-    std::vector<bool> flag(rows, false);
-    int flagged = 0;
-    for (int r = 0; r < rows; ++r) {
-      const double lp = stats::log_chi2_sf(e2[r] / (scale * scale), 3.0);
-      if (lp < std::log(cx.opt->outlier_alpha / rows)) {
-        flag[r] = true;
-        ++flagged;
+    if (round > 0 || fixed || !(cx.opt->outlier_alpha > 0)) break;
+    int too_many = 0;
+    std::vector<bool> flag = improbable_rows(x, y, cx.opt->outlier_alpha, noise.known, &too_many);
+    for (const auto& name : candidates) {
+      if (std::none_of(flag.begin(), flag.end(), [](bool b) { return b; })) break;
+      std::vector<std::string> eff = effects;
+      eff.push_back(name);
+      std::unique_ptr<DeflectionModel> mg;
+      try {
+        mg = std::make_unique<DeflectionModel>(*cx.robot, eff, &calib);
+      } catch (const InvalidArgument&) {
+        continue;  // untestable here (no masses, no sessions)
       }
+      const int pc = a.model->parameter_count(), pg = mg->parameter_count() - pc;
+      VectorXd theta(mg->parameter_count());
+      theta.head(pc) = a.theta;
+      for (int k = 0; k < pg; ++k) theta(pc + k) = mg->spec(pc + k).null_value;
+      const auto ctx = mg->contexts(calib);
+      MatrixXd xz(3 * rows, pc + pg);
+      xz.leftCols(pc) = x;
+      for (int r = 0; r < rows; ++r)
+        xz.block(3 * r, pc, 3, pg) =
+            mg->displacement_jacobian(theta, calib.rows[r], ctx[r]).rightCols(pg) / noise.sigma(r);
+      const std::vector<bool> fg =
+          improbable_rows(xz, y, cx.opt->outlier_alpha, noise.known, &too_many);
+      for (int r = 0; r < rows; ++r) flag[r] = flag[r] && fg[r];
     }
-    if (flagged > rows / 5) {
-      a.warnings.push_back(std::to_string(flagged) +
-                           " measurements have improbably large residuals: too many to be "
-                           "outliers, kept (the residuals are heavy-tailed: structure)");
-      if (round == 0) break;
-      flag = a.outlier;  // keep the previous round's flags
-    }
-    if (flag == a.outlier || round == 3) break;  // the fit above used a.outlier
+    if (too_many > 0)
+      a.warnings.push_back(std::to_string(too_many) +
+                           " measurements have improbably large residuals under some model: too "
+                           "many to be outliers, kept (heavy tails: structure)");
+    if (flag == a.outlier) break;
     a.outlier = flag;
   }
   for (const auto& w : fit.warnings)
@@ -325,6 +408,11 @@ Analysis analyse(const Context& cx,
   q.chi2 = noise.known ? a.rss : 0.0;
   q.chi2_p = noise.known && q.dof > 0 ? stats::chi2_sf(a.rss, q.dof) : 1.0;
   q.sigma_hat_m = q.dof > 0 ? std::sqrt(a.rss / q.dof) * (noise.known ? noise.floor_m : 1.0) : 0.0;
+  if (noise.known && q.dof > 0) {
+    const double u = 1.0 + cx.opt->noise_uncertainty;
+    q.residual_to_floor = std::sqrt(a.rss / q.dof);
+    q.floor_p = stats::chi2_sf(a.rss / (u * u), q.dof);
+  }
   for (int k = 0; k < pc; ++k) {
     q.parameter_names.push_back(a.model->owner(k).name() + "." + a.model->spec(k).name);
     q.parameter_values.push_back(a.theta(k));
@@ -343,6 +431,18 @@ Analysis analyse(const Context& cx,
     q.validation_rms_m = std::sqrt(ss / (3.0 * v.rows.size()));
     const double vs = cx.vnoise->known ? cx.vnoise->floor_m : noise.floor_m;  // RMS sigma
     q.validation_floor_m = vs * std::sqrt(1.0 + static_cast<double>(a.p) / a.n);
+    // Prediction error of new poses expected from the fit residual alone: E[RSS] = s^2 (n - p)
+    // and E[validation SS] = s^2 3m (1 + p/n) for a right model (mean leverage p/n), so the
+    // ratio of the two mean squares is ~ F(3m, n - p) (unweighted: no stated noise needed).
+    if (q.dof > 0 && ss_m > 0) {
+      const double fit_ms = ss_m / q.dof;
+      const double f = (ss / (3.0 * v.rows.size())) / (fit_ms * (1.0 + double(a.p) / a.n));
+      q.validation_to_fit = std::sqrt(f);
+      // A validation session's noise is not the calibration's (another day, another thermal
+      // state): allowed to differ by the same relative uncertainty as a stated noise level.
+      const double u = 1.0 + cx.opt->noise_uncertainty;
+      q.validation_to_fit_p = stats::f_sf(f / (u * u), 3.0 * v.rows.size(), q.dof);
+    }
   }
   return a;
 }
@@ -424,7 +524,9 @@ struct Level {
   std::vector<CandidateScore> scores;  ///< testable by rank, then untestable
   std::vector<MatrixXd> bases;         ///< projected basis per score (testable)
   std::vector<std::string> group;      ///< ambiguity set around the top (incl. top)
-  bool separable = true;               ///< the top is separable from every group member
+  size_t pick = 0;                     ///< the candidate the next level adds (index in scores)
+  std::string rival;      ///< a group member whose chain explains the data as well as the pick
+  bool separable = true;  ///< the top is separable from every group member
   std::string experiment;
 };
 
@@ -753,13 +855,13 @@ struct Chain {
     if (!claims(levels[i])) return nullptr;
     if (levels.size() <= i + 1) {
       std::vector<std::string> eff = levels[i].a.effects;
-      const std::string top = levels[i].scores[0].effect;
+      const std::string top = levels[i].scores[levels[i].pick].effect;
       eff.push_back(top);
       std::vector<std::string> rest;
       for (const auto& c : candidates)
         if (std::find(eff.begin(), eff.end(), c) == eff.end()) rest.push_back(c);
       try {
-        Analysis a = analyse(*cx, eff, fixed);
+        Analysis a = analyse(*cx, eff, fixed, rest);
         levels.push_back(score_level(*cx, std::move(a), rest));
       } catch (const NumericalError& e) {
         warnings.push_back("re-fit with " + top + " failed: " + e.what());
@@ -769,27 +871,131 @@ struct Chain {
     return &levels[i + 1];
   }
 
-  /// Does adding level i's top (and, while the evidence holds, the following tops) bring the
-  /// residual to the noise floor, with the validation error falling at every step?
-  bool explained_by_chain(size_t i, int depth, std::string* why) {
+  /// Is the residual of `q` at the noise floor? With a stated noise: the chi-square test,
+  /// allowing for the uncertainty of the stated level. Without: a model that explains the data
+  /// predicts the validation poses about as well as it fits (F test of the two mean squares);
+  /// with neither there is no evidence against it.
+  bool at_floor(const ModelQuality& q, std::string* why) const {
+    const double alpha = cx->opt->alpha;
+    if (cx->noise->known) {
+      if (q.floor_p >= alpha) return true;
+      *why = "the residual is " + num(q.residual_to_floor, 3) + " times the stated noise floor (" +
+             "improbable even for a noise " + num(100 * cx->opt->noise_uncertainty, 2) +
+             " % above the stated one, p = " + num(q.floor_p, 2) + ")";
+      return false;
+    }
+    if (!q.has_validation || q.validation_to_fit_p >= alpha) return true;
+    *why = "it predicts the validation poses " + num(q.validation_to_fit, 3) +
+           " times worse than its fit residual allows (p = " + num(q.validation_to_fit_p, 2) +
+           " allowing " + num(100 * cx->opt->noise_uncertainty, 2) +
+           " % between sessions): structure remains";
+    return false;
+  }
+
+  /// Does adding one of level i's significant candidates (the top and the next ones by rank,
+  /// kAlternatives in all) and, while the evidence holds, the following ones bring the
+  /// residual to the noise floor, with the validation error falling at every step? The
+  /// calibration data ranks the candidates; when several chains explain it, the one that
+  /// predicts the validation poses best is kept (out-of-sample choice; the first that explains
+  /// without validation data). On success levels[i].pick is its candidate; on failure `why` is
+  /// the top's reason.
+  bool explained_by_chain(size_t i, int depth, std::string* why, std::string* top_why = nullptr) {
+    static constexpr size_t kAlternatives = 3;
+    std::string first;
+    size_t best = SIZE_MAX;
+    double best_rms = INFINITY, top_rms = INFINITY;
+    const size_t tries = std::min(kAlternatives, levels[i].scores.size());
+    const auto& group = levels[i].group;
+    for (size_t k = 0; k < tries; ++k) {
+      if (!levels[i].scores[k].significant) break;
+      // Candidates outside the top's ambiguity group explain another part of the residual:
+      // tried only when nothing in the group explains it.
+      const bool rival = k == 0 || std::find(group.begin(), group.end(),
+                                             levels[i].scores[k].effect) != group.end();
+      if (!rival && best != SIZE_MAX) break;
+      levels.resize(i + 1);
+      levels[i].pick = k;
+      std::string w;
+      if (explained_by(i, depth, &w)) {
+        const ModelQuality& end = levels.back().a.quality;
+        const double rms = end.has_validation ? end.validation_rms_m : 0.0;
+        if (k == 0) top_rms = end.has_validation ? rms : INFINITY;
+        if (rms < best_rms) {
+          best_rms = rms;
+          best = k;
+        }
+        if (!end.has_validation) break;
+      } else if (k == 0) {
+        first = w;
+      }
+    }
+    levels.resize(i + 1);
+    levels[i].rival.clear();
+    if (best == SIZE_MAX) {
+      levels[i].pick = 0;
+      *why = first;
+      return false;
+    }
+    // The top keeps its place unless a rival chain predicts the validation poses significantly
+    // better (F test of the two validation mean squares, 3m dof each); a rival that is not
+    // significantly better or worse leaves the data unable to choose (ambiguous).
+    if (best != 0 && top_rms < INFINITY) {
+      const double m3 = 3.0 * cx->validation->rows.size();
+      const double ratio = (top_rms * top_rms) / (best_rms * best_rms);
+      if (stats::f_sf(ratio, m3, m3) >= cx->opt->alpha) {
+        levels[i].rival = levels[i].scores[best].effect;
+        best = 0;
+      }
+    }
+    levels[i].pick = best;
+    std::string w;
+    explained_by(i, depth, &w);  // rebuild the chosen chain's levels
+    if (top_why)
+      *top_why =
+          best == 0 ? ""
+                    : (first.empty() ? "predicts the validation poses significantly worse" : first);
+    return true;
+  }
+
+  /// explained_by_chain for level i's pick.
+  bool explained_by(size_t i, int depth, std::string* why) {
+    const std::string added = levels[i].scores[levels[i].pick].effect;
     const Level* n = next(i);
     if (!n) {
-      *why = "the re-fit with " + levels[i].scores[0].effect + " failed";
+      *why = "the re-fit with " + added + " failed";
       return false;
     }
     const ModelQuality& q = levels[i].a.quality;
     const ModelQuality& nq = n->a.quality;
     if (q.has_validation && nq.validation_rms_m >= q.validation_rms_m) {
-      *why = "adding " + levels[i].scores[0].effect + " does not improve the validation error (" +
+      *why = "adding " + added + " does not improve the validation error (" +
              um(q.validation_rms_m) + " -> " + um(nq.validation_rms_m) + ")";
       return false;
     }
-    if (!cx->noise->known || nq.chi2_p >= cx->opt->alpha) return true;
-    if (claims(*n) && n->separable && depth > 1) return explained_by_chain(i + 1, depth - 1, why);
-    *why = "after adding " + levels[i].scores[0].effect +
-           " the residual is still above the noise " + "floor (chi2 = " + num(nq.chi2, 4) +
-           " for " + std::to_string(nq.dof) + " dof, p = " + num(nq.chi2_p, 2) +
-           ") and no further candidate explains the rest";
+    // Explained: the residual is at the floor and no candidate finds structure in it (the
+    // partial F-tests do not depend on the stated noise, so they also catch a residual that
+    // the noise allowance would let pass).
+    std::string floor_why;
+    const bool floor = at_floor(nq, &floor_why);
+    if (floor && !claims(*n)) return true;
+    // At the floor with a marginal candidate left (p_adj > alpha/10, the rule of decide()) that
+    // does not validate: not structure.
+    const bool marginal = n->scores[0].p_adjusted > cx->opt->alpha / 10;
+    if (claims(*n) && n->separable && depth > 1) {
+      std::string deeper;
+      if (explained_by_chain(i + 1, depth - 1, &deeper)) return true;
+      if (floor && levels[i + 1].scores[0].p_adjusted > cx->opt->alpha / 10) return true;
+      *why = "after adding " + added + ": " + deeper;
+      return false;
+    }
+    if (floor && marginal) return true;
+    n = &levels[i + 1];
+    if (floor)
+      floor_why = "structure remains (" + n->scores[0].effect +
+                  " is significant, p_adj = " + num(n->scores[0].p_adjusted, 2) +
+                  (n->separable ? "" : ", not separable from " + join(n->group, ", ")) + ")";
+    *why = "after adding " + added + " " + floor_why +
+           (depth > 1 ? " and no further candidate explains the rest" : "");
     return false;
   }
 
@@ -799,9 +1005,11 @@ struct Chain {
     const double alpha = cx->opt->alpha;
     const ModelQuality& q = L.a.quality;
     const bool known = cx->noise->known;
-    const bool omnibus = known && q.chi2_p < alpha;
+    const bool omnibus = known && q.floor_p < alpha;
     const std::string chi = "chi2 = " + num(q.chi2, 4) + " for " + std::to_string(q.dof) +
-                            " dof, p = " + num(q.chi2_p, 2);
+                            " dof, residual " + num(q.residual_to_floor, 3) +
+                            " times the floor, p = " + num(q.floor_p, 2) + " allowing " +
+                            num(100 * cx->opt->noise_uncertainty, 2) + " % noise uncertainty";
     auto nothing = [&](const std::string& extra) {
       if (omnibus) {
         *why = "the residual is above the noise floor (" + chi + ") but no candidate effect " +
@@ -825,8 +1033,8 @@ struct Chain {
           join(L.group, ", ");
       return "ambiguous";
     }
-    std::string reason;
-    if (!explained_by_chain(i, cx->opt->max_steps, &reason)) {
+    std::string reason, top_reason;
+    if (!explained_by_chain(i, cx->opt->max_steps, &reason, &top_reason)) {
       // A marginal candidate that does not validate on a model at the noise floor: no claim.
       if (!omnibus && top.p_adjusted > alpha / 10)
         return nothing(" (" + top.effect + " reached p_adj = " + num(top.p_adjusted, 2) + " but " +
@@ -836,9 +1044,20 @@ struct Chain {
              ": the missing effect is probably not in the candidate list";
       return "unexplained";
     }
-    *why = top.effect + " is missing (partial F = " + num(top.statistic, 4) +
-           ", Holm-adjusted p = " + num(top.p_adjusted, 2) + ", expected RMS drop " +
-           um(top.expected_rms_drop_m) + ")";
+    if (!L.rival.empty()) {
+      levels[i].group = {top.effect, L.rival};
+      levels[i].experiment = experiment_for(*cx, levels[i].group);
+      *why = top.effect + " and " + L.rival +
+             " each explain the misfit and predict the validation poses equally well: this data "
+             "cannot tell them apart";
+      return "ambiguous";
+    }
+    const CandidateScore& pick = L.scores[L.pick];
+    *why = pick.effect + " is missing (partial F = " + num(pick.statistic, 4) +
+           ", Holm-adjusted p = " + num(pick.p_adjusted, 2) + ", expected RMS drop " +
+           um(pick.expected_rms_drop_m) + ")";
+    if (L.pick > 0)
+      *why += "; " + top.effect + " fits the calibration data as well or better but " + top_reason;
     return "missing_effect";
   }
 };
@@ -872,6 +1091,8 @@ Diagnosis diagnose(const RobotModel& robot,
     throw InvalidArgument("diagnose: rank_tolerance must be in (0, 0.1)");
   if (!(options.outlier_alpha >= 0 && options.outlier_alpha < 1))
     throw InvalidArgument("diagnose: outlier_alpha must be in [0, 1)");
+  if (!(options.noise_uncertainty >= 0 && options.noise_uncertainty < 1))
+    throw InvalidArgument("diagnose: noise_uncertainty must be in [0, 1)");
   if (options.max_steps < 0 || options.max_steps > 20)
     throw InvalidArgument("diagnose: max_steps must be in [0, 20]");
   if (model.empty()) throw InvalidArgument("diagnose: the model has no effect (e.g. 'joint')");
@@ -918,7 +1139,10 @@ Diagnosis diagnose(const RobotModel& robot,
         "measurements): tests use the residual variance; the absolute (chi2) check is skipped");
 
   Chain chain{&cx, candidates, {}, {}};
-  chain.levels.push_back(score_level(cx, analyse(cx, model), candidates));
+  // decide() holds references into `levels` while the chain grows it: never reallocate (the
+  // loop's last step looks max_steps further).
+  chain.levels.reserve(2 * static_cast<size_t>(options.max_steps) + 2);
+  chain.levels.push_back(score_level(cx, analyse(cx, model, nullptr, candidates), candidates));
   std::string why;
   d.verdict = chain.decide(0, &why);
   // Outliers are judged under the best explanation found: rows the given model calls outliers
@@ -934,7 +1158,7 @@ Diagnosis diagnose(const RobotModel& robot,
   const Level* next = chain.next(0);
   const Level& L0 = chain.levels[0];
   d.fit = L0.a.quality;
-  d.omnibus_rejects = noise.known && d.fit.chi2_p < options.alpha;
+  d.omnibus_rejects = noise.known && d.fit.floor_p < options.alpha;
   d.candidates = L0.scores;
   d.warnings.insert(d.warnings.end(), L0.a.warnings.begin(), L0.a.warnings.end());
   where(cx, L0, d);
@@ -943,8 +1167,8 @@ Diagnosis diagnose(const RobotModel& robot,
     d.after_valid = true;
   }
   if (claims(L0)) {
-    d.suggested_model = join(model, "+") + "+" + L0.scores[0].effect;
-    d.suggested_command = L0.scores[0].command;
+    d.suggested_model = join(model, "+") + "+" + L0.scores[L0.pick].effect;
+    d.suggested_command = L0.scores[L0.pick].command;
   }
   if (d.verdict == "ambiguous") {
     d.ambiguous_group = L0.group;
@@ -954,7 +1178,9 @@ Diagnosis diagnose(const RobotModel& robot,
   int outliers = 0;
   for (bool o : L0.a.outlier) outliers += o;
   d.summary = "model " + d.fit.model + ": fit RMS " + um(d.fit.fit_rms_m) +
-              (noise.known ? " vs noise floor " + um(noise.floor_m) : "") +
+              (noise.known ? " vs noise floor " + um(noise.floor_m) + " (" +
+                                 num(d.fit.residual_to_floor, 3) + " times the floor)"
+                           : "") +
               (d.fit.has_validation ? ", validation RMS " + um(d.fit.validation_rms_m) : "") +
               (outliers ? ", " + std::to_string(outliers) + " outlier(s) excluded" : "") +
               ". Verdict: " + d.verdict + " - " + why + ".";
@@ -970,9 +1196,9 @@ Diagnosis diagnose(const RobotModel& robot,
     s.quality = L.a.quality;
     s.verdict = verdict;
     if (claims(L)) {
-      s.top = L.scores[0].effect;
-      s.top_p_adjusted = L.scores[0].p_adjusted;
-      s.top_expected_rms_drop_m = L.scores[0].expected_rms_drop_m;
+      s.top = L.scores[L.pick].effect;
+      s.top_p_adjusted = L.scores[L.pick].p_adjusted;
+      s.top_expected_rms_drop_m = L.scores[L.pick].expected_rms_drop_m;
     }
     return s;
   };
@@ -984,7 +1210,7 @@ Diagnosis diagnose(const RobotModel& robot,
     for (size_t i = 0; verdict == "missing_effect" && static_cast<int>(i) < options.max_steps;
          ++i) {
       if (!chain.next(i)) break;
-      const std::string added = chain.levels[i].scores[0].effect;
+      const std::string added = chain.levels[i].scores[chain.levels[i].pick].effect;
       std::string w2;
       verdict = chain.decide(i + 1, &w2);
       d.steps.push_back(step_of(i + 1, added, verdict));
@@ -998,6 +1224,10 @@ Diagnosis diagnose(const RobotModel& robot,
 
 namespace {
 
+nlohmann::json finite(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+}
+
 nlohmann::json quality_json(const ModelQuality& q) {
   nlohmann::json j;
   j["model"] = q.model;
@@ -1009,20 +1239,20 @@ nlohmann::json quality_json(const ModelQuality& q) {
   j["dof"] = q.dof;
   j["chi2_p"] = q.chi2_p;
   j["sigma_hat_m"] = q.sigma_hat_m;
+  j["residual_to_floor"] = finite(q.residual_to_floor);
+  j["floor_p"] = q.floor_p;
   if (q.has_validation) {
     j["validation_rms_m"] = q.validation_rms_m;
     j["validation_floor_m"] = q.validation_floor_m;
     j["validation_error_m"] = q.validation_error_m;
+    j["validation_to_fit"] = finite(q.validation_to_fit);
+    j["validation_to_fit_p"] = q.validation_to_fit_p;
   }
   nlohmann::json p = nlohmann::json::object();
   for (size_t k = 0; k < q.parameter_names.size(); ++k)
     p[q.parameter_names[k]] = q.parameter_values[k];
   j["parameter_values"] = p;
   return j;
-}
-
-nlohmann::json finite(double v) {
-  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
 }
 
 }  // namespace

@@ -288,10 +288,9 @@ Eigen::MatrixXd predict_dataset(const RobotModel& robot,
   check_fit_applies(fit, robot, model, "predict");
   const Eigen::VectorXd theta = fit.theta();
   Eigen::MatrixXd out(data.rows.size(), 6);
+  const auto ctx = model.contexts(data);  // the one time axis (model.cpp)
   for (size_t r = 0; r < data.rows.size(); ++r)
-    out.row(r) =
-        model.predict(theta, data.rows[r], model.context(data.rows[r], static_cast<int>(r)))
-            .transpose();
+    out.row(r) = model.predict(theta, data.rows[r], ctx[r]).transpose();
   return out;
 }
 

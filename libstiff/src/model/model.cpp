@@ -2,6 +2,7 @@
 
 #include <cstdint>
 #include <cstring>
+#include <map>
 #include <set>
 
 #include "kinematics/fast_chain.hpp"
@@ -138,6 +139,18 @@ std::vector<MeasurementContext> DeflectionModel::contexts(const Dataset& data) c
   Eigen::Matrix3d rf;
   Eigen::Vector3d pf;
   std::vector<MeasurementContext> out(data.rows.size());
+  // Time axis: the `t` column, else the row order, counted from the session's first reading
+  // in this data (a new session, e.g. a validation file, restarts the warm-up), so that
+  // identify, predict and diagnose see the same times.
+  std::map<std::string, double> first;
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    const double t = data.has_time ? data.rows[r].time : static_cast<double>(r);
+    auto it = first.find(data.rows[r].session);
+    if (it == first.end())
+      first.emplace(data.rows[r].session, t);
+    else
+      it->second = std::min(it->second, t);
+  }
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const Measurement& m = data.rows[r];
     if (m.q.size() != n || !m.q.allFinite())
@@ -152,7 +165,7 @@ std::vector<MeasurementContext> DeflectionModel::contexts(const Dataset& data) c
     c.chain.flange.topRightCorner<3, 1>() = pf;
     c.tau_gravity = gravity_torques(robot_, c.chain);
     c.session = session_index(m.session);
-    c.time = data.has_time && m.time != 0.0 ? m.time : static_cast<double>(r);
+    c.time = (data.has_time ? m.time : static_cast<double>(r)) - first[m.session];
   }
   return out;
 }

@@ -172,7 +172,12 @@ static NoiseModel parse_noise_yaml_unguarded(const std::string& text, const std:
       n.force_relative = nonneg(yaml_number(file, v, key));
     else if (key == "force_absolute_N")
       n.force_absolute_N = nonneg(yaml_number(file, v, key));
-    else if (key == "joint_sigma_rad")
+    else if (key == "force_error_sum") {
+      const std::string how = v.IsScalar() ? v.as<std::string>() : "";
+      if (how != "linear" && how != "quadrature")
+        fail_at(file, v, "force_error_sum must be 'linear' or 'quadrature'");
+      n.force_error_linear = how == "linear";
+    } else if (key == "joint_sigma_rad")
       n.joint_sigma_rad = nonneg(yaml_number(file, v, key));
     else if (key == "joint_sigma_deg")
       n.joint_sigma_rad = nonneg(yaml_number(file, v, key)) * M_PI / 180.0;
@@ -187,7 +192,8 @@ static NoiseModel parse_noise_yaml_unguarded(const std::string& text, const std:
       fail_at(file, kv.first,
               "unknown key '" + key +
                   "' (known: tracker_sigma_m, tracker_sigma_um, tracker_ppm, tracker_position_m, "
-                  "force_relative, force_absolute_N, joint_sigma_rad, joint_sigma_deg, "
+                  "force_relative, force_absolute_N, force_error_sum, joint_sigma_rad, "
+                  "joint_sigma_deg, "
                   "outlier_rate, outlier_size_m, seed)");
   }
   return n;
@@ -276,9 +282,13 @@ Dataset simulate(const RobotModel& robot,
     m.sigma_d = sigma;
     out.has_sigma = out.has_sigma || sigma > 0;
     // What the force sensor and the encoders report, not what acted.
-    for (int k = 0; k < 3; ++k)
-      m.force(k) +=
-          noise.force_relative * m.force(k) * rng.normal() + noise.force_absolute_N * rng.normal();
+    for (int k = 0; k < 3; ++k) {
+      // Two draws per component whatever the sum, so that a seed gives the same stream.
+      const double a = noise.force_relative * std::abs(m.force(k));
+      const double n1 = rng.normal(), n2 = rng.normal();
+      m.force(k) += noise.force_error_linear ? (a + noise.force_absolute_N) * n1
+                                             : a * n1 + noise.force_absolute_N * n2;
+    }
     for (int j = 0; j < m.q.size(); ++j) m.q(j) += noise.joint_sigma_rad * rng.normal();
     if (m.id.empty()) m.id = std::to_string(r + 1);
     // Absurd inputs (a link of 1e300 m, a tracker at 1e300 m) overflow: never write inf/NaN.
@@ -296,6 +306,7 @@ Dataset simulate(const RobotModel& robot,
   out.set_meta("tracker_ppm", fmt(noise.tracker_ppm));
   out.set_meta("force_relative", fmt(noise.force_relative));
   out.set_meta("force_absolute_N", fmt(noise.force_absolute_N));
+  out.set_meta("force_error_sum", noise.force_error_linear ? "linear" : "quadrature");
   out.set_meta("joint_sigma_rad", fmt(noise.joint_sigma_rad));
   out.set_meta("outlier_rate", fmt(noise.outlier_rate));
   out.set_meta("seed", std::to_string(noise.seed));

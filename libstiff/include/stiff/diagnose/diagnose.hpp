@@ -15,6 +15,7 @@
 /// underflow), Holm-corrected across groups (Holm 1979).
 #pragma once
 
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -60,6 +61,10 @@ struct DiagnosisOptions {
   /// Walk the loop: add the top effect while the evidence holds, re-fit, re-score.
   bool auto_loop = false;
   int max_steps = 4;
+  /// Relative uncertainty of a stated noise level (an instrument specification or a propagated
+  /// force error is itself known to 10-25 %): the checks that the residual is at the noise
+  /// floor reject only when it is improbably large for a noise (1 + u) times the stated one.
+  double noise_uncertainty = 0.1;
   /// Number of worst poses listed.
   int worst_poses = 5;
   /// Flag rows whose residual is improbable under chi2_3 at this family-wise level (after a
@@ -130,10 +135,19 @@ struct ModelQuality {
   double chi2 = 0.0;  ///< RSS / sigma^2 (weighted)
   int dof = 0;
   double chi2_p = 1.0;  ///< P(chi2_dof > chi2); 1 without a noise level
+  /// With a stated noise: sqrt(chi2 / dof), how far the residual sits from the floor, and
+  /// P(chi2_dof > chi2 / (1 + u)^2), the floor test allowing for the noise uncertainty u.
+  double residual_to_floor = NAN;
+  double floor_p = 1.0;
   double sigma_hat_m = 0.0;
   bool has_validation = false;
   double validation_rms_m = 0.0;
-  double validation_floor_m = 0.0;         ///< sigma sqrt(1 + p/n)
+  double validation_floor_m = 0.0;  ///< sigma sqrt(1 + p/n)
+  /// Validation RMS over what the fit residual predicts for new poses, sigma_hat sqrt(1 + p/n)
+  /// (1 when the model explains the data), and P(F(3m, n - p) > ratio^2): a model that leaves
+  /// structure predicts new poses worse than it fits them.
+  double validation_to_fit = NAN;
+  double validation_to_fit_p = 1.0;
   std::vector<double> validation_error_m;  ///< per validation row, norm of the error
   std::vector<std::string> parameter_names;
   std::vector<double> parameter_values;

@@ -35,9 +35,12 @@ struct NoiseModel {
   Eigen::Vector3d tracker_position_m{2.0, 0.0, 0.5};  ///< tracker station, base frame [m]
   double force_relative = 0.0;                        ///< relative force error (1 sigma) per axis
   double force_absolute_N = 0.0;  ///< absolute force error (1 sigma) per axis [N]
-  double joint_sigma_rad = 0.0;   ///< joint reading error (1 sigma) [rad]
-  double outlier_rate = 0.0;      ///< fraction of rows with a gross tracker error
-  double outlier_size_m = 0.0;    ///< size of a gross error (norm) [m]
+  /// How the two force errors combine per component: a linear sum rel |F_k| + abs (true, the
+  /// convention of "a + b x" instrument specifications) or a quadrature sum.
+  bool force_error_linear = true;
+  double joint_sigma_rad = 0.0;  ///< joint reading error (1 sigma) [rad]
+  double outlier_rate = 0.0;     ///< fraction of rows with a gross tracker error
+  double outlier_size_m = 0.0;   ///< size of a gross error (norm) [m]
   uint64_t seed = 1;
   /// Per-axis tracker sigma for a point at `p` (base frame) [m].
   double tracker_sigma_at(const Eigen::Vector3d& p) const;

@@ -9,35 +9,24 @@ namespace {
 
 /// Warm-up of robot and tracker adds to every loaded-minus-unloaded reading a term that does
 /// not scale with the load: per session an offset b and a rate v,
-///   d_meas = d + b + v (t - t0),
-/// t the reading's time [s] (the row index when the data has no `t` column), t0 the session's
-/// mean time in the data the model was built with (0 without data).
+///   d_meas = d + b + v t,
+/// t the reading's time since the session's first reading in the data (the row order when the
+/// data has no `t` column; DeflectionModel::contexts): b is the offset at the start of the
+/// session, and a new session (a validation file) restarts the warm-up.
 class Drift : public EffectT<Drift> {
  public:
   explicit Drift(const EffectSetup& s) {
     const int sessions = std::max(1, s.sessions);
-    t0_.assign(sessions, 0.0);
+    sessions_ = sessions;
     std::vector<std::string> labels(sessions);
     if (s.data) {
       std::map<std::string, int> index;
-      std::vector<double> sum(sessions, 0.0);
-      std::vector<int> count(sessions, 0);
-      for (size_t r = 0; r < s.data->rows.size(); ++r) {
-        const auto& m = s.data->rows[r];
-        auto it = index.find(m.session);
-        if (it == index.end()) {
-          const int k = static_cast<int>(index.size());
-          it = index.emplace(m.session, k).first;
-          if (k < sessions) labels[k] = m.session;
-        }
-        const int k = it->second;
-        if (k >= sessions) continue;
-        const double t = s.data->has_time ? m.time : static_cast<double>(r);
-        sum[k] += t;
-        ++count[k];
+      for (const auto& m : s.data->rows) {
+        if (index.count(m.session)) continue;
+        const int k = static_cast<int>(index.size());
+        index.emplace(m.session, k);
+        if (k < sessions) labels[k] = m.session;
       }
-      for (int k = 0; k < sessions; ++k)
-        if (count[k] > 0) t0_[k] = sum[k] / count[k];
     }
     const char* axis[3] = {"x", "y", "z"};
     for (int k = 0; k < sessions; ++k) {
@@ -69,8 +58,8 @@ class Drift : public EffectT<Drift> {
     return {effects::kHintLoadReversal};
   }
   std::string description() const override {
-    return "thermal drift: per session an offset and a linear rate in time, d += b + v (t - "
-           "t0); does not scale with the load";
+    return "thermal drift: per session an offset and a linear rate in time, d += b + v t (t "
+           "since the session's first reading); does not scale with the load";
   }
   std::string reference() const override {
     return "Pollack Periodica (AT960-MR warm-up test); ISO 9283 (drift of pose "
@@ -83,13 +72,13 @@ class Drift : public EffectT<Drift> {
   template <typename T>
   void measurement_t(const T* p, EvalState<T>& s) const {
     int k = s.context->session;
-    if (k < 0 || k >= static_cast<int>(t0_.size())) k = 0;
-    const T dt = T(s.context->time - t0_[k]);
+    if (k < 0 || k >= sessions_) k = 0;
+    const T dt = T(s.context->time);
     for (int a = 0; a < 3; ++a) s.d(a) += p[6 * k + a] + p[6 * k + 3 + a] * dt;
   }
 
  private:
-  std::vector<double> t0_;
+  int sessions_ = 1;
   std::string name_ = "drift";
   std::vector<ParameterSpec> params_;
 };

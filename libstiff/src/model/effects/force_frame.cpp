@@ -4,9 +4,12 @@
 namespace stiff {
 namespace {
 
-/// The sensor reports the load in its own frame, mounted on the flange with a clocking error
-/// omega (rotation about the flange axes) and per-axis gain errors s:
-///   F_true = R_06 R(omega) diag(1 + s) R_06^T F_meas   (same for the moment).
+/// Two physically common variants, both in the model so that the data chooses:
+/// a sensor on the flange reports the load in its own frame, with a clocking error omega
+/// (rotation about the flange axes) and per-axis gain errors s; a load applied through a
+/// fixture (weights and pulleys, a cable to a load cell on the floor) has its direction and
+/// gain errors fixed in the base frame (omega_b, s_b):
+///   F_true = R(omega_b) diag(1 + s_b) R_06 R(omega) diag(1 + s) R_06^T F_meas  (and moment).
 /// A common scale (s_x = s_y = s_z) is exactly collinear with the joint compliances,
 /// A(sF) c = A(F) (s c): no displacement data can see it, only an independent force
 /// reference (dead weights). identify() then holds one scale at 0 and names the combination.
@@ -25,6 +28,17 @@ class ForceFrame : public EffectT<ForceFrame> {
           std::string("scale_") + axis[k], "1",
           std::string("relative gain error of the force sensor's ") + axis[k] + " axis", -0.5, 0.5,
           0.02, 0.0, 0.0));
+    for (int k = 0; k < 3; ++k)
+      params_.push_back(
+          effects::parameter(std::string("omega_base_") + axis[k], "rad",
+                             std::string("rotation of the applied load about the base ") + axis[k] +
+                                 " axis (fixture or load-cell alignment fixed in the base frame)",
+                             -0.5, 0.5, 0.02, 0.0, 0.0));
+    for (int k = 0; k < 3; ++k)
+      params_.push_back(effects::parameter(
+          std::string("scale_base_") + axis[k], "1",
+          std::string("relative gain error of the load along the base ") + axis[k] + " axis", -0.5,
+          0.5, 0.02, 0.0, 0.0));
   }
   const std::string& name() const override { return name_; }
   bool example_parameters(const Eigen::VectorXd& /*c*/, double* p) const override {
@@ -36,7 +50,8 @@ class ForceFrame : public EffectT<ForceFrame> {
     return true;
   }
   std::string description() const override {
-    return "force-sensor frame: clocking omega about the flange axes and per-axis gain s, F = "
+    return "force frame: clocking omega and per-axis gain s of a flange sensor, direction "
+           "omega_b and gain s_b of a load fixed in the base frame, F = R(omega_b) diag(1+s_b) "
            "R_06 R(omega) diag(1+s) R_06^T F_meas (a common gain is not identifiable)";
   }
   std::string reference() const override {
@@ -50,7 +65,10 @@ class ForceFrame : public EffectT<ForceFrame> {
     const Matrix3<T> r = effects::rotation_matrix(p);
     Vector3<T> gain;
     for (int k = 0; k < 3; ++k) gain(k) = T(1) + p[3 + k];
-    const Matrix3<T> map = rf * r * gain.asDiagonal() * rf.transpose();
+    const Matrix3<T> rb = effects::rotation_matrix(p + 6);
+    Vector3<T> gain_b;
+    for (int k = 0; k < 3; ++k) gain_b(k) = T(1) + p[9 + k];
+    const Matrix3<T> map = rb * gain_b.asDiagonal() * rf * r * gain.asDiagonal() * rf.transpose();
     s.force = map * s.force;
     s.moment = map * s.moment;
   }
