@@ -33,7 +33,10 @@ namespace detail {
 /// std::set per row: a fast scan that, on finding any problem, lets validate_dataset throw its
 /// (identical) error. Also checks what check_joint_vector checks (q size and finiteness).
 void validate_identification_data(const Dataset& data, int dof) {
-  if (data.rows.empty() || !data.has_displacement) validate_dataset(data, dof, true);
+  if (data.rows.empty() || !data.has_displacement || data.has_position) {
+    validate_dataset(data, dof, true);  // the full check (absolute rows have more columns)
+    if (data.has_position) return;
+  }
   const size_t n = data.rows.size();
   // Duplicate ids: open addressing on the ids' hashes (FNV-1a, inline: ids are short), the
   // full hash kept beside the row so that only equal hashes compare the strings.
@@ -293,6 +296,10 @@ FitResult identify_joint_linear(const RobotModel& robot,
                                 const Dataset& data,
                                 const LinearOptions& options) {
   detail::validate_identification_data(data, robot.dof());
+  if (data.absolute_rows() > 0)
+    throw InvalidArgument(
+        "the linear identification takes loaded-minus-unloaded rows only; absolute rows need "
+        "the nonlinear identification (with geometric effects such as registration+tool)");
   const int n = robot.dof();
   const int N = static_cast<int>(data.rows.size());
   const int m = 3 * N;

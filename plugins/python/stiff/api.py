@@ -164,6 +164,33 @@ class Dataset(_Handle):
         return self._get(5, 1)
 
     @property
+    def absolute(self) -> np.ndarray:
+        """N booleans: True for an absolute row (target position in the instrument frame)."""
+        return self._get(7, 1).astype(bool)
+
+    @property
+    def position(self) -> Optional[np.ndarray]:
+        """N x 3 target positions in the instrument frame [m] (NaN on displacement rows), or
+        None when the file has no px, py, pz columns."""
+        return self._get(8, 3)
+
+    @property
+    def temperature(self) -> Optional[np.ndarray]:
+        """N temperatures [deg C], or None without a temp column."""
+        return self._get(10, 1)
+
+    @property
+    def observed(self) -> Optional[np.ndarray]:
+        """N x 3 what a model predicts for each row: the absolute position of an absolute row,
+        the displacement of a displacement row [m] (None when neither is measured)."""
+        p, d = self.position, self.displacement
+        if p is None:
+            return d
+        if d is None:
+            return p
+        return np.where(self.absolute[:, None], p, d)
+
+    @property
     def wrench(self) -> np.ndarray:
         """N x 6 (force, moment) at the load point, base frame."""
         m = self.moment
@@ -332,10 +359,17 @@ class Model(_Handle):
                                       _c.ptr(w), rows, n))
         return out[0] if np.ndim(q) == 1 else out
 
+    def predict_dataset(self, data: "Dataset") -> np.ndarray:
+        """What the model predicts for every row of `data`, N x 3 [m]: the displacement of a
+        displacement row, the target position in the instrument frame of an absolute row (the
+        registration of its session, which the fit must have identified)."""
+        return _c.get_doubles(lib.stiff_predict_dataset, self, data).reshape(-1, 3)
+
 
 def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "none",
              loss_scale_m: float = 0.0, method: str = "auto", max_iterations: int = 0) -> Fit:
-    """Identify the compliance model (effects joined by '+') from measured displacements."""
+    """Identify the model (effects joined by '+') from measured displacements and/or absolute
+    positions (e.g. model='registration+tool+joint_offset+kinematic' on absolute data)."""
     methods = {"auto": 0, "linear": 1, "ceres": 2}
     if method not in methods:
         raise ValueError(f"unknown method {method!r} (use auto, linear, ceres)")

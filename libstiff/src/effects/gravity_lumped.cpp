@@ -1,0 +1,67 @@
+// gravity_lumped: deflection under the robot's own weight without a mass model.
+#include "stiff/effects/common.hpp"
+
+namespace stiff {
+namespace {
+
+/// The gravity torque on joint j is tau_j = z_j . sum_k (c_k - o_j) x m_k g over the links
+/// k it carries. With each link's weight lumped at the next joint's origin o_k (and a last
+/// one at the measured point), the joint deflection c_j tau_j is linear in the products
+/// beta_jk = c_j m_k:  dtheta_j = sum_{k>j} beta_jk z_j . ((o_k - o_j) x g),
+/// regressors from the nominal geometry (lumped parameters, Khalil & Dombre 2002 ch. 12).
+/// Acts on absolute rows only (the weight cancels in loaded-minus-unloaded differences).
+class GravityLumped : public EffectT<GravityLumped> {
+ public:
+  explicit GravityLumped(const EffectSetup& s) : n_(s.robot->dof()), g_(s.robot->gravity) {
+    for (int j = 0; j < n_; ++j)
+      for (int k = j + 1; k <= n_; ++k) {
+        const std::string jn = std::to_string(j + 1);
+        const std::string kn = k < n_ ? std::to_string(k + 1) : std::string("P");
+        params_.push_back(effects::parameter(
+            "b" + jn + "_" + kn, "rad*kg/(N*m)",
+            "compliance of joint " + jn + " times the weight lumped at " +
+                (k < n_ ? "the origin of joint " + kn : std::string("the measured point")),
+            -1e-1, 1e-1, 1e-5, 0.0, 0.0));
+      }
+  }
+  const std::string& name() const override { return name_; }
+  std::string description() const override {
+    return "deflection under self-weight without a mass model: dtheta_j = sum_k beta_jk z_j . "
+           "((o_k - o_j) x g), lumped masses at the joint origins (absolute data)";
+  }
+  std::string reference() const override {
+    return "Khalil & Dombre, Modeling, Identification and Control of Robots (2002), ch. 11-12 "
+           "(lumped/base parameters)";
+  }
+  const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  bool linear() const override { return true; }
+
+  template <typename T>
+  void joint_t(const T* p, EvalState<T>& s) const {
+    if (!s.measurement->absolute) return;
+    const ChainState& c = s.context->chain;
+    const Eigen::Vector3d pm = effects::value(s.p_meas);
+    int i = 0;
+    for (int j = 0; j < n_; ++j) {
+      const Eigen::Vector3d z = c.axis.col(j), o = c.origin.col(j);
+      for (int k = j + 1; k <= n_; ++k, ++i) {
+        const Eigen::Vector3d ok = k < n_ ? Eigen::Vector3d(c.origin.col(k)) : pm;
+        s.dtheta(j) += p[i] * T(z.dot((ok - o).cross(g_)));
+      }
+    }
+  }
+
+ private:
+  int n_;
+  Eigen::Vector3d g_;
+  std::string name_ = "gravity_lumped";
+  std::vector<ParameterSpec> params_;
+};
+
+}  // namespace
+
+std::unique_ptr<Effect> make_gravity_lumped_effect(const EffectSetup& s) {
+  return std::make_unique<GravityLumped>(s);
+}
+
+}  // namespace stiff
