@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "stiff/effect.hpp"
 #include "stiff/error.hpp"
 
 namespace stiff::detail {
@@ -27,6 +28,24 @@ std::string num(double v) {
 /// (joint compliances first, then the effects in model order), normalised, and a column is
 /// accepted when its component orthogonal to the accepted ones has relative norm above
 /// `tolerance`; otherwise it is named with the parameters it is confounded with.
+/// The order in which parameters claim what the data show: the joint compliances first (the
+/// deflection model's core), then the effects in model order; on a geometric model (an effect
+/// that corrects the chain or registers the instrument) the model order alone, so that the
+/// registration, tool and geometry the user lists first keep what the compliances share.
+std::vector<int> priority_order(const DeflectionModel& model) {
+  const int p = model.parameter_count();
+  bool geometric = false;
+  for (const auto& e : model.effects())
+    geometric = geometric || (e->stages() & kGeometryStage) || e->name() == "registration";
+  std::vector<int> order;
+  const int je = model.find("joint");
+  if (je >= 0 && !geometric)
+    for (int k = 0; k < model.effects()[je]->size(); ++k) order.push_back(model.offset(je) + k);
+  for (int k = 0; k < p; ++k)
+    if (std::find(order.begin(), order.end(), k) == order.end()) order.push_back(k);
+  return order;
+}
+
 Identifiability structural(const DeflectionModel& model,
                            const Eigen::MatrixXd& j,
                            const Eigen::VectorXd& typical,
@@ -41,12 +60,7 @@ Identifiability structural(const DeflectionModel& model,
   Identifiability out;
   out.fixed.assign(p, false);
   out.reason.assign(p, "");
-  std::vector<int> order;
-  const int je = model.find("joint");
-  if (je >= 0)
-    for (int k = 0; k < model.effects()[je]->size(); ++k) order.push_back(model.offset(je) + k);
-  for (int k = 0; k < p; ++k)
-    if (std::find(order.begin(), order.end(), k) == order.end()) order.push_back(k);
+  const std::vector<int> order = priority_order(model);
 
   // The same decisions on the p x p Gram matrix J^T J (Cholesky of the normalised columns in
   // this order: the squared orthogonal rest is 1 - |L^-1 c|^2), which costs a third of the
@@ -134,15 +148,21 @@ Identifiability check_identifiability(const DeflectionModel& model,
                                       const Eigen::VectorXd& typical,
                                       double tolerance,
                                       double residual_sigma,
-                                      double max_relative_se) {
+                                      double max_relative_se,
+                                      const Eigen::VectorXd* theta) {
   Identifiability out = structural(model, j, typical, tolerance);
-  if (!(max_relative_se > 0) || !(residual_sigma > 0)) return out;
+  if (!(max_relative_se > 0) || !(residual_sigma > 0) || !theta) return out;
   const int p = model.parameter_count();
   // Gram matrix of the scaled columns once; each round inverts its free block.
   const Eigen::MatrixXd js = j * typical.asDiagonal();
   Eigen::MatrixXd g = Eigen::MatrixXd::Zero(p, p);
   g.selfadjointView<Eigen::Lower>().rankUpdate(js.transpose());
   g = g.selfadjointView<Eigen::Lower>();
+  std::vector<int> rank(p);  // position in the priority order
+  {
+    const std::vector<int> order = priority_order(model);
+    for (int i = 0; i < p; ++i) rank[order[i]] = i;
+  }
   while (true) {
     std::vector<int> free;
     for (int k = 0; k < p; ++k)
@@ -157,13 +177,19 @@ Identifiability check_identifiability(const DeflectionModel& model,
     const Eigen::MatrixXd ge = d.asDiagonal() * gf * d.asDiagonal();
     const Eigen::MatrixXd cov =
         d.asDiagonal() * ge.ldlt().solve(Eigen::MatrixXd::Identity(nf, nf)) * d.asDiagonal();
+    // se in units of the typical magnitude; the scale a parameter must be determined to:
+    // its typical magnitude, or a third of its value when that is larger (t >= 3). Of the
+    // parameters that fail, the last in priority order is held (in a correlated group the
+    // others then become determined, as in the structural test).
     int worst = -1;
-    double worst_se = max_relative_se;
+    double worst_se = 0.0;
     for (int a = 0; a < nf; ++a) {
       const double se = residual_sigma * std::sqrt(std::max(0.0, cov(a, a)));
-      if (!(se <= worst_se)) {  // NaN counts as undetermined
-        worst_se = std::isfinite(se) ? se : INFINITY;
+      const double scale = std::max(1.0, std::abs((*theta)(free[a])) / (3.0 * typical(free[a])));
+      if (se / scale <= max_relative_se) continue;  // NaN fails
+      if (worst < 0 || rank[free[a]] > rank[free[worst]]) {
         worst = a;
+        worst_se = std::isfinite(se) ? se : INFINITY;
       }
     }
     if (worst < 0) break;
@@ -181,9 +207,10 @@ Identifiability check_identifiability(const DeflectionModel& model,
     const auto& sp = model.spec(k);
     out.fixed[k] = true;
     out.reason[k] = "the data determine it only to +-" + num(worst_se * typical(k)) + " " +
-                    sp.unit + " (standard error " + num(worst_se) +
-                    " times its typical magnitude " + num(typical(k)) + " " + sp.unit + ", limit " +
-                    num(max_relative_se) + ")" +
+                    sp.unit + " (standard error), more than its typical magnitude " +
+                    num(typical(k)) + " " + sp.unit + " and a third of its value " +
+                    num((*theta)(k)) + " " + sp.unit +
+                    (max_relative_se != 1.0 ? " (times " + num(max_relative_se) + ")" : "") +
                     (partner >= 0 && std::abs(corr) > 0.5
                          ? "; it is correlated " + num(corr) + " with " + qualified(model, partner)
                          : std::string());

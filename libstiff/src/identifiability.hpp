@@ -28,16 +28,19 @@ struct Identifiability {
 ///     relative norm above `tolerance` (the rank decision of a QR of the scaled Jacobian,
 ///     Khalil & Dombre 2002); a rejected column is named with the accepted parameters it is
 ///     a combination of;
-///  2. statistical: with `max_relative_se` > 0, the accepted parameter whose standard error
-///     (residual scale `residual_sigma` times the scaled inverse Gram diagonal) exceeds
-///     `max_relative_se` times its typical magnitude is held, named with the parameter it is
-///     most correlated with, and the test repeated until every free parameter passes.
+///  2. statistical: with `max_relative_se` > 0 and the parameter values `theta`, an accepted
+///     parameter is not determined when its standard error (residual scale `residual_sigma`
+///     times the root of the scaled inverse Gram diagonal) exceeds `max_relative_se` times
+///     both its typical magnitude and a third of its value (a t-statistic below 3): the worst
+///     such parameter is held, named with the parameter it is most correlated with, and the
+///     test repeated until every free parameter passes.
 /// Throws NumericalError when j is not finite.
 Identifiability check_identifiability(const DeflectionModel& model,
                                       const Eigen::MatrixXd& j,
                                       const Eigen::VectorXd& typical,
                                       double tolerance,
                                       double residual_sigma = 1.0,
-                                      double max_relative_se = 0.0);
+                                      double max_relative_se = 0.0,
+                                      const Eigen::VectorXd* theta = nullptr);
 
 }  // namespace stiff::detail

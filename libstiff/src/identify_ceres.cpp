@@ -873,15 +873,15 @@ FitResult identify(const RobotModel& robot,
   Eigen::MatrixXd last_jacobian;
   Eigen::VectorXd last_jacobian_theta;
   double residual_sigma = 0.0;  // 0 until a solve: structural test only
-  auto check = [&](const Eigen::MatrixXd& jac) {
+  auto check = [&](const Eigen::MatrixXd& jac, const Eigen::VectorXd& at) {
     return check_identifiability(model, jac, s.typical, opt.rank_tolerance, residual_sigma,
-                                 opt.max_relative_se);
+                                 opt.max_relative_se, &at);
   };
   auto fit_passes = [&]() {
     // theta as the solver will see it, (theta / typical) * typical, so that the Jacobian of
     // this check is the one of the solver's first iteration (Evaluations cache).
     for (int k = 0; k < p; ++k) theta(k) = theta(k) / s.typical(k) * s.typical(k);
-    idf = check(weighted_jacobian(s, theta));
+    idf = check(weighted_jacobian(s, theta), theta);
     for (int pass = 0;; ++pass) {
       free.clear();
       for (int k = 0; k < p; ++k) {
@@ -906,7 +906,7 @@ FitResult identify(const RobotModel& robot,
                                   (static_cast<int>(free.size()) + kJetStride - 1) / kJetStride)
           return false;  // a constant Jacobian, or columns the cache does not hold
         if (!held_has_effect(s, t, idf.fixed)) return false;
-        const Identifiability a = check(weighted_jacobian(s, t));
+        const Identifiability a = check(weighted_jacobian(s, t), t);
         for (int k = 0; k < p; ++k)
           if (idf.fixed[k] && !a.fixed[k]) return true;
         return false;
@@ -919,7 +919,7 @@ FitResult identify(const RobotModel& robot,
       const int dof_left = 3 * n - static_cast<int>(free.size());
       residual_sigma =
           dof_left > 0 ? std::sqrt(weighted_residuals(s, theta).squaredNorm() / dof_left) : 1.0;
-      Identifiability again = check(last_jacobian);
+      Identifiability again = check(last_jacobian, theta);
       if (again == idf || pass == 2) break;
       // A parameter held so far became visible (or the reverse): solve again from here, a
       // freed parameter from the value it was held at (theta unchanged: the Jacobians cached

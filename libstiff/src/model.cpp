@@ -260,9 +260,10 @@ Vector3<T> corrected_point(const RobotModel& robot,
   using std::sin;
   Matrix3<T> rot = Matrix3<T>::Identity();
   Vector3<T> pos = Vector3<T>::Zero();
+  // Products with the constant transforms stay T x double (half the work of T x T).
   auto apply = [&](const Eigen::Matrix4d& a) {  // (rot, pos) <- (rot, pos) * a
-    pos += rot * a.topRightCorner<3, 1>().cast<T>();
-    rot = (rot * a.topLeftCorner<3, 3>().cast<T>()).eval();
+    pos += rot * a.topRightCorner<3, 1>();
+    rot = (rot * a.topLeftCorner<3, 3>()).eval();
   };
   for (int j = 0; j < robot.dof(); ++j) {
     const Joint& jt = robot.joints[j];
@@ -280,10 +281,9 @@ Vector3<T> corrected_point(const RobotModel& robot,
     k << 0, -a(2), a(1), a(2), 0, -a(0), -a(1), a(0), 0;
     const Eigen::Matrix3d k2 = k * k;
     const T st = sin(t), ct = T(1) - cos(t);
-    Matrix3<T> ra;
+    const Matrix3<T> rk = rot * k, rk2 = rot * k2;
     for (int u = 0; u < 3; ++u)
-      for (int v = 0; v < 3; ++v) ra(u, v) = T(u == v ? 1.0 : 0.0) + st * k(u, v) + ct * k2(u, v);
-    rot = (rot * ra).eval();
+      for (int v = 0; v < 3; ++v) rot(u, v) += st * rk(u, v) + ct * rk2(u, v);
     apply(jt.post);
   }
   return rot * r + pos;
@@ -311,6 +311,25 @@ void DeflectionModel::evaluate_into(const T* theta,
   const Vector3<T> pf = c.chain.flange.block<3, 1>(0, 3).cast<T>();
   s.p_meas = rf * s.r_meas + pf;
   s.p_load = rf * s.r_load + pf;
+  if (m.absolute) {
+    // A purely geometric model of an absolute row needs no Jacobians and no deflection.
+    bool deflects = false;
+    for (const auto& e : effects_)
+      deflects = deflects || e->reads_jacobians() ||
+                 (e->stages() & (unsigned{kJointStage} | unsigned{kCartesianStage}));
+    if (!deflects) {
+      s.tau = VectorX<T>::Zero(n);
+      s.dtheta = VectorX<T>::Zero(n);
+      s.d.setZero();
+      s.rot.setZero();
+      s.dq = VectorX<T>::Zero(n);
+      s.joint_error = Matrix6X<T>::Zero(6, n);
+      for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
+      s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas);
+      for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
+      return;
+    }
+  }
   s.jac_meas.resize(6, n);
   s.jac_load.resize(6, n);
   s.tau.resize(n);

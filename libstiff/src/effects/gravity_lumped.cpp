@@ -40,14 +40,17 @@ class GravityLumped : public EffectT<GravityLumped> {
   void joint_t(const T* p, EvalState<T>& s) const {
     if (!s.measurement->absolute) return;
     const ChainState& c = s.context->chain;
-    const Eigen::Vector3d pm = effects::value(s.p_meas);
     int i = 0;
     for (int j = 0; j < n_; ++j) {
       const Eigen::Vector3d z = c.axis.col(j), o = c.origin.col(j);
-      for (int k = j + 1; k <= n_; ++k, ++i) {
-        const Eigen::Vector3d ok = k < n_ ? Eigen::Vector3d(c.origin.col(k)) : pm;
-        s.dtheta(j) += p[i] * T(z.dot((ok - o).cross(g_)));
-      }
+      for (int k = j + 1; k < n_; ++k, ++i)
+        s.dtheta(j) += p[i] * T(z.dot((Eigen::Vector3d(c.origin.col(k)) - o).cross(g_)));
+      // The last weight sits at P, which the tool and point offsets move: keep its
+      // derivatives. z . ((P - o) x g) = (g x z) . (P - o).
+      const Eigen::Vector3d gz = g_.cross(z);
+      T lever = T(-gz.dot(o));
+      for (int a = 0; a < 3; ++a) lever += T(gz(a)) * s.p_meas(a);
+      s.dtheta(j) += p[i++] * lever;
     }
   }
 

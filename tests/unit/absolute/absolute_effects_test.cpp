@@ -179,7 +179,7 @@ void zero_held(const DeflectionModel& m, const FitResult& f, Geometry* g) {
     else if (e == "kinematic")
       g->axis(i % 4, i / 4) = 0.0;
     else
-      ADD_FAILURE() << e << "." << m.spec(k).name << " held on noise-free data";
+      ADD_FAILURE() << e << "." << m.spec(k).name << " held";
   }
   (void)n;
 }
@@ -188,17 +188,19 @@ TEST(AbsoluteEffects, RecoversGeometryWithinThreeStandardErrors) {
   const RobotModel robot = ur5();
   int inside = 0, total = 0;
   double worst_validation = 0;
-  for (int seed = 1; seed <= 8; ++seed) {
+  for (int seed = 1; seed <= 4; ++seed) {
     std::mt19937_64 rng(100 + seed);
     Geometry g = random_geometry(robot.dof(), 2, rng);
     const double sigma = 20e-6;
-    // The identifiable set from noise-free data, then the truth restricted to it.
+    // The set the data determine, then the truth restricted to it (the same poses and noise
+    // again): a held parameter's truth would otherwise bias its partners.
+    const std::mt19937_64 start = rng;
     {
-      std::mt19937_64 r0(seed);
-      const Dataset clean = measure(robot, g, 60, 1e-9, r0);
-      const FitResult f0 = identify(robot, clean, kGeometric);
-      zero_held(DeflectionModel(robot, kGeometric, &clean), f0, &g);
+      const Dataset first = measure(robot, g, 60, sigma, rng);
+      const FitResult f0 = identify(robot, first, kGeometric);
+      zero_held(DeflectionModel(robot, kGeometric, &first), f0, &g);
     }
+    rng = start;
     const Dataset data = measure(robot, g, 60, sigma, rng);
     const FitResult f = identify(robot, data, kGeometric);
     const DeflectionModel m(robot, kGeometric, &data);
@@ -294,7 +296,10 @@ TEST(Identifiability, JointTheDataBarelySeeIsHeldNotFittedToNoise) {
   RobotModel robot = test::rokae();
   robot.measured_point = Eigen::Vector3d(0.24e-3, 0.0, robot.measured_point(2));
   robot.load_point = robot.measured_point;
-  const Dataset design = test::design60(21, 60);
+  RandomDesignOptions o;
+  o.count = 60;
+  o.seed = 21;
+  const Dataset design = random_design(robot, o);
   NoiseModel noise;
   noise.tracker_sigma_m = 10e-6;
   const Dataset data = simulate(robot, joint_truth(test::paper_stiffness()), design, noise);

@@ -2,6 +2,7 @@
 // bad inputs (docs/formats.md, absolute measurements).
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 
 #include "stiff/dataset.hpp"
