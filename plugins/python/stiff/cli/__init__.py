@@ -9,7 +9,7 @@ import sys
 from ..errors import StiffError
 
 # Subcommand modules, in the order `stiff --help` lists them.
-COMMANDS = ["demo", "simulate", "identify", "predict", "effects"]
+COMMANDS = ["demo", "simulate", "identify", "predict", "effects", "import_"]
 OPTIONAL_COMMANDS = ["plan", "diagnose", "compensate", "fmu", "study"]
 
 
