@@ -34,6 +34,11 @@ stiff_status stiff_identify(stiff_result** out,
       throw InvalidArgument("loss_scale_m must be finite and >= 0");
     if (o.method > STIFF_METHOD_CERES)
       throw InvalidArgument("unknown method " + std::to_string(o.method));
+    if (!std::isfinite(o.max_relative_se))
+      throw InvalidArgument("max_relative_se must be finite");
+    const double max_relative_se =
+        o.max_relative_se == 0.0 ? IdentifyOptions{}.max_relative_se
+                                 : (o.max_relative_se < 0.0 ? 0.0 : o.max_relative_se);
     const bool linear_ok = effects.size() == 1 && effects[0] == "joint" && loss == "none";
     auto r = std::make_unique<stiff_result>();
     // Absolute rows need the nonlinear path (the linear one reads displacement rows only).
@@ -42,11 +47,14 @@ stiff_status stiff_identify(stiff_result** out,
         (o.method == STIFF_METHOD_AUTO && linear_ok && displacement_only)) {
       if (!linear_ok)
         throw InvalidArgument("the linear method fits the model 'joint' without robust loss only");
-      r->fit = identify_joint_linear(robot->model, data->data);
+      LinearOptions lo;
+      lo.max_relative_se = max_relative_se;
+      r->fit = identify_joint_linear(robot->model, data->data, lo);
     } else {
       IdentifyOptions io;
       io.loss = loss;
       io.loss_scale_m = o.loss_scale_m;
+      io.max_relative_se = max_relative_se;
       if (o.max_iterations) io.max_iterations = static_cast<int>(o.max_iterations);
       if (o.progress) {
         const auto fn = o.progress;

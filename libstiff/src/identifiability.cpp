@@ -185,7 +185,9 @@ Identifiability check_identifiability(const DeflectionModel& model,
     double worst_se = 0.0;
     for (int a = 0; a < nf; ++a) {
       const double se = residual_sigma * std::sqrt(std::max(0.0, cov(a, a)));
-      const double scale = std::max(1.0, std::abs((*theta)(free[a])) / (3.0 * typical(free[a])));
+      const int k = free[a];
+      const double from_null = std::abs((*theta)(k) - model.spec(k).null_value);
+      const double scale = std::max(1.0, from_null / (3.0 * typical(k)));
       if (se / scale <= max_relative_se) continue;  // NaN fails
       if (worst < 0 || rank[free[a]] > rank[free[worst]]) {
         worst = a;
@@ -208,8 +210,9 @@ Identifiability check_identifiability(const DeflectionModel& model,
     out.fixed[k] = true;
     out.reason[k] = "the data determine it only to +-" + num(worst_se * typical(k)) + " " +
                     sp.unit + " (standard error), more than its typical magnitude " +
-                    num(typical(k)) + " " + sp.unit + " and a third of its value " +
-                    num((*theta)(k)) + " " + sp.unit +
+                    num(typical(k)) + " " + sp.unit + " and a third of its distance " +
+                    num(std::abs((*theta)(k) - sp.null_value)) + " " + sp.unit +
+                    " from its null value" +
                     (max_relative_se != 1.0 ? " (times " + num(max_relative_se) + ")" : "") +
                     (partner >= 0 && std::abs(corr) > 0.5
                          ? "; it is correlated " + num(corr) + " with " + qualified(model, partner)

@@ -31,8 +31,9 @@ struct Identifiability {
 ///  2. statistical: with `max_relative_se` > 0 and the parameter values `theta`, an accepted
 ///     parameter is not determined when its standard error (residual scale `residual_sigma`
 ///     times the root of the scaled inverse Gram diagonal) exceeds `max_relative_se` times
-///     both its typical magnitude and a third of its value (a t-statistic below 3): the worst
-///     such parameter is held, named with the parameter it is most correlated with, and the
+///     both its typical magnitude and a third of its distance from its null value (a
+///     t-statistic below 3 against "effect off"): the last in priority order of the
+///     such parameters is held, named with the parameter it is most correlated with, and the
 ///     test repeated until every free parameter passes.
 /// Throws NumericalError when j is not finite.
 Identifiability check_identifiability(const DeflectionModel& model,

@@ -916,9 +916,24 @@ FitResult identify(const RobotModel& robot,
       last_jacobian = weighted_jacobian(s, theta);
       last_jacobian_theta = theta;
       // The statistical test needs the residual scale of a solved model: from here on.
-      const int dof_left = 3 * n - static_cast<int>(free.size());
-      residual_sigma =
-          dof_left > 0 ? std::sqrt(weighted_residuals(s, theta).squaredNorm() / dof_left) : 1.0;
+      // As the statistics below: rows down-weighted by the robust loss count that much.
+      {
+        const Eigen::VectorXd e = weighted_residuals(s, theta);
+        double wsum = 0, wrss = 0;
+        for (int r = 0; r < n; ++r) {
+          double w = 1.0;
+          std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
+          if (loss) {
+            double rho[3];
+            loss->Evaluate(e.segment<3>(3 * r).squaredNorm(), rho);
+            w = std::min(1.0, std::max(0.0, rho[1]));
+          }
+          wsum += 3.0 * w;
+          wrss += w * w * e.segment<3>(3 * r).squaredNorm();
+        }
+        const double dof_left = wsum - static_cast<double>(free.size());
+        residual_sigma = dof_left > 0 ? std::sqrt(wrss / dof_left) : 1.0;
+      }
       Identifiability again = check(last_jacobian, theta);
       if (again == idf || pass == 2) break;
       // A parameter held so far became visible (or the reverse): solve again from here, a

@@ -25,6 +25,7 @@
 #include "fast_chain.hpp"
 #include "stiff/error.hpp"
 #include "stiff/identify.hpp"
+#include "identifiability.hpp"
 
 namespace stiff {
 namespace detail {
@@ -292,9 +293,67 @@ Eigen::VectorXd pivoted_cholesky_diagonal(Eigen::MatrixXd g) {
 
 }  // namespace
 
+namespace {
+
+/// The linear fit with the compliances in `held` held at 0 (named in warnings by the caller).
+FitResult linear_fit(const RobotModel& robot,
+                     const Dataset& data,
+                     const LinearOptions& options,
+                     const std::vector<bool>& held,
+                     Eigen::MatrixXd* weighted_a,
+                     double* residual_sigma);
+
+}  // namespace
+
 FitResult identify_joint_linear(const RobotModel& robot,
                                 const Dataset& data,
                                 const LinearOptions& options) {
+  // The rank decision inside the fit, then the statistical test of every fit
+  // (identifiability.hpp): a compliance the data do not determine is held at 0 and the rest
+  // fitted again.
+  const int n = robot.dof();
+  std::vector<bool> held(n, false);
+  std::vector<std::string> reasons(n);
+  const DeflectionModel model(robot, {"joint"});
+  Eigen::VectorXd typical(n);
+  for (int j = 0; j < n; ++j) typical(j) = model.spec(j).typical;
+  for (int round = 0; round <= n; ++round) {
+    Eigen::MatrixXd aw;
+    double sigma = 0.0;  // residual standard deviation in the rows' weighted units
+    FitResult f = linear_fit(robot, data, options, held, &aw, &sigma);
+    const Eigen::VectorXd theta = f.theta();
+    const detail::Identifiability idf =
+        detail::check_identifiability(model, aw, typical, options.rank_tolerance, sigma,
+                                      options.max_relative_se, &theta);
+    bool more = false;
+    for (int j = 0; j < n; ++j)
+      if (idf.fixed[j] && f.parameters[j].identified && !idf.reason[j].empty() &&
+          idf.reason[j].find("determine") != std::string::npos) {
+        held[j] = true;
+        reasons[j] = idf.reason[j];
+        more = true;
+      }
+    if (!more) {
+      for (int j = 0; j < n; ++j)
+        if (!reasons[j].empty())
+          f.warnings.push_back("joint " + std::to_string(j + 1) +
+                               " is not identifiable from this data (joint.c" +
+                               std::to_string(j + 1) + "): " + reasons[j] +
+                               "; held at c = 0 (infinitely stiff)");
+      return f;
+    }
+  }
+  throw NumericalError("identify: no joint compliance is identifiable");
+}
+
+namespace {
+
+FitResult linear_fit(const RobotModel& robot,
+                     const Dataset& data,
+                     const LinearOptions& options,
+                     const std::vector<bool>& held,
+                     Eigen::MatrixXd* weighted_a,
+                     double* residual_sigma) {
   detail::validate_identification_data(data, robot.dof());
   if (data.absolute_rows() > 0)
     throw InvalidArgument(
@@ -324,6 +383,7 @@ FitResult identify_joint_linear(const RobotModel& robot,
   std::vector<int> candidates;
   FitResult f;
   for (int j = 0; j < n; ++j) {
+    if (held[j]) continue;  // named by the caller
     if (norms(j) > 1e-12 * max_norm)
       candidates.push_back(j);
     else
@@ -474,7 +534,12 @@ FitResult identify_joint_linear(const RobotModel& robot,
     f.chi2 = rss_w;
   else if (f.noise_floor_m > 0)
     f.chi2 = f.residuals.squaredNorm() / (f.noise_floor_m * f.noise_floor_m);
+  *weighted_a = a;
+  for (int r = 0; r < N; ++r) weighted_a->middleRows<3>(3 * r) *= ob.w(r);
+  *residual_sigma = std::sqrt(s2);
   return f;
 }
+
+}  // namespace
 
 }  // namespace stiff

@@ -233,10 +233,14 @@ typedef struct stiff_identify_options {
   uint32_t method;            /**< a stiff_method */
   stiff_progress_fn progress; /**< may be NULL */
   void* progress_user_data;
+  /** A parameter whose standard error exceeds this many times both its typical magnitude and
+   *  a third of its value is not determined and is held (docs/identifiability.md); 0: the
+   *  default 1; < 0: off (the structural rank test only). @since 0.2 */
+  double max_relative_se;
 } stiff_identify_options;
 /* Every field spelled out: a bare {sizeof(...)} trips -Wmissing-field-initializers. */
 #define STIFF_IDENTIFY_OPTIONS_INIT \
-  { sizeof(stiff_identify_options), NULL, NULL, 0.0, 0, 0, NULL, NULL }
+  { sizeof(stiff_identify_options), NULL, NULL, 0.0, 0, 0, NULL, NULL, 0.0 }
 
 /** Identify the model from data with measured displacements. Joints or parameters that the
  *  data cannot identify are named in the result's warnings and held fixed. Errors:

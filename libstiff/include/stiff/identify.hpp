@@ -17,6 +17,8 @@ struct LinearOptions {
   double rank_tolerance = 1e-8;
   /// Weight rows by 1/sigma_d when the data has sigma_d.
   bool use_sigma = true;
+  /// The statistical identifiability limit, as IdentifyOptions::max_relative_se.
+  double max_relative_se = 1.0;
 };
 
 /// Least-squares identification of the diagonal joint compliances (`joint` model), c =

@@ -64,6 +64,7 @@ class IdentifyOptions(C.Structure):
         ("method", C.c_uint32),
         ("progress", PROGRESS_FN),
         ("progress_user_data", C.c_void_p),
+        ("max_relative_se", C.c_double),
     ]
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ctypes as C
 import json
+import math
 import os
 import weakref
 from dataclasses import dataclass
@@ -367,9 +368,13 @@ class Model(_Handle):
 
 
 def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "none",
-             loss_scale_m: float = 0.0, method: str = "auto", max_iterations: int = 0) -> Fit:
+             loss_scale_m: float = 0.0, method: str = "auto", max_iterations: int = 0,
+             max_relative_se: float = 1.0) -> Fit:
     """Identify the model (effects joined by '+') from measured displacements and/or absolute
-    positions (e.g. model='registration+tool+joint_offset+kinematic' on absolute data)."""
+    positions (e.g. model='registration+tool+joint_offset+kinematic' on absolute data).
+    `max_relative_se`: a parameter whose standard error exceeds this many times both its
+    typical magnitude and a third of its value is held (docs/identifiability.md); 0 keeps only
+    the structural rank test."""
     methods = {"auto": 0, "linear": 1, "ceres": 2}
     if method not in methods:
         raise ValueError(f"unknown method {method!r} (use auto, linear, ceres)")
@@ -380,6 +385,9 @@ def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "non
     o.loss_scale_m = loss_scale_m
     o.max_iterations = max_iterations
     o.method = methods[method]
+    if not (max_relative_se >= 0 and math.isfinite(max_relative_se)):
+        raise ValueError("max_relative_se must be a finite value >= 0")
+    o.max_relative_se = max_relative_se if max_relative_se > 0 else -1.0
     h = C.c_void_p()
     check(lib.stiff_identify(C.byref(h), robot, data, C.byref(o)))
     return Fit(h)
