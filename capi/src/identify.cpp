@@ -34,11 +34,10 @@ stiff_status stiff_identify(stiff_result** out,
       throw InvalidArgument("loss_scale_m must be finite and >= 0");
     if (o.method > STIFF_METHOD_CERES)
       throw InvalidArgument("unknown method " + std::to_string(o.method));
-    if (!std::isfinite(o.max_relative_se))
-      throw InvalidArgument("max_relative_se must be finite");
-    const double max_relative_se =
-        o.max_relative_se == 0.0 ? IdentifyOptions{}.max_relative_se
-                                 : (o.max_relative_se < 0.0 ? 0.0 : o.max_relative_se);
+    if (!std::isfinite(o.max_relative_se)) throw InvalidArgument("max_relative_se must be finite");
+    const double max_relative_se = o.max_relative_se == 0.0
+                                       ? IdentifyOptions{}.max_relative_se
+                                       : (o.max_relative_se < 0.0 ? 0.0 : o.max_relative_se);
     const bool linear_ok = effects.size() == 1 && effects[0] == "joint" && loss == "none";
     auto r = std::make_unique<stiff_result>();
     // Absolute rows need the nonlinear path (the linear one reads displacement rows only).

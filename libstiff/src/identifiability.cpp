@@ -149,8 +149,10 @@ Identifiability check_identifiability(const DeflectionModel& model,
                                       double tolerance,
                                       double residual_sigma,
                                       double max_relative_se,
-                                      const Eigen::VectorXd* theta) {
+                                      const Eigen::VectorXd* theta,
+                                      const std::vector<bool>* fitted) {
   Identifiability out = structural(model, j, typical, tolerance);
+  out.statistical.assign(out.fixed.size(), false);
   if (!(max_relative_se > 0) || !(residual_sigma > 0) || !theta) return out;
   const int p = model.parameter_count();
   // Gram matrix of the scaled columns once; each round inverts its free block.
@@ -186,7 +188,8 @@ Identifiability check_identifiability(const DeflectionModel& model,
     for (int a = 0; a < nf; ++a) {
       const double se = residual_sigma * std::sqrt(std::max(0.0, cov(a, a)));
       const int k = free[a];
-      const double from_null = std::abs((*theta)(k) - model.spec(k).null_value);
+      if (fitted && !(*fitted)[k]) continue;
+      const double from_null = std::abs((*theta)(k)-model.spec(k).null_value);
       const double scale = std::max(1.0, from_null / (3.0 * typical(k)));
       if (se / scale <= max_relative_se) continue;  // NaN fails
       if (worst < 0 || rank[free[a]] > rank[free[worst]]) {
@@ -208,10 +211,11 @@ Identifiability check_identifiability(const DeflectionModel& model,
     }
     const auto& sp = model.spec(k);
     out.fixed[k] = true;
+    out.statistical[k] = true;
     out.reason[k] = "the data determine it only to +-" + num(worst_se * typical(k)) + " " +
                     sp.unit + " (standard error), more than its typical magnitude " +
                     num(typical(k)) + " " + sp.unit + " and a third of its distance " +
-                    num(std::abs((*theta)(k) - sp.null_value)) + " " + sp.unit +
+                    num(std::abs((*theta)(k)-sp.null_value)) + " " + sp.unit +
                     " from its null value" +
                     (max_relative_se != 1.0 ? " (times " + num(max_relative_se) + ")" : "") +
                     (partner >= 0 && std::abs(corr) > 0.5

@@ -17,6 +17,7 @@ std::string qualified(const DeflectionModel& model, int k);
 struct Identifiability {
   std::vector<bool> fixed;          ///< per parameter: held (not determined by the data)
   std::vector<std::string> reason;  ///< per held parameter: why, naming its partners
+  std::vector<bool> statistical;    ///< per held parameter: held by the statistical test
   bool operator==(const Identifiability& o) const { return fixed == o.fixed; }
 };
 
@@ -34,7 +35,9 @@ struct Identifiability {
 ///     both its typical magnitude and a third of its distance from its null value (a
 ///     t-statistic below 3 against "effect off"): the last in priority order of the
 ///     such parameters is held, named with the parameter it is most correlated with, and the
-///     test repeated until every free parameter passes.
+///     test repeated until every free parameter passes. Only parameters marked in `fitted`
+///     (those theta holds a fitted value of; all when null) can be held by this test: a value
+///     held at its null so far is not evidence either way.
 /// Throws NumericalError when j is not finite.
 Identifiability check_identifiability(const DeflectionModel& model,
                                       const Eigen::MatrixXd& j,
@@ -42,6 +45,7 @@ Identifiability check_identifiability(const DeflectionModel& model,
                                       double tolerance,
                                       double residual_sigma = 1.0,
                                       double max_relative_se = 0.0,
-                                      const Eigen::VectorXd* theta = nullptr);
+                                      const Eigen::VectorXd* theta = nullptr,
+                                      const std::vector<bool>* fitted = nullptr);
 
 }  // namespace stiff::detail

@@ -873,9 +873,22 @@ FitResult identify(const RobotModel& robot,
   Eigen::MatrixXd last_jacobian;
   Eigen::VectorXd last_jacobian_theta;
   double residual_sigma = 0.0;  // 0 until a solve: structural test only
+  // The statistical test judges only values a solve fitted (`free`), and what it held stays
+  // held (its fitted value was the evidence).
+  std::vector<bool> judged_out(p, false);
+  std::vector<std::string> judged_reason(p);
   auto check = [&](const Eigen::MatrixXd& jac, const Eigen::VectorXd& at) {
-    return check_identifiability(model, jac, s.typical, opt.rank_tolerance, residual_sigma,
-                                 opt.max_relative_se, &at);
+    std::vector<bool> fitted(p, false);
+    for (int k : free) fitted[k] = true;
+    Identifiability a = check_identifiability(model, jac, s.typical, opt.rank_tolerance,
+                                              residual_sigma, opt.max_relative_se, &at, &fitted);
+    for (int k = 0; k < p; ++k)
+      if (judged_out[k] && !a.fixed[k]) {
+        a.fixed[k] = true;
+        a.statistical[k] = true;
+        a.reason[k] = judged_reason[k];
+      }
+    return a;
   };
   auto fit_passes = [&]() {
     // theta as the solver will see it, (theta / typical) * typical, so that the Jacobian of
@@ -935,6 +948,11 @@ FitResult identify(const RobotModel& robot,
         residual_sigma = dof_left > 0 ? std::sqrt(wrss / dof_left) : 1.0;
       }
       Identifiability again = check(last_jacobian, theta);
+      for (int k = 0; k < p; ++k)
+        if (again.statistical[k] && !judged_out[k]) {
+          judged_out[k] = true;
+          judged_reason[k] = again.reason[k];
+        }
       if (again == idf || pass == 2) break;
       // A parameter held so far became visible (or the reverse): solve again from here, a
       // freed parameter from the value it was held at (theta unchanged: the Jacobians cached

@@ -23,9 +23,9 @@
 #include <vector>
 
 #include "fast_chain.hpp"
+#include "identifiability.hpp"
 #include "stiff/error.hpp"
 #include "stiff/identify.hpp"
-#include "identifiability.hpp"
 
 namespace stiff {
 namespace detail {
@@ -322,13 +322,14 @@ FitResult identify_joint_linear(const RobotModel& robot,
     double sigma = 0.0;  // residual standard deviation in the rows' weighted units
     FitResult f = linear_fit(robot, data, options, held, &aw, &sigma);
     const Eigen::VectorXd theta = f.theta();
+    std::vector<bool> fitted(n);
+    for (int j = 0; j < n; ++j) fitted[j] = f.parameters[j].identified;
     const detail::Identifiability idf =
         detail::check_identifiability(model, aw, typical, options.rank_tolerance, sigma,
-                                      options.max_relative_se, &theta);
+                                      options.max_relative_se, &theta, &fitted);
     bool more = false;
     for (int j = 0; j < n; ++j)
-      if (idf.fixed[j] && f.parameters[j].identified && !idf.reason[j].empty() &&
-          idf.reason[j].find("determine") != std::string::npos) {
+      if (idf.statistical[j]) {
         held[j] = true;
         reasons[j] = idf.reason[j];
         more = true;
@@ -336,10 +337,9 @@ FitResult identify_joint_linear(const RobotModel& robot,
     if (!more) {
       for (int j = 0; j < n; ++j)
         if (!reasons[j].empty())
-          f.warnings.push_back("joint " + std::to_string(j + 1) +
-                               " is not identifiable from this data (joint.c" +
-                               std::to_string(j + 1) + "): " + reasons[j] +
-                               "; held at c = 0 (infinitely stiff)");
+          f.warnings.push_back(
+              "joint " + std::to_string(j + 1) + " is not identifiable from this data (joint.c" +
+              std::to_string(j + 1) + "): " + reasons[j] + "; held at c = 0 (infinitely stiff)");
       return f;
     }
   }

@@ -234,8 +234,9 @@ typedef struct stiff_identify_options {
   stiff_progress_fn progress; /**< may be NULL */
   void* progress_user_data;
   /** A parameter whose standard error exceeds this many times both its typical magnitude and
-   *  a third of its value is not determined and is held (docs/identifiability.md); 0: the
-   *  default 1; < 0: off (the structural rank test only). @since 0.2 */
+   *  a third of its distance from its null value is not determined and is held
+   *  (docs/identifiability.md); 0: the default 100; < 0: off (the structural rank test only).
+   * @since 0.2 */
   double max_relative_se;
 } stiff_identify_options;
 /* Every field spelled out: a bare {sizeof(...)} trips -Wmissing-field-initializers. */

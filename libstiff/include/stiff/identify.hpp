@@ -18,7 +18,7 @@ struct LinearOptions {
   /// Weight rows by 1/sigma_d when the data has sigma_d.
   bool use_sigma = true;
   /// The statistical identifiability limit, as IdentifyOptions::max_relative_se.
-  double max_relative_se = 1.0;
+  double max_relative_se = 100.0;
 };
 
 /// Least-squares identification of the diagonal joint compliances (`joint` model), c =
@@ -50,10 +50,11 @@ struct IdentifyOptions {
   /// span of the columns before it: that parameter is not identifiable and is held fixed.
   double rank_tolerance = 1e-6;
   /// A parameter whose standard error at the solution exceeds this many times its typical
-  /// magnitude (ParameterSpec::typical) is not determined by the data: it is held at its null
-  /// value, named in `warnings`, and the rest solved again (docs/identifiability.md). 0 turns
-  /// the statistical test off (structural rank only).
-  double max_relative_se = 1.0;
+  /// magnitude (ParameterSpec::typical; two orders of magnitude: beyond any physically
+  /// plausible value) and a third of its distance from its null value is not determined by
+  /// the data: it is held at its null value, named in `warnings`, and the rest solved again
+  /// (docs/identifiability.md). 0 turns the statistical test off (structural rank only).
+  double max_relative_se = 100.0;
   /// Called after every Ceres iteration with (iteration, cost); return false to cancel (the
   /// call then throws Cancelled).
   std::function<bool(int, double)> progress;

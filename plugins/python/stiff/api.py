@@ -369,7 +369,7 @@ class Model(_Handle):
 
 def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "none",
              loss_scale_m: float = 0.0, method: str = "auto", max_iterations: int = 0,
-             max_relative_se: float = 1.0) -> Fit:
+             max_relative_se: float = 100.0) -> Fit:
     """Identify the model (effects joined by '+') from measured displacements and/or absolute
     positions (e.g. model='registration+tool+joint_offset+kinematic' on absolute data).
     `max_relative_se`: a parameter whose standard error exceeds this many times both its

@@ -29,10 +29,10 @@ def register(sub):
     p.add_argument("--loss-scale-um", type=float, default=0.0,
                    help="robust loss scale [um] (default: from sigma_d or the data)")
     p.add_argument("--method", default="auto", choices=["auto", "linear", "ceres"])
-    p.add_argument("--max-relative-se", type=float, default=1.0,
+    p.add_argument("--max-relative-se", type=float, default=100.0,
                    help="hold a parameter whose standard error exceeds this many times both its "
                         "typical magnitude and a third of its value (docs/identifiability.md); "
-                        "0: structural rank test only (default 1)")
+                        "0: structural rank test only (default 100)")
     p.add_argument("-o", "--output", help="fit JSON to write")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of tables")
     p.set_defaults(func=run)
