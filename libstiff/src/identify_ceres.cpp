@@ -872,23 +872,33 @@ FitResult identify(const RobotModel& robot,
   SolveOutcome last;
   Eigen::MatrixXd last_jacobian;
   Eigen::VectorXd last_jacobian_theta;
-  double residual_sigma = 0.0;  // 0 until a solve: structural test only
-  // The statistical test judges only values a solve fitted (`free`), and what it held stays
-  // held (its fitted value was the evidence).
-  std::vector<bool> judged_out(p, false);
-  std::vector<std::string> judged_reason(p);
+  double residual_sigma = 0.0;  // 0: the structural test only (the passes)
+  // The statistical test judges only values a solve fitted (`free`): a value held at its
+  // null so far is not evidence either way.
   auto check = [&](const Eigen::MatrixXd& jac, const Eigen::VectorXd& at) {
     std::vector<bool> fitted(p, false);
     for (int k : free) fitted[k] = true;
-    Identifiability a = check_identifiability(model, jac, s.typical, opt.rank_tolerance,
-                                              residual_sigma, opt.max_relative_se, &at, &fitted);
-    for (int k = 0; k < p; ++k)
-      if (judged_out[k] && !a.fixed[k]) {
-        a.fixed[k] = true;
-        a.statistical[k] = true;
-        a.reason[k] = judged_reason[k];
+    return check_identifiability(model, jac, s.typical, opt.rank_tolerance, residual_sigma,
+                                 opt.max_relative_se, &at, &fitted);
+  };
+  // Residual standard deviation of the weighted fit at theta, as the statistics below: rows
+  // down-weighted by the robust loss count that much.
+  auto robust_residual_sigma = [&]() {
+    const Eigen::VectorXd e = weighted_residuals(s, theta);
+    double wsum = 0, wrss = 0;
+    for (int r = 0; r < n; ++r) {
+      double w = 1.0;
+      std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
+      if (loss) {
+        double rho[3];
+        loss->Evaluate(e.segment<3>(3 * r).squaredNorm(), rho);
+        w = std::min(1.0, std::max(0.0, rho[1]));
       }
-    return a;
+      wsum += 3.0 * w;
+      wrss += w * w * e.segment<3>(3 * r).squaredNorm();
+    }
+    const double dof_left = wsum - static_cast<double>(free.size());
+    return dof_left > 0 ? std::sqrt(wrss / dof_left) : 1.0;
   };
   auto fit_passes = [&]() {
     // theta as the solver will see it, (theta / typical) * typical, so that the Jacobian of
@@ -928,37 +938,36 @@ FitResult identify(const RobotModel& robot,
       iterations += last.iterations;
       last_jacobian = weighted_jacobian(s, theta);
       last_jacobian_theta = theta;
-      // The statistical test needs the residual scale of a solved model: from here on.
-      // As the statistics below: rows down-weighted by the robust loss count that much.
-      {
-        const Eigen::VectorXd e = weighted_residuals(s, theta);
-        double wsum = 0, wrss = 0;
-        for (int r = 0; r < n; ++r) {
-          double w = 1.0;
-          std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
-          if (loss) {
-            double rho[3];
-            loss->Evaluate(e.segment<3>(3 * r).squaredNorm(), rho);
-            w = std::min(1.0, std::max(0.0, rho[1]));
-          }
-          wsum += 3.0 * w;
-          wrss += w * w * e.segment<3>(3 * r).squaredNorm();
-        }
-        const double dof_left = wsum - static_cast<double>(free.size());
-        residual_sigma = dof_left > 0 ? std::sqrt(wrss / dof_left) : 1.0;
-      }
       Identifiability again = check(last_jacobian, theta);
-      for (int k = 0; k < p; ++k)
-        if (again.statistical[k] && !judged_out[k]) {
-          judged_out[k] = true;
-          judged_reason[k] = again.reason[k];
-        }
       if (again == idf || pass == 2) break;
       // A parameter held so far became visible (or the reverse): solve again from here, a
       // freed parameter from the value it was held at (theta unchanged: the Jacobians cached
       // at this point serve the next solve's first iteration).
       idf = again;
     }
+    // The statistical test, once, at the solution of the structurally identifiable model;
+    // what it holds goes back to its null value and the rest is solved once more.
+    residual_sigma = robust_residual_sigma();
+    const Identifiability stat = check(last_jacobian, theta);
+    residual_sigma = 0.0;
+    if (std::find(stat.statistical.begin(), stat.statistical.end(), true) == stat.statistical.end())
+      return;
+    idf = stat;
+    free.clear();
+    for (int k = 0; k < p; ++k) {
+      if (idf.fixed[k])
+        theta(k) =
+            std::min(std::max(model.spec(k).null_value, model.spec(k).lower), model.spec(k).upper);
+      else
+        free.push_back(k);
+    }
+    if (free.empty())
+      throw NumericalError("identify: no parameter of model '" + model.model_string() +
+                           "' is determined by this data");
+    last = solve(s, free, theta, opt, loss_scale, nullptr);
+    iterations += last.iterations;
+    last_jacobian = weighted_jacobian(s, theta);
+    last_jacobian_theta = theta;
   };
   fit_passes();
   // Without a stated noise the robust scale comes from the residuals; the start's residuals
