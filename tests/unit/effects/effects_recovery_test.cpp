@@ -31,7 +31,7 @@ Recovery run(const std::string& effect, int seeds) {
     NoiseModel noise;
     noise.tracker_sigma_m = kNoise;
     noise.seed = 1000 + seed;
-    const Dataset data = simulate(robot, truth, test::design60(seed), noise);
+    const Dataset data = test::measure(robot, truth, test::design60(seed), noise);
     const FitResult fit = identify(robot, data, truth.effects, IdentifyOptions{});
     for (size_t k = 0; k < fit.parameters.size(); ++k) {
       const auto& p = fit.parameters[k];
@@ -46,10 +46,10 @@ Recovery run(const std::string& effect, int seeds) {
       if (std::abs(p.value - truth.theta(k)) <= 3 * p.standard_error) ++out.inside[key];
     }
     noise.seed = 5000 + seed;
-    const Dataset val = simulate(robot, truth, test::design60(100000 + seed), noise);
+    const Dataset val = test::measure(robot, truth, test::design60(100000 + seed), noise);
     const Eigen::MatrixXd pred = predict_dataset(robot, fit, val);
     for (size_t r = 0; r < val.size(); ++r) {
-      out.val_ss += (val.rows[r].displacement - pred.row(r).head<3>().transpose()).squaredNorm();
+      out.val_ss += (val.rows[r].observed() - pred.row(r).head<3>().transpose()).squaredNorm();
       out.val_n += 3;
     }
   }

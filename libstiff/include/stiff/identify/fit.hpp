@@ -35,7 +35,10 @@ struct FitResult {
   std::string robot_name;
   std::string robot_path;
   std::vector<std::string> model;  ///< effect names
-  std::string method;              ///< "linear_least_squares" or "ceres"
+  /// Session labels in the model's order (absolute data: one registration each); empty when
+  /// the data had no sessions.
+  std::vector<std::string> sessions;
+  std::string method;  ///< "linear_least_squares" or "ceres"
   std::string loss = "none";
   double loss_scale_m = 0.0;
   std::vector<FitParameter> parameters;
