@@ -1,4 +1,4 @@
-// The C boundary (style.md 3.5): every extern "C" function is
+// The C boundary: every extern "C" function is
 //   return stiff::capi::guarded(__func__, [&] { ...; return STIFF_OK; });
 // so that no exception crosses it; failures store "function: reason" in a thread-local
 // message that stiff_last_error() returns.

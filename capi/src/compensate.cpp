@@ -222,6 +222,32 @@ stiff_status stiff_truth_deviation(double* deviation,
   });
 }
 
+namespace {
+ToolPath read_path_with(const char* path, const stiff_path_options* options) {
+  capi::require_string(path, "path");
+  const stiff_path_options o = capi::read_options(options);
+  PathOptions po;
+  Eigen::Matrix<double, 6, 1> f;
+  require_finite(o.frame, 6, "options.frame");
+  require_finite(o.tool_rpy, 3, "options.tool_rpy");
+  for (int k = 0; k < 6; ++k) f(k) = o.frame[k];
+  po.frame = pose_from_xyz_rpy(f);
+  if (o.flags & STIFF_PATH_TOOL_RPY) {
+    f << 0, 0, 0, o.tool_rpy[0], o.tool_rpy[1], o.tool_rpy[2];
+    po.tool_orientation = pose_from_xyz_rpy(f).block<3, 3>(0, 0);
+  }
+  if (!(o.segment_m >= 0)) throw InvalidArgument("options.segment_m must be >= 0");
+  po.segment_m = o.segment_m;
+  return read_path(path, po);
+}
+
+void require_points(size_t capacity, size_t n) {
+  if (capacity < n)
+    throw Error(Status::buffer_too_small, "buffer holds " + std::to_string(capacity) + " points, " +
+                                              std::to_string(n) + " needed");
+}
+}  // namespace
+
 stiff_status stiff_path_read(double* poses,
                              double* wrench,
                              uint32_t* lines,
@@ -231,27 +257,10 @@ stiff_status stiff_path_read(double* poses,
                              const char* path,
                              const stiff_path_options* options) {
   return guarded(__func__, [&] {
-    capi::require_string(path, "path");
-    const stiff_path_options o = capi::read_options(options);
-    PathOptions po;
-    Eigen::Matrix<double, 6, 1> f;
-    require_finite(o.frame, 6, "options.frame");
-    require_finite(o.tool_rpy, 3, "options.tool_rpy");
-    for (int k = 0; k < 6; ++k) f(k) = o.frame[k];
-    po.frame = pose_from_xyz_rpy(f);
-    if (o.flags & STIFF_PATH_TOOL_RPY) {
-      f << 0, 0, 0, o.tool_rpy[0], o.tool_rpy[1], o.tool_rpy[2];
-      po.tool_orientation = pose_from_xyz_rpy(f).block<3, 3>(0, 0);
-    }
-    if (!(o.segment_m >= 0)) throw InvalidArgument("options.segment_m must be >= 0");
-    po.segment_m = o.segment_m;
-    const ToolPath tp = read_path(path, po);
+    const ToolPath tp = read_path_with(path, options);
     if (rows) *rows = tp.size();
     if (has_wrench) *has_wrench = tp.has_wrench ? 1 : 0;
-    if (capacity < tp.size())
-      throw Error(Status::buffer_too_small, "buffer holds " + std::to_string(capacity) +
-                                                " points, " + std::to_string(tp.size()) +
-                                                " needed");
+    require_points(capacity, tp.size());
     for (size_t i = 0; i < tp.size(); ++i) {
       const PathPoint& pt = tp.points[i];
       if (poses)
@@ -261,6 +270,22 @@ stiff_status stiff_path_read(double* poses,
         for (int k = 0; k < 6; ++k) wrench[6 * i + k] = pt.wrench(k);
       if (lines) lines[i] = static_cast<uint32_t>(pt.line);
     }
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_path_read_flags(uint32_t* flags,
+                                   size_t capacity,
+                                   size_t* rows,
+                                   const char* path,
+                                   const stiff_path_options* options) {
+  return guarded(__func__, [&] {
+    const ToolPath tp = read_path_with(path, options);
+    if (rows) *rows = tp.size();
+    require_points(capacity, tp.size());
+    if (flags)
+      for (size_t i = 0; i < tp.size(); ++i)
+        flags[i] = tp.points[i].rapid ? STIFF_PATH_POINT_RAPID : 0u;
     return STIFF_OK;
   });
 }

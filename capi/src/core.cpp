@@ -71,13 +71,97 @@ stiff_status stiff_robot_load(stiff_robot** out, const char* path) {
     require(out, "out");
     require_string(path, "path");
     auto r = std::make_unique<stiff_robot>();
-    r->model = load_robot(path);
+    r->model = load_robot(path, {}, &r->report);
     *out = r.release();
     return STIFF_OK;
   });
 }
 
 void stiff_robot_destroy(stiff_robot* robot) { delete robot; }
+
+stiff_status stiff_robot_load_with(stiff_robot** out,
+                                   const char* path,
+                                   const stiff_robot_options* options) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require_string(path, "path");
+    const stiff_robot_options o = read_options(options);
+    RobotLoadOptions lo;
+    if (o.base_link) lo.base_link = o.base_link;
+    if (o.tip_link) lo.tip_link = o.tip_link;
+    if (o.set & ~(STIFF_ROBOT_SET_MEASURED_POINT | STIFF_ROBOT_SET_LOAD_POINT |
+                  STIFF_ROBOT_SET_TOOL_MASS | STIFF_ROBOT_SET_TOOL_COM))
+      throw InvalidArgument("options.set has unknown bits");
+    auto vec = [](const double* v, const char* what) {
+      require_finite(v, 3, what);
+      return Eigen::Vector3d(v[0], v[1], v[2]);
+    };
+    if (o.set & STIFF_ROBOT_SET_MEASURED_POINT)
+      lo.measured_point = vec(o.measured_point_m, "measured_point_m");
+    if (o.set & STIFF_ROBOT_SET_LOAD_POINT) lo.load_point = vec(o.load_point_m, "load_point_m");
+    if (o.set & STIFF_ROBOT_SET_TOOL_MASS) lo.tool_mass = o.tool_mass_kg;
+    if (o.set & STIFF_ROBOT_SET_TOOL_COM) lo.tool_com = vec(o.tool_com_m, "tool_com_m");
+    auto r = std::make_unique<stiff_robot>();
+    r->model = load_robot(path, lo, &r->report);
+    *out = r.release();
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_robot_joint_name(
+    char* name, size_t capacity, size_t* needed, const stiff_robot* robot, size_t index) {
+  return guarded(__func__, [&] {
+    require(robot, "robot");
+    if (index >= static_cast<size_t>(robot->model.dof()))
+      throw InvalidArgument("joint index " + std::to_string(index) + " is not below the dof " +
+                            std::to_string(robot->model.dof()));
+    return copy_string(robot->model.joints[index].name, name, capacity, needed);
+  });
+}
+
+stiff_status stiff_robot_points(double measured_point[3],
+                                double load_point[3],
+                                double* tool_mass,
+                                double tool_com[3],
+                                const stiff_robot* robot) {
+  return guarded(__func__, [&] {
+    require(robot, "robot");
+    const RobotModel& m = robot->model;
+    for (int k = 0; k < 3; ++k) {
+      if (measured_point) measured_point[k] = m.measured_point(k);
+      if (load_point) load_point[k] = m.load_point(k);
+      if (tool_com) tool_com[k] = m.tool_com(k);
+    }
+    if (tool_mass) *tool_mass = m.tool_mass;
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_robot_notes(char* text,
+                               size_t capacity,
+                               size_t* needed,
+                               const stiff_robot* robot) {
+  return guarded(__func__, [&] {
+    require(robot, "robot");
+    std::string s;
+    for (const auto& n : robot->report.notes) s += n + "\n";
+    return copy_string(s, text, capacity, needed);
+  });
+}
+
+stiff_status stiff_robot_to_yaml(char* text,
+                                 size_t capacity,
+                                 size_t* needed,
+                                 const stiff_robot* robot) {
+  return guarded(__func__, [&] {
+    require(robot, "robot");
+    std::string s;
+    for (const auto& n : robot->report.notes) s += "# " + n + "\n";
+    s += robot_to_yaml(robot->model);
+    return copy_string(s, text, capacity, needed);
+  });
+}
 
 stiff_status stiff_robot_dof(size_t* dof, const stiff_robot* robot) {
   return guarded(__func__, [&] {

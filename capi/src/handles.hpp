@@ -5,11 +5,13 @@
 
 #include "stiff/identify/fit.hpp"
 #include "stiff/io/dataset.hpp"
+#include "stiff/io/robot_io.hpp"
 #include "stiff/kinematics/robot_model.hpp"
 #include "stiff/model/model.hpp"
 
 struct stiff_robot {
   stiff::RobotModel model;
+  stiff::RobotFileReport report;  ///< what the reader decided (URDF chain, locked joints)
 };
 
 struct stiff_dataset {

@@ -1,7 +1,7 @@
 %
 (Pocket 120 x 80 mm, 2 mm deep, on a workpiece whose origin is a corner of its top face.)
 (Workpiece frame on the command line: --frame 370,-40,-150,0,0,0  [mm, deg].)
-(G0/G1 only: arcs are linearised by the CAM post-processor.)
+(Straight passes, then the finishing contour in incremental mode; G0 moves carry no force.)
 N10 G21 G90 G17 G94      ; mm, absolute
 N20 G0 X10 Y10 Z10       ; approach above the pocket
 N30 G1 Z-2 F300          ; plunge

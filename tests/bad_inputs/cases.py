@@ -255,7 +255,7 @@ CASES = [
          message="empty load range [50, 10] N"),
     dict(id="cli-plan-unknown-criterion", kind="cli", topic="plan requests that cannot be met",
          args=["plan", "--robot", "rokae", "--criterion", "max_fun", "-o", "{out}"],
-         message="unknown criterion 'max_fun'"),
+         message="unknown plan criterion 'max_fun'"),
     dict(id="cli-plan-zero-count", kind="cli", topic="plan requests that cannot be met",
          args=["plan", "--robot", "rokae", "--count", "0", "-o", "{out}"],
          message="count"),

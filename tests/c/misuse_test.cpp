@@ -256,6 +256,21 @@ TEST(CApiMisuse, EveryFunctionReturnsItsStatusAndNamesItself) {
        [&] {
          return stiff_compensate_path(out, 5, &needed, nullptr, f.model, pose, w, 1, nullptr);
        }},
+      {"stiff_filter_target", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         double bad[16];
+         std::memcpy(bad, pose, sizeof bad);
+         bad[0] = 2.0;  // not a rotation
+         return stiff_filter_target(out, out + 16, 6, &needed, &flag, nullptr, f.model, pose,
+                                    nullptr, w, bad, nullptr);
+       }},
+      {"stiff_filter_target", STIFF_E_BUFFER_TOO_SMALL,
+       [&] {
+         return stiff_filter_target(out, out + 16, 5, &needed, &flag, nullptr, f.model, pose,
+                                    nullptr, w, nullptr, nullptr);
+       }},
+      {"stiff_robot_tool_points", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_robot_tool_points(out, out + 3, nullptr); }},
       {"stiff_truth_deviation", STIFF_E_IO,
        [&] {
          return stiff_truth_deviation(out, 64, &needed, f.robot, "/nonexistent.yaml", q, pose, w,

@@ -94,6 +94,54 @@ int main(int argc, char** argv) {
     CHECK(strstr(stiff_last_error(), "warp_drive") != NULL);
     CHECK(stiff_identify(&r, robot, design, NULL) == STIFF_E_INVALID_ARGUMENT); /* no d */
   }
+  {
+    /* The program filter's per-target call: with the base frame and the TCP at the flange it
+     * must agree with stiff_compensate_pose; with a work-object frame B and a tool T, the
+     * written pose is B^-1 * flange(q_cmd) * T for the same joints. */
+    double q_cmd[6], q_f[6], out[16], target[16], defl[6], mp[3], lp[3];
+    double base[16] = {0, -1, 0, 0.4, 1, 0, 0, -0.1, 0, 0, 1, -0.2, 0, 0, 0, 1};
+    double tool[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0.12, 0, 0, 0, 1};
+    double flange_tool[16], tmp[16];
+    const double q2[6] = {0.1, 0.3, -0.2, 0.4, 0.8, 0.1};
+    int status = -1, r, c, m;
+    double worst = 0;
+    CHECK(stiff_robot_tool_points(mp, lp, robot) == STIFF_OK && mp[0] == 0 && lp[2] == 0);
+    CHECK(stiff_robot_tool_pose(pose, robot, q2, 6) == STIFF_OK);
+    CHECK(stiff_compensate_pose(q_cmd, model, q2, 6, wrench) == STIFF_OK);
+    CHECK(stiff_filter_target(out, q_f, 6, &needed, &status, defl, model, pose, q2, wrench, NULL,
+                              NULL) == STIFF_OK &&
+          status == 0 && needed == 6);
+    for (i = 0; i < 6; ++i) worst = fmax(worst, fabs(q_f[i] - q_cmd[i]));
+    CHECK(worst < 1e-12);
+    /* target = B^-1 * pose * T (B is a rotation about z by 90 deg plus a shift) */
+    for (r = 0; r < 4; ++r)
+      for (c = 0; c < 4; ++c) {
+        flange_tool[4 * r + c] = 0;
+        for (m = 0; m < 4; ++m) flange_tool[4 * r + c] += pose[4 * r + m] * tool[4 * m + c];
+      }
+    {
+      double binv[16] = {0, 1, 0, 0, -1, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+      binv[3] = -(binv[0] * base[3] + binv[1] * base[7] + binv[2] * base[11]);
+      binv[7] = -(binv[4] * base[3] + binv[5] * base[7] + binv[6] * base[11]);
+      binv[11] = -(binv[8] * base[3] + binv[9] * base[7] + binv[10] * base[11]);
+      for (r = 0; r < 4; ++r)
+        for (c = 0; c < 4; ++c) {
+          tmp[4 * r + c] = 0;
+          for (m = 0; m < 4; ++m) tmp[4 * r + c] += binv[4 * r + m] * flange_tool[4 * m + c];
+        }
+    }
+    memcpy(target, tmp, sizeof target);
+    CHECK(stiff_filter_target(out, q_f, 6, &needed, &status, defl, model, target, q2, NULL, base,
+                              tool) == STIFF_OK &&
+          status == 0);
+    worst = 0;
+    for (i = 0; i < 6; ++i) worst = fmax(worst, fabs(q_f[i] - q2[i]));
+    for (i = 0; i < 16; ++i) worst = fmax(worst, fabs(out[i] - target[i]));
+    CHECK(worst < 1e-9 && fabs(defl[0]) < 1e-12 && fabs(defl[5]) < 1e-12);
+    CHECK(stiff_filter_target(out, q_f, 5, &needed, &status, NULL, model, target, NULL, NULL, NULL,
+                              NULL) == STIFF_E_BUFFER_TOO_SMALL &&
+          needed == 6);
+  }
   stiff_robot_destroy(NULL);
   stiff_dataset_destroy(NULL);
   stiff_result_destroy(NULL);

@@ -111,6 +111,57 @@ STIFF_API stiff_status stiff_robot_jacobian(double* jacobian,
                                             const double* q,
                                             size_t n);
 
+/** Which fields of stiff_robot_options replace the file's values (bits of `set`). */
+#define STIFF_ROBOT_SET_MEASURED_POINT 1u
+#define STIFF_ROBOT_SET_LOAD_POINT 2u
+#define STIFF_ROBOT_SET_TOOL_MASS 4u
+#define STIFF_ROBOT_SET_TOOL_COM 8u
+
+/** How to read a robot file (docs/formats.md, "Robot files"). Points are in the tip
+ *  (flange) frame [m]. A field replaces the file's value only when its bit is in `set`; a URDF
+ *  has no such values (points at the tip frame's origin, no tool). Without a measured point's
+ *  load point, the load point follows the measured point as in the YAML format. */
+typedef struct stiff_robot_options {
+  uint32_t struct_size;
+  const char* base_link;      /**< URDF: first link; NULL or "": base_link, else the root */
+  const char* tip_link;       /**< URDF: last link; NULL or "": tool0, flange, else the only end */
+  uint32_t set;               /**< STIFF_ROBOT_SET_* bits */
+  double measured_point_m[3]; /**< measured point (SMR), tip frame [m] */
+  double load_point_m[3];     /**< point where the force acts, tip frame [m] */
+  double tool_mass_kg;        /**< tool mass [kg], >= 0 */
+  double tool_com_m[3];       /**< tool centre of mass, tip frame [m] */
+} stiff_robot_options;
+
+/** Load a robot description with options (NULL: as stiff_robot_load). base/tip on a YAML robot
+ *  is INVALID_ARGUMENT; an ambiguous URDF tip is a PARSE error listing the candidates.
+ *  @since 0.1 */
+STIFF_API stiff_status stiff_robot_load_with(stiff_robot** out,
+                                             const char* path,
+                                             const stiff_robot_options* options);
+/** Name of joint `index` (0-based), UTF-8 with NUL; buffer in bytes. @since 0.1 */
+STIFF_API stiff_status stiff_robot_joint_name(
+    char* name, size_t capacity, size_t* needed, const stiff_robot* robot, size_t index);
+/** Measured point and load point [m], tool mass [kg] and centre of mass [m], tip frame; any
+ *  pointer may be NULL. @since 0.1 */
+STIFF_API stiff_status stiff_robot_points(double measured_point[3],
+                                          double load_point[3],
+                                          double* tool_mass,
+                                          double tool_com[3],
+                                          const stiff_robot* robot);
+/** What the reader decided, one line each ("chain: 'base_link' -> 'tool0' (6 joints; ...)",
+ *  locked joints, continuous ranges, chain ends not used), UTF-8 with NUL; empty for a plain
+ *  YAML robot. @since 0.1 */
+STIFF_API stiff_status stiff_robot_notes(char* text,
+                                         size_t capacity,
+                                         size_t* needed,
+                                         const stiff_robot* robot);
+/** The robot in the YAML format (SI units, general convention for URDF chains), UTF-8 with
+ *  NUL: what stiff uses, reloadable with stiff_robot_load. @since 0.1 */
+STIFF_API stiff_status stiff_robot_to_yaml(char* text,
+                                           size_t capacity,
+                                           size_t* needed,
+                                           const stiff_robot* robot);
+
 /* ---------------------------------------------------------------- datasets */
 
 /** Columns of a dataset, for stiff_dataset_get. Shapes: Q rows x dof [rad]; FORCE, MOMENT,

@@ -111,6 +111,46 @@ STIFF_API stiff_status stiff_truth_deviation(double* deviation,
                                              const double* wrench,
                                              size_t rows);
 
+/** The robot file's measured point and load point in the flange frame [m] (3 values each; either
+ *  may be NULL): the tool pose of stiff_robot_tool_pose is the measured point with the flange
+ *  orientation, so flange = tool_pose * Trans(-measured_point). @since 0.1 */
+STIFF_API stiff_status stiff_robot_tool_points(double measured_point[3],
+                                               double load_point[3],
+                                               const stiff_robot* robot);
+
+/** Filter one robot-program target, the call an offline-programming filter or post-processor
+ *  makes per motion: the compensated target that makes the loaded TCP reach the programmed one.
+ *
+ *  pose: programmed TCP pose in the program's reference frame (16 doubles, row-major, m);
+ *  base: reference frame (work object, $BASE, user frame) in the robot base frame, NULL =
+ *  identity; tool: TCP frame in the flange frame, NULL = identity (the TCP is then the flange,
+ *  not the robot file's measured point); q_seed: dof joint values [rad] near which the nominal
+ *  inverse kinematics solution is taken (e.g. the previous motion's or the configuration the
+ *  program asks for), NULL = zeros; wrench: process force [N] and moment [N*m] acting at the
+ *  TCP, reference-frame components, NULL = none.
+ *
+ *  Outputs: pose_out: compensated TCP pose in the reference frame, tool_pose(q_out) mapped
+ *  through base and tool (the input pose is copied when the target cannot be compensated);
+ *  q_out (capacity >= dof): compensated joints [rad] (the nominal joints when the compensation
+ *  did not converge, q_seed when unreachable); status: STIFF_POINT_* bits (SINGULAR,
+ *  UNREACHABLE, NOT_CONVERGED), target-level problems are reported here, not as a failure;
+ *  deflection (6 values, may be NULL): predicted deflection of the TCP at the nominal joints
+ *  (position [m], rotation vector [rad], reference-frame components), i.e. the error the
+ *  uncompensated program would have. Errors: INVALID_ARGUMENT (NULL, non-finite input, a
+ *  frame that is not a rigid transform), BUFFER_TOO_SMALL. @since 0.1 */
+STIFF_API stiff_status stiff_filter_target(double pose_out[16],
+                                           double* q_out,
+                                           size_t capacity,
+                                           size_t* needed,
+                                           int* status,
+                                           double deflection[6],
+                                           const stiff_model* model,
+                                           const double pose[16],
+                                           const double* q_seed,
+                                           const double wrench[6],
+                                           const double base[16],
+                                           const double tool[16]);
+
 /** Options of stiff_path_read. */
 typedef struct stiff_path_options {
   uint32_t struct_size;
@@ -133,7 +173,9 @@ typedef struct stiff_path_options {
  *  zeros when has_wrench is 0) and lines (capacity source line numbers) may each be NULL;
  *  capacity counts points: when it is below the point count nothing is written, *rows holds
  *  the count and STIFF_E_BUFFER_TOO_SMALL is returned. Errors: IO, PARSE ("path:line:column:
- *  reason", e.g. for G2/G3 arcs). @since 0.1 */
+ *  reason"). G-code (docs/compensation.md): G2/G3 arcs in G17/G18/G19 are split into
+ *  points, G43/G49 tool length compensation and rotary words at zero are accepted, no point
+ *  is made before X, Y and Z are all known. @since 0.1 */
 STIFF_API stiff_status stiff_path_read(double* poses,
                                        double* wrench,
                                        uint32_t* lines,
@@ -142,6 +184,17 @@ STIFF_API stiff_status stiff_path_read(double* poses,
                                        int* has_wrench,
                                        const char* path,
                                        const stiff_path_options* options);
+
+/** Bits of stiff_path_read_flags. */
+#define STIFF_PATH_POINT_RAPID 1u /**< a G0 (rapid) move: positioning, no process force */
+
+/** Per-point flags of the path stiff_path_read reads with the same options: flags (capacity
+ *  values, STIFF_PATH_POINT_* bits), rows and buffer semantics as there. @since 0.1 */
+STIFF_API stiff_status stiff_path_read_flags(uint32_t* flags,
+                                             size_t capacity,
+                                             size_t* rows,
+                                             const char* path,
+                                             const stiff_path_options* options);
 
 #ifdef __cplusplus
 }

@@ -1,5 +1,5 @@
 /// \file error.hpp
-/// Error model of the core (style.md 3.3): bad input from a caller throws a subclass of
+/// Error model of the core: bad input from a caller throws a subclass of
 /// stiff::Error carrying a Status whose values equal the C ABI's stiff_status; numerical
 /// outcomes are values, never exceptions.
 #pragma once

@@ -1,7 +1,7 @@
 /// \file random.hpp
 /// Seeded random numbers that are the same on every platform: std::mt19937_64 is specified
 /// exactly by the standard, the std::*_distribution classes are not, so the mappings to
-/// uniform and normal values are our own (style.md 3.3 e).
+/// uniform and normal values are our own.
 #pragma once
 
 #include <cmath>

@@ -1,4 +1,4 @@
-// Linear least-squares identification of joint compliances, method.md eqs. 4-5.
+// Linear least-squares identification of joint compliances, Jiang & Fang 2023.
 //
 // Performance notes (issue 4): the observation matrix A (3N x n) is built in one pass with a
 // forward kinematics specialised once per robot (fast_chain.hpp: no 4x4 products, no

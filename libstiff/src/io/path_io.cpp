@@ -16,10 +16,18 @@ namespace {
 
 constexpr double kPi = 3.141592653589793238462643383279502884;
 
+// Largest distance of an arc's chords from the circle [m]: well below the repeatability of
+// industrial robots (~20 um), so the linearised path is the programmed one.
+constexpr double kArcChordTolerance = 1e-6;
+constexpr double kPiPath = 3.141592653589793238462643383279502884;
+
 std::vector<std::string> split_lines(const std::string& text) {
   std::vector<std::string> lines;
   std::string cur;
-  for (char ch : text) {
+  // A UTF-8 byte-order mark (written by some CAM post-processors and Windows editors).
+  const size_t skip = text.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0;
+  for (size_t n = skip; n < text.size(); ++n) {
+    const char ch = text[n];
     if (ch == '\n') {
       if (!cur.empty() && cur.back() == '\r') cur.pop_back();
       lines.push_back(cur);
@@ -312,9 +320,13 @@ ToolPath parse_gcode(const std::string& text, const std::string& file, const Pat
   path.source = file;
   double unit = 1e-3;  // G21
   bool absolute = true;
-  int motion = -1;                                // 0 or 1 once set
+  int motion = -1;                                // 0, 1, 2 (G2, clockwise) or 3 (G3) once set
+  int plane = 17;                                 // G17 XY, G18 ZX, G19 YZ: the plane of arcs
   double feed = 0.0;                              // [m/s]
   Eigen::Vector3d pos = Eigen::Vector3d::Zero();  // workpiece frame [m]
+  // Axes whose position is known: a program starts wherever the machine stands, so no point is
+  // made before X, Y and Z have all been given (typically "G0 X.. Y.." then "G43 Z.. H..").
+  bool known[3] = {false, false, false};
   for (size_t li = 0; li < lines.size(); ++li) {
     const int line_no = static_cast<int>(li) + 1;
     const std::string& s = lines[li];
@@ -345,6 +357,10 @@ ToolPath parse_gcode(const std::string& text, const std::string& file, const Pat
         i = s.size();
         break;
       }
+      if (ch == '/' && words.empty()) {  // block delete: the line runs unless skipped
+        ++i;
+        continue;
+      }
       if (!std::isalpha(static_cast<unsigned char>(ch)))
         throw ParseError(
             file, line_no, static_cast<int>(i) + 1,
@@ -368,20 +384,18 @@ ToolPath parse_gcode(const std::string& text, const std::string& file, const Pat
       i = k;
     }
     if (words.empty()) continue;
-    bool has_xyz = false;
-    Eigen::Vector3d given = Eigen::Vector3d::Zero();
+    bool has_xyz = false, non_path_move = false, has_ijk = false, has_r = false;
+    Eigen::Vector3d given = Eigen::Vector3d::Zero(), ijk = Eigen::Vector3d::Zero();
+    double radius = 0.0;
     bool axis_given[3] = {false, false, false};
     // Modal G codes first (units and distance mode apply to the coordinates of the line).
     for (const Word& w : words) {
       if (w.letter != 'G') continue;
       const double g = w.value;
-      if (g == 0 || g == 1)
+      if (g == 0 || g == 1 || g == 2 || g == 3)
         motion = static_cast<int>(g);
-      else if (g == 2 || g == 3)
-        throw ParseError(file, line_no, w.col,
-                         "arcs (" + w.text +
-                             ") are not supported: linearise them in the CAM post-processor "
-                             "(G0/G1 only)");
+      else if (g == 17 || g == 18 || g == 19)
+        plane = static_cast<int>(g);
       else if (g == 20)
         unit = 25.4e-3;
       else if (g == 21)
@@ -390,14 +404,17 @@ ToolPath parse_gcode(const std::string& text, const std::string& file, const Pat
         absolute = true;
       else if (g == 91)
         absolute = false;
-      else if (g == 17 || g == 18 || g == 19 || g == 40 || g == 49 || g == 80 || g == 94 ||
-               g == 61 || g == 64 || (g >= 54 && g <= 59))
-        continue;  // plane, cutter compensation off, work offsets (frame from the caller)
+      else if (g == 28 || g == 30 || g == 53)
+        non_path_move = true;  // home / machine-coordinate move: not a point of the path
+      else if (g == 4 || g == 40 || g == 43 || g == 49 || g == 80 || g == 94 || g == 61 ||
+               g == 64 || (g >= 54 && g <= 59))
+        continue;  // dwell, cutter and tool length compensation (the robot's tool is its
+                   // measured point), work offsets (frame from the caller), feed mode
       else
         throw ParseError(file, line_no, w.col,
                          "unsupported G-code " + w.text +
-                             " (supported: G0, G1, G17-G19, G20, G21, G40, G49, G54-G59, G61, "
-                             "G64, G80, G90, G91, G94)");
+                             " (supported: G0-G4, G17-G21, G28, G30, G40, G43, G49, G53-G59, "
+                             "G61, G64, G80, G90, G91, G94)");
     }
     for (const Word& w : words) {
       switch (w.letter) {
@@ -409,6 +426,7 @@ ToolPath parse_gcode(const std::string& text, const std::string& file, const Pat
         case 'T':
         case 'H':
         case 'D':
+        case 'P':  // dwell time, G64 tolerance
           break;
         case 'F':
           if (!(w.value > 0))
@@ -430,52 +448,159 @@ ToolPath parse_gcode(const std::string& text, const std::string& file, const Pat
         case 'A':
         case 'B':
         case 'C':
-          throw ParseError(file, line_no, w.col,
-                           std::string("rotary axis '") + w.letter +
-                               "' is not supported: the tool orientation is fixed (give it "
-                               "with the tool orientation option)");
+          // A 3+2 post writes the rotary axes at zero in its safe-start lines: no rotation.
+          if (w.value != 0)
+            throw ParseError(
+                file, line_no, w.col,
+                std::string("rotary axis word '") + w.text +
+                    "': 4- and 5-axis programs are not supported, the tool orientation is "
+                    "fixed; give it instead with the tool orientation option (stiff "
+                    "compensate --tool-rpy rx,ry,rz), or write the path as CSV with rx/ry/rz "
+                    "or quaternion columns");
+          break;
         case 'I':
         case 'J':
         case 'K':
+          ijk(w.letter - 'I') = w.value * unit;  // arc centre, relative to the start (G91.1)
+          has_ijk = true;
+          break;
         case 'R':
-          throw ParseError(
-              file, line_no, w.col,
-              std::string("arc parameter '") + w.letter + "' is not supported (G0/G1 only)");
+          radius = w.value * unit;
+          has_r = true;
+          break;
         default:
           throw ParseError(file, line_no, w.col, std::string("unsupported word '") + w.text + "'");
       }
     }
-    if (!has_xyz) continue;
+    if (non_path_move) {
+      // The machine goes home (or to machine coordinates): where the tool then stands in the
+      // workpiece frame is not known from the program.
+      for (bool& k : known) k = false;
+      continue;
+    }
+    if (!has_xyz && !(has_ijk && (motion == 2 || motion == 3))) continue;
     if (motion < 0)
       throw ParseError(file, line_no, words.front().col,
                        "coordinates before any G0/G1 motion command");
-    const Eigen::Vector3d end = absolute ? [&] {
-      Eigen::Vector3d e = pos;
-      for (int a = 0; a < 3; ++a)
-        if (axis_given[a]) e(a) = given(a);
-      return e;
-    }()
-                                         : Eigen::Vector3d(pos + given);
-    if (motion == 1 && feed <= 0)
-      throw ParseError(file, line_no, words.front().col, "G1 move without a feed (F word)");
-    int pieces = 1;
-    if (motion == 1 && o.segment_m > 0) {
-      // Checked before the conversion to int: a huge move (or coordinate) would overflow it.
-      const double want = std::ceil((end - pos).norm() / o.segment_m - 1e-9);
+    if (!absolute && !(known[0] && known[1] && known[2]))
+      throw ParseError(file, line_no, words.front().col,
+                       "incremental move (G91) before the position is known (X, Y and Z not all "
+                       "given in G90)");
+    Eigen::Vector3d end = pos;
+    for (int a = 0; a < 3; ++a)
+      if (axis_given[a]) end(a) = absolute ? given(a) : pos(a) + given(a);
+    if (motion >= 1 && feed <= 0)
+      throw ParseError(file, line_no, words.front().col,
+                       std::string(motion == 1 ? "G1" : "arc") + " move without a feed (F word)");
+    const bool start_known = known[0] && known[1] && known[2];
+    for (int a = 0; a < 3; ++a) known[a] = known[a] || axis_given[a];
+    if (!(known[0] && known[1] && known[2])) {
+      if (motion >= 2)
+        throw ParseError(file, line_no, words.front().col,
+                         "arc before the position is known (X, Y and Z not all given)");
+      pos = end;  // not yet a point: the machine's start is unknown
+      continue;
+    }
+    if ((motion == 2 || motion == 3) && !start_known)
+      throw ParseError(file, line_no, words.front().col,
+                       "arc before the position is known (X, Y and Z not all given)");
+    std::vector<Eigen::Vector3d> targets;  // end points of the pieces of this move
+    if (motion == 2 || motion == 3) {
+      // Arc in the selected plane (u, v) with the third axis w moving linearly (helix).
+      const int u = plane == 17 ? 0 : plane == 18 ? 2 : 1;
+      const int v = plane == 17 ? 1 : plane == 18 ? 0 : 2;
+      const int wax = 3 - u - v;
+      const char* plane_name = plane == 17 ? "G17 (XY)" : plane == 18 ? "G18 (ZX)" : "G19 (YZ)";
+      if (has_ijk == has_r)
+        throw ParseError(file, line_no, words.front().col,
+                         std::string("arc needs either the centre (I, J, K) or the radius R, ") +
+                             (has_r ? "not both" : "got neither"));
+      if (has_ijk && ijk(wax) != 0)
+        throw ParseError(file, line_no, words.front().col,
+                         std::string("arc centre offset along the axis normal to the plane ") +
+                             plane_name + " must be 0");
+      const Eigen::Vector2d a(pos(u), pos(v)), b(end(u), end(v));
+      Eigen::Vector2d c;
+      // G2 is clockwise seen from the positive normal axis; in G18 the normal is +Y with the
+      // plane ordered (Z, X), which keeps the same right-handed rule with (u, v) = (Z, X).
+      const double sense = motion == 3 ? 1.0 : -1.0;
+      if (has_ijk) {
+        c = a + Eigen::Vector2d(ijk(u), ijk(v));
+      } else {
+        const double chord = (b - a).norm();
+        const double r = std::abs(radius);
+        if (chord == 0 || !(r > 0))
+          throw ParseError(file, line_no, words.front().col,
+                           "R arc needs a radius > 0 and an end point other than the start");
+        if (chord > 2 * r * (1 + 1e-9))
+          throw ParseError(file, line_no, words.front().col,
+                           "R arc: the end point is farther from the start than the diameter");
+        const double h = std::sqrt(std::max(0.0, r * r - chord * chord / 4));
+        const Eigen::Vector2d mid = (a + b) / 2, d = (b - a) / chord;
+        const Eigen::Vector2d left(-d(1), d(0));
+        // R > 0: the short arc (<= 180 deg); R < 0: the long one.
+        const double side = (radius > 0 ? 1.0 : -1.0) * sense;
+        c = mid + side * h * left;
+      }
+      const double r0 = (a - c).norm(), r1 = (b - c).norm();
+      if (!(r0 > 0)) throw ParseError(file, line_no, words.front().col, "arc with zero radius");
+      // Same tolerance as common CNC controllers: 0.002 mm or 0.1 % of the radius.
+      if (std::abs(r1 - r0) > std::max(2e-6, 1e-3 * r0))
+        throw ParseError(file, line_no, words.front().col,
+                         "arc end point is not on the circle: radius " + std::to_string(r0 * 1e3) +
+                             " mm at the start, " + std::to_string(r1 * 1e3) +
+                             " mm at the end (plane " + plane_name + ")");
+      const double t0 = std::atan2(a(1) - c(1), a(0) - c(0));
+      double t1 = std::atan2(b(1) - c(1), b(0) - c(0));
+      double sweep = t1 - t0;
+      if (sense > 0) {
+        while (sweep <= 1e-12) sweep += 2 * kPiPath;
+      } else {
+        while (sweep >= -1e-12) sweep -= 2 * kPiPath;
+      }
+      // Pieces: at most segment_m long, and chords within kArcChordTolerance of the circle.
+      const double length = std::hypot(std::abs(sweep) * r0, end(wax) - pos(wax));
+      const double max_angle = 2 * std::acos(std::max(-1.0, 1 - kArcChordTolerance / r0));
+      double want = std::ceil(std::abs(sweep) / max_angle - 1e-9);
+      if (o.segment_m > 0) want = std::max(want, std::ceil(length / o.segment_m - 1e-9));
       if (!(want <= 1e6))
         throw ParseError(file, line_no, words.front().col,
-                         "this move splits into more than 1000000 segments of " +
-                             std::to_string(o.segment_m) +
-                             " m: check the units or the segment length");
-      pieces = std::max(1, static_cast<int>(want));
+                         "this arc splits into more than 1000000 segments: check the units or "
+                         "the segment length");
+      const int pieces = std::max(1, static_cast<int>(want));
+      for (int k = 1; k <= pieces; ++k) {
+        const double f = static_cast<double>(k) / pieces;
+        Eigen::Vector3d p;
+        if (k == pieces) {
+          p = end;
+        } else {
+          p(u) = c(0) + r0 * std::cos(t0 + f * sweep);
+          p(v) = c(1) + r0 * std::sin(t0 + f * sweep);
+          p(wax) = pos(wax) + f * (end(wax) - pos(wax));
+        }
+        targets.push_back(p);
+      }
+    } else {
+      int pieces = 1;
+      if (motion == 1 && o.segment_m > 0 && start_known) {
+        // Checked before the conversion to int: a huge move (or coordinate) would overflow it.
+        const double want = std::ceil((end - pos).norm() / o.segment_m - 1e-9);
+        if (!(want <= 1e6))
+          throw ParseError(file, line_no, words.front().col,
+                           "this move splits into more than 1000000 segments of " +
+                               std::to_string(o.segment_m) +
+                               " m: check the units or the segment length");
+        pieces = std::max(1, static_cast<int>(want));
+      }
+      for (int k = 1; k < pieces; ++k)
+        targets.push_back(pos + (end - pos) * (static_cast<double>(k) / pieces));
+      targets.push_back(end);  // exactly the programmed point
     }
-    if (path.points.empty() && pieces > 1) pieces = 1;  // no known start point yet
-    for (int k = 1; k <= pieces; ++k) {
+    for (const Eigen::Vector3d& p : targets) {
       PathPoint pt;
-      const Eigen::Vector3d p = pos + (end - pos) * (static_cast<double>(k) / pieces);
       pt.pose = frame_pose(o, p, o.tool_orientation);
       pt.line = line_no;
-      pt.feed_m_s = motion == 1 ? feed : 0.0;
+      pt.feed_m_s = motion >= 1 ? feed : 0.0;
       pt.rapid = motion == 0;
       path.points.push_back(pt);
     }
@@ -483,7 +608,8 @@ ToolPath parse_gcode(const std::string& text, const std::string& file, const Pat
   }
   if (path.points.empty())
     throw ParseError(file, static_cast<int>(lines.size()), 0,
-                     "the G-code has no G0/G1 moves with X, Y or Z");
+                     "the G-code has no move that reaches a known position (X, Y and Z all "
+                     "given)");
   return path;
 }
 

@@ -5,6 +5,7 @@
 #include <urdf_parser/urdf_parser.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
@@ -215,9 +216,39 @@ Eigen::Matrix4d urdf_pose(const urdf::Pose& p) {
 
 }  // namespace
 
+namespace {
+
+bool is_moving(const urdf::Joint& j) {
+  if (j.type == urdf::Joint::CONTINUOUS) return true;
+  if (j.type != urdf::Joint::REVOLUTE) return false;
+  return !j.limits || j.limits->lower != j.limits->upper;  // lower = upper: locked
+}
+
+bool is_supported(const urdf::Joint& j) {
+  return j.type == urdf::Joint::FIXED || j.type == urdf::Joint::REVOLUTE ||
+         j.type == urdf::Joint::CONTINUOUS;
+}
+
+/// Links from `from` up to the root, `from` first.
+std::vector<urdf::LinkConstSharedPtr> ancestry(urdf::LinkConstSharedPtr from) {
+  std::vector<urdf::LinkConstSharedPtr> up;
+  for (auto l = from; l; l = l->getParent()) up.push_back(l);
+  return up;
+}
+
+std::string join_names(const std::vector<std::string>& names) {
+  std::string s;
+  for (const auto& n : names) s += (s.empty() ? "" : ", ") + n;
+  return s;
+}
+
+}  // namespace
+
 RobotModel parse_robot_urdf(const std::string& text,
                             const std::string& file,
-                            const std::string& tip_link) {
+                            const std::string& tip_link,
+                            const std::string& base_link,
+                            RobotFileReport* report) {
   // urdfdom reports problems through console_bridge, which prints to stderr by default; the
   // library never prints (stiff.h): capture them for the error message instead.
   struct Capture : console_bridge::OutputHandler {
@@ -248,70 +279,163 @@ RobotModel parse_robot_urdf(const std::string& text,
             (capture.first_error.empty() ? std::string() : " (" + capture.first_error + ")"));
   auto root = model->getRoot();
   if (!root) throw ParseError(file, 0, 0, "URDF has no root link");
+  auto find_link = [&](const std::string& name, const char* role) {
+    urdf::LinkConstSharedPtr l = model->getLink(name);
+    if (!l)
+      throw ParseError(
+          file, 0, 0, std::string("URDF has no link named '") + name + "' (the " + role + " link)");
+    return l;
+  };
 
-  // Walk from the root to the tip: the unique leaf, or the named link.
-  std::vector<urdf::LinkConstSharedPtr> chain{root};
-  while (true) {
-    const auto& link = chain.back();
-    if (link->name == tip_link) break;
-    if (link->child_links.empty()) break;
-    if (link->child_links.size() > 1 && tip_link.empty())
-      throw ParseError(file, 0, 0,
-                       "URDF link '" + link->name + "' branches; name the tip link of the chain");
-    urdf::LinkConstSharedPtr next = link->child_links.front();
-    if (link->child_links.size() > 1) {
-      next = nullptr;
-      for (const auto& c : link->child_links) {
-        // choose the child whose subtree contains the tip
-        std::vector<urdf::LinkConstSharedPtr> stack{c};
-        bool found = false;
-        while (!stack.empty() && !found) {
-          auto l = stack.back();
-          stack.pop_back();
-          if (l->name == tip_link) found = true;
-          for (const auto& cc : l->child_links) stack.push_back(cc);
-        }
-        if (found) next = c;
-      }
-      if (!next) throw ParseError(file, 0, 0, "URDF has no link named '" + tip_link + "'");
-    }
-    chain.push_back(next);
+  // The base: the named link, else `base_link`, else the root. It may be a frame fixed beside
+  // the arm (ROS-Industrial `base` under `base_link`): the chain then starts at the anchor,
+  // the highest link joined to the base by fixed joints only, and the base's pose in the
+  // anchor is taken out of the first joint.
+  urdf::LinkConstSharedPtr base =
+      !base_link.empty() ? find_link(base_link, "base")
+                         : (model->getLink("base_link") ? model->getLink("base_link") : root);
+  urdf::LinkConstSharedPtr anchor = base;
+  Eigen::Matrix4d anchor_to_base = Eigen::Matrix4d::Identity();
+  while (anchor->parent_joint && anchor->parent_joint->type == urdf::Joint::FIXED &&
+         anchor->getParent()) {
+    anchor_to_base =
+        urdf_pose(anchor->parent_joint->parent_to_joint_origin_transform) * anchor_to_base;
+    anchor = anchor->getParent();
   }
-  if (!tip_link.empty() && chain.back()->name != tip_link)
-    throw ParseError(file, 0, 0, "URDF has no link named '" + tip_link + "' below the root");
+
+  // Candidate tips: links below the anchor reached through revolute, continuous and fixed
+  // joints only, with at least one moving joint on the way, none of whose children is also one.
+  struct Candidate {
+    urdf::LinkConstSharedPtr link;
+    int moving;
+  };
+  std::vector<Candidate> reachable, maximal;
+  {
+    std::vector<Candidate> stack{{anchor, 0}};
+    while (!stack.empty()) {
+      const Candidate c = stack.back();
+      stack.pop_back();
+      bool extended = false;
+      for (const auto& child : c.link->child_links) {
+        if (!is_supported(*child->parent_joint)) continue;
+        const Candidate next{child, c.moving + (is_moving(*child->parent_joint) ? 1 : 0)};
+        stack.push_back(next);
+        if (next.moving > 0) extended = true;
+      }
+      if (c.moving > 0) {
+        reachable.push_back(c);
+        if (!extended) maximal.push_back(c);
+      }
+    }
+  }
+  auto reachable_named = [&](const std::string& name) -> urdf::LinkConstSharedPtr {
+    for (const auto& c : reachable)
+      if (c.link->name == name) return c.link;
+    return nullptr;
+  };
+  std::string tip_rule;
+  urdf::LinkConstSharedPtr tip;
+  if (!tip_link.empty()) {
+    const auto named = find_link(tip_link, "tip");
+    tip = reachable_named(tip_link);
+    if (!tip) {
+      // Say why: above the base, on another branch, or behind an unsupported joint.
+      std::string why = "it is not below '" + anchor->name + "'";
+      for (const auto& l : ancestry(anchor))
+        if (l == named) why = "it is above the base link '" + base->name + "'";
+      for (auto l = named; l && l != anchor; l = l->getParent())
+        if (l->parent_joint && !is_supported(*l->parent_joint)) {
+          why = "joint '" + l->parent_joint->name +
+                "' on the way is not revolute, continuous or fixed";
+          break;
+        }
+      throw ParseError(
+          file, 0, 0,
+          "URDF link '" + tip_link + "' cannot end a chain from '" + base->name + "': " + why);
+    }
+    tip_rule = "named";
+  } else {
+    for (const char* conventional : {"tool0", "flange"})
+      if (!tip && (tip = reachable_named(conventional))) tip_rule = "the ROS-Industrial tool frame";
+    if (!tip) {
+      int most = 0;
+      for (const auto& c : maximal) most = std::max(most, c.moving);
+      std::vector<std::string> best, all;
+      for (const auto& c : maximal) {
+        all.push_back(c.link->name + " (" + std::to_string(c.moving) + " joints)");
+        if (c.moving == most) {
+          best.push_back(c.link->name);
+          tip = c.link;
+        }
+      }
+      if (maximal.empty())
+        throw ParseError(file, 0, 0,
+                         "URDF has no revolute or continuous joint below '" + anchor->name + "'");
+      if (best.size() > 1)
+        throw ParseError(
+            file, 0, 0,
+            "URDF chain from '" + base->name +
+                "' has several possible tip links; name one (--tip): " + join_names(all));
+      tip_rule = maximal.size() == 1 ? "the only end of the chain" : "the end with the most joints";
+    }
+  }
+
+  std::vector<urdf::LinkConstSharedPtr> chain;
+  for (auto l = tip; l != anchor; l = l->getParent()) chain.push_back(l);
+  chain.push_back(anchor);
+  std::reverse(chain.begin(), chain.end());
 
   RobotModel robot;
   robot.name = model->getName();
   robot.convention = Convention::urdf;
   robot.source_path = file;
-  Eigen::Matrix4d pending = Eigen::Matrix4d::Identity();  // fixed transforms not yet assigned
+  std::vector<std::string> notes;
+  // Fixed transforms not yet assigned to a joint; the chain starts in the base frame.
+  Eigen::Matrix4d pending = anchor_to_base.inverse();
   for (size_t i = 1; i < chain.size(); ++i) {
     const auto& joint = chain[i]->parent_joint;
     const Eigen::Matrix4d origin = urdf_pose(joint->parent_to_joint_origin_transform);
+    Eigen::Vector3d axis(joint->axis.x, joint->axis.y, joint->axis.z);
+    if (joint->type != urdf::Joint::FIXED) {
+      if (axis.norm() < 1e-12)
+        throw ParseError(file, 0, 0, "URDF joint '" + joint->name + "' has a zero axis");
+      axis.normalize();
+    }
     if (joint->type == urdf::Joint::FIXED) {
       pending = pending * origin;
-    } else if (joint->type == urdf::Joint::REVOLUTE || joint->type == urdf::Joint::CONTINUOUS) {
+    } else if (!is_moving(*joint)) {
+      // lower = upper: the joint cannot move; it is a fixed transform at that angle.
+      if (!std::isfinite(joint->limits->lower))
+        throw ParseError(file, 0, 0,
+                         "URDF joint '" + joint->name + "' is locked at a non-finite angle");
+      Eigen::Matrix4d rot = Eigen::Matrix4d::Identity();
+      rot.block<3, 3>(0, 0) = Eigen::AngleAxisd(joint->limits->lower, axis).toRotationMatrix();
+      pending = pending * origin * rot;
+      std::ostringstream n;
+      n << "joint '" << joint->name << "' has lower = upper = " << joint->limits->lower
+        << " rad: locked there (a fixed transform, not a joint)";
+      notes.push_back(n.str());
+    } else {
       Joint j;
       j.name = joint->name;
       j.pre = pending * origin;
       pending.setIdentity();
-      j.axis = Eigen::Vector3d(joint->axis.x, joint->axis.y, joint->axis.z);
-      if (j.axis.norm() < 1e-12)
-        throw ParseError(file, 0, 0, "URDF joint '" + joint->name + "' has a zero axis");
-      j.axis.normalize();
+      j.axis = axis;
       if (joint->type == urdf::Joint::REVOLUTE && joint->limits) {
         j.lower = joint->limits->lower;
         j.upper = joint->limits->upper;
         if (!(j.lower < j.upper))
-          throw ParseError(file, 0, 0, "URDF joint '" + joint->name + "' has an empty limit range");
+          throw ParseError(file, 0, 0, "URDF joint '" + joint->name + "' has lower > upper limit");
+      } else if (joint->type == urdf::Joint::CONTINUOUS) {
+        // No end stops: one turn either way reaches every angle from any start without
+        // crossing a limit, and keeps ranges finite for sampling.
+        j.lower = -2 * kPi;
+        j.upper = 2 * kPi;
+        notes.push_back("joint '" + joint->name +
+                        "' is continuous: range [-2 pi, 2 pi] rad (one turn either way)");
       }
       for (double& v : j.dh) v = NAN;
       robot.joints.push_back(j);
-    } else {
-      throw ParseError(file, 0, 0,
-                       "URDF joint '" + joint->name +
-                           "' is not revolute, continuous or fixed; only serial "
-                           "revolute chains are supported");
     }
     if (const auto& inertial = chain[i]->inertial; inertial && !robot.joints.empty()) {
       // Express the link's centre of mass in the frame of the last moving joint.
@@ -324,7 +448,9 @@ RobotModel parse_robot_urdf(const std::string& text,
       }
     }
   }
-  if (robot.joints.empty()) throw ParseError(file, 0, 0, "URDF chain has no revolute joint");
+  if (robot.joints.empty())
+    throw ParseError(file, 0, 0,
+                     "URDF chain '" + base->name + "' -> '" + tip->name + "' has no moving joint");
   // Fixed transforms after the last joint define the flange: fold them into its `post`.
   auto& last = robot.joints.back();
   last.post = last.post * pending;
@@ -332,13 +458,65 @@ RobotModel parse_robot_urdf(const std::string& text,
     const Eigen::Vector4d c = pending.inverse() * last.com.homogeneous();
     last.com = c.head<3>();
   }
+  if (report) {
+    report->base_link = base->name;
+    report->tip_link = tip->name;
+    report->notes.clear();
+    report->notes.push_back("chain: '" + base->name + "' -> '" + tip->name + "' (" +
+                            std::to_string(robot.dof()) + " joints; tip: " + tip_rule + ")");
+    if (anchor != base)
+      report->notes.push_back("base '" + base->name + "' is fixed to '" + anchor->name +
+                              "': poses are in '" + base->name + "'");
+    std::vector<std::string> others;
+    for (const auto& c : maximal)
+      if (c.link != tip) others.push_back(c.link->name);
+    if (!others.empty())
+      report->notes.push_back("other chain ends, not used: " + join_names(others));
+    for (auto& n : notes) report->notes.push_back(std::move(n));
+  }
   return robot;
 }
 
-RobotModel load_robot(const std::string& path) {
+RobotModel load_robot(const std::string& path,
+                      const RobotLoadOptions& options,
+                      RobotFileReport* report) {
   const std::string text = read_text_file(path);
   const bool urdf_file = path.size() > 5 && path.substr(path.size() - 5) == ".urdf";
-  return urdf_file ? parse_robot_urdf(text, path) : parse_robot_yaml(text, path);
+  RobotFileReport local;
+  RobotModel robot;
+  if (urdf_file) {
+    robot = parse_robot_urdf(text, path, options.tip_link, options.base_link, &local);
+  } else {
+    if (!options.base_link.empty() || !options.tip_link.empty())
+      throw InvalidArgument(path +
+                            ": a base or tip link selects a chain in a URDF file; a YAML robot "
+                            "is one chain already");
+    robot = parse_robot_yaml(text, path);
+  }
+  auto check_point = [&](const std::optional<Eigen::Vector3d>& p, const char* what) {
+    if (p && !p->allFinite()) throw InvalidArgument(std::string(what) + " is not finite");
+  };
+  check_point(options.measured_point, "measured point");
+  check_point(options.load_point, "load point");
+  check_point(options.tool_com, "tool centre of mass");
+  if (options.tool_mass && !(std::isfinite(*options.tool_mass) && *options.tool_mass >= 0))
+    throw InvalidArgument("tool mass must be a finite number >= 0 kg");
+  // A YAML file without load_point loads at its measured point; the same holds for options.
+  const bool load_follows = robot.load_point == robot.measured_point;
+  if (options.measured_point) {
+    robot.measured_point = *options.measured_point;
+    if (load_follows && !options.load_point) robot.load_point = robot.measured_point;
+    local.notes.push_back("measured point set by the user");
+  }
+  if (options.load_point) {
+    robot.load_point = *options.load_point;
+    local.notes.push_back("load point set by the user");
+  }
+  if (options.tool_mass) robot.tool_mass = *options.tool_mass;
+  if (options.tool_com) robot.tool_com = *options.tool_com;
+  if (options.tool_mass || options.tool_com) local.notes.push_back("tool set by the user");
+  if (report) *report = std::move(local);
+  return robot;
 }
 
 namespace {

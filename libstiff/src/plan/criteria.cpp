@@ -1,4 +1,4 @@
-// Criteria registry and evaluation of a given set (method.md eqs. 6 and 9, docs/planning.md).
+// Criteria registry and evaluation of a given set (Jiang & Fang 2023, docs/planning.md).
 #include <cmath>
 
 #include "plan_internal.hpp"

@@ -652,10 +652,12 @@ void check_plan_options(const PoolOptions& pool, const PlanOptions& plan) {
   if (!(pool.range_fraction > 0 && pool.range_fraction <= 1))
     throw InvalidArgument("plan: range_fraction must be in (0, 1]" + got(pool.range_fraction));
   if (!(pool.load_min_N >= 0 && pool.load_min_N <= pool.load_max_N &&
-        std::isfinite(pool.load_max_N)))
-    throw InvalidArgument("plan: the load range must satisfy 0 <= min <= max < inf (got [" +
-                          std::to_string(pool.load_min_N) + ", " + std::to_string(pool.load_max_N) +
-                          "] N)");
+        std::isfinite(pool.load_max_N))) {
+    std::ostringstream range;
+    range << "plan: empty load range [" << pool.load_min_N << ", " << pool.load_max_N
+          << "] N: the per-axis magnitudes need 0 <= min <= max < inf";
+    throw InvalidArgument(range.str());
+  }
   if (!(pool.min_sigma_m >= 0 && std::isfinite(pool.min_sigma_m)))
     throw InvalidArgument("plan: min_sigma_m must be finite and >= 0" + got(pool.min_sigma_m));
   if (!(pool.noise.tracker_sigma_m > 0 && std::isfinite(pool.noise.tracker_sigma_m)))

@@ -100,7 +100,7 @@ struct KernelData {
 const KernelData& kernel_of(const CandidatePool& p);
 
 // M += sign * w^2 * diag(t) (Jp^T Jp) diag(t), t = Jl^T F: the element's A_e^T A_e / sigma^2
-// (method.md eq. 3: A[r, k] = Jp[r, k] t_k). Lower triangle of row-major m x m only.
+// (Jiang & Fang 2023: A[r, k] = Jp[r, k] t_k). Lower triangle of row-major m x m only.
 template <int MC>
 inline void add_element(const CandidatePool& p, int e, double sign, double* M) {
   const int m = dim<MC>(p.identified_count());

@@ -277,9 +277,8 @@ Dataset simulate(const RobotModel& robot,
   }
   out.set_meta("robot", robot.name);
   out.set_meta("source", "stiff virtual robot");
-  std::string model_str;
-  for (const auto& e : truth.effects) model_str += (model_str.empty() ? "" : "+") + e;
-  out.set_meta("truth_model", model_str);
+  // Which effects the truth holds stays out of the file: a blind test must stay blind
+  // (`stiff simulate --record-truth` adds it).
   out.set_meta("tracker_sigma_m", fmt(noise.tracker_sigma_m));
   out.set_meta("tracker_ppm", fmt(noise.tracker_ppm));
   out.set_meta("force_relative", fmt(noise.force_relative));

@@ -6,6 +6,7 @@ from .fmu import export_fmu
 from .plan import Plan, criteria, evaluate_criteria, plan, plan_defaults
 from .diagnose import Diagnosis, diagnose
 from .compensate import compensate_path, inverse_kinematics, read_path  # noqa: F401
+from . import data  # noqa: F401  (built-in files by name: stiff.data.find, stiff.data.names)
 from .errors import (CancelledError, InvalidArgumentError, NumericalError, ParseError,
                      StiffError, StiffIOError)
 
@@ -14,4 +15,4 @@ __version__ = "0.1.0"
 __all__ = ["Robot", "Dataset", "Fit", "Model", "identify", "simulate", "random_design", "predict",
            "effects", "describe_effect", "diagnose", "Diagnosis", "export_fmu", "plan", "plan_defaults", "Plan", "criteria", "evaluate_criteria", "library_version", "StiffError", "ParseError",
            "InvalidArgumentError", "NumericalError", "CancelledError", "StiffIOError",
-           "__version__"]
+           "data", "__version__"]

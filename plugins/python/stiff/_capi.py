@@ -54,6 +54,19 @@ class NoiseOptions(C.Structure):
     ]
 
 
+class RobotOptions(C.Structure):
+    _fields_ = [
+        ("struct_size", C.c_uint32),
+        ("base_link", C.c_char_p),
+        ("tip_link", C.c_char_p),
+        ("set", C.c_uint32),
+        ("measured_point_m", C.c_double * 3),
+        ("load_point_m", C.c_double * 3),
+        ("tool_mass_kg", C.c_double),
+        ("tool_com_m", C.c_double * 3),
+    ]
+
+
 class IdentifyOptions(C.Structure):
     _fields_ = [
         ("struct_size", C.c_uint32),
@@ -100,6 +113,11 @@ _proto("stiff_version_string", C.c_char_p)
 _proto("stiff_last_error", C.c_char_p)
 _proto("stiff_status_name", C.c_char_p, C.c_int)
 _proto("stiff_robot_load", S, HP, C.c_char_p)
+_proto("stiff_robot_load_with", S, HP, C.c_char_p, C.c_void_p)
+_proto("stiff_robot_joint_name", S, C.c_char_p, C.c_size_t, c_size_p, H, C.c_size_t)
+_proto("stiff_robot_points", S, c_double_p, c_double_p, c_double_p, c_double_p, H)
+_proto("stiff_robot_notes", S, C.c_char_p, C.c_size_t, c_size_p, H)
+_proto("stiff_robot_to_yaml", S, C.c_char_p, C.c_size_t, c_size_p, H)
 _proto("stiff_robot_destroy", None, H)
 _proto("stiff_robot_dof", S, c_size_p, H)
 _proto("stiff_robot_name", S, C.c_char_p, C.c_size_t, c_size_p, H)
@@ -289,9 +307,15 @@ _proto("stiff_ik", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, c_double_
 _proto("stiff_ik_path", S, c_double_p, C.c_size_t, c_size_p, c_int_p, H, c_double_p, C.c_size_t,
        c_double_p)
 _proto("stiff_compensate_pose", S, c_double_p, H, c_double_p, C.c_size_t, c_double_p)
+_proto("stiff_robot_tool_points", S, c_double_p, c_double_p, H)
+_proto("stiff_filter_target", S, c_double_p, c_double_p, C.c_size_t, c_size_p, c_int_p, c_double_p,
+       H, c_double_p, c_double_p, c_double_p, c_double_p, c_double_p)
 _proto("stiff_compensate_path", S, c_double_p, C.c_size_t, c_size_p, c_int_p, H, c_double_p,
        c_double_p, C.c_size_t, c_double_p)
 _proto("stiff_truth_deviation", S, c_double_p, C.c_size_t, c_size_p, H, C.c_char_p, c_double_p,
        c_double_p, c_double_p, C.c_size_t)
 _proto("stiff_path_read", S, c_double_p, c_double_p, C.POINTER(C.c_uint32), C.c_size_t, c_size_p,
        c_int_p, C.c_char_p, C.POINTER(PathOptions))
+_proto("stiff_path_read_flags", S, C.POINTER(C.c_uint32), C.c_size_t, c_size_p, C.c_char_p,
+       C.POINTER(PathOptions))
+PATH_POINT_RAPID = 1

@@ -26,6 +26,15 @@ def library_version() -> str:
     return lib.stiff_version_string().decode()
 
 
+def _pandas(what: str, instead: str):
+    try:
+        import pandas
+    except ImportError:
+        raise ImportError(f"{what} needs pandas, which stiff does not require: install it "
+                          f"(pip install pandas) or use {instead}") from None
+    return pandas
+
+
 class _Handle:
     _destroy = None
 
@@ -39,15 +48,81 @@ class _Handle:
 
 
 class Robot(_Handle):
-    """A robot description (YAML or URDF): kinematics, limits, measured point, masses."""
+    """A robot description (YAML or URDF): kinematics, limits, measured point, masses.
+
+    `path` is a file or the name of a built-in robot (`stiff.data.names("robots")`). For a URDF,
+    `base` and `tip` name the first and last link of the chain (defaults: `base_link`, else the
+    root; `tool0` or `flange`, else the only chain end). `measured_point`, `load_point` and
+    `tool_com` [m, tip frame] and `tool_mass` [kg] replace the file's values (a URDF has none:
+    points at the tip frame's origin, no tool); the load point follows the measured point
+    unless given."""
 
     _destroy = lib.stiff_robot_destroy
 
-    def __init__(self, path: "str | os.PathLike[str]"):
+    def __init__(self, path: "str | os.PathLike[str]", *, base: Optional[str] = None,
+                 tip: Optional[str] = None, measured_point=None, load_point=None,
+                 tool_mass: Optional[float] = None, tool_com=None):
+        from .data import find
+
+        path = find("robots", path)
+        o = _c.RobotOptions()
+        o.struct_size = C.sizeof(o)
+        o.base_link = _c.encode(base) if base else None
+        o.tip_link = _c.encode(tip) if tip else None
+        for bit, field, value in ((1, "measured_point_m", measured_point),
+                                  (2, "load_point_m", load_point), (8, "tool_com_m", tool_com)):
+            if value is not None:
+                v = np.asarray(value, dtype=float)
+                if v.shape != (3,):
+                    raise ValueError(f"{field[:-2]} must be 3 numbers [m], got shape {v.shape}")
+                getattr(o, field)[:] = [float(x) for x in v]
+                o.set |= bit
+        if tool_mass is not None:
+            o.tool_mass_kg = float(tool_mass)
+            o.set |= 4
         h = C.c_void_p()
-        check(lib.stiff_robot_load(C.byref(h), _c.encode(os.fspath(path))))
+        check(lib.stiff_robot_load_with(C.byref(h), _c.encode(os.fspath(path)), C.byref(o)))
         self._own(h)
         self.path = os.fspath(path)
+
+    @property
+    def joint_names(self) -> list[str]:
+        return [_c.get_string(lib.stiff_robot_joint_name, self, i) for i in range(self.dof)]
+
+    def _points(self):
+        mp, lp, com, mass = np.empty(3), np.empty(3), np.empty(3), C.c_double()
+        check(lib.stiff_robot_points(_c.ptr(mp), _c.ptr(lp), C.byref(mass), _c.ptr(com), self))
+        return mp, lp, mass.value, com
+
+    @property
+    def measured_point(self) -> np.ndarray:
+        """Measured point (SMR) in the tip (flange) frame [m]."""
+        return self._points()[0]
+
+    @property
+    def load_point(self) -> np.ndarray:
+        """Point where the force acts, tip (flange) frame [m]."""
+        return self._points()[1]
+
+    @property
+    def tool_mass(self) -> float:
+        """Tool mass [kg]."""
+        return self._points()[2]
+
+    @property
+    def tool_com(self) -> np.ndarray:
+        """Tool centre of mass, tip (flange) frame [m]."""
+        return self._points()[3]
+
+    @property
+    def notes(self) -> list[str]:
+        """What the reader decided: the URDF chain and its tip, locked joints, continuous
+        ranges, chain ends left out (empty for a YAML robot without options)."""
+        return [l for l in _c.get_string(lib.stiff_robot_notes, self).split("\n") if l]
+
+    def to_yaml(self) -> str:
+        """The robot as stiff uses it, in the YAML format (SI units), loadable again."""
+        return _c.get_string(lib.stiff_robot_to_yaml, self)
 
     @property
     def dof(self) -> int:
@@ -202,8 +277,8 @@ class Dataset(_Handle):
         return [_c.get_string(lib.stiff_dataset_id, self, r) for r in range(len(self))]
 
     def to_dataframe(self):
-        import pandas as pd  # optional dependency
-
+        """The rows as a pandas DataFrame (pandas is optional: ImportError says so)."""
+        pd = _pandas("Dataset.to_dataframe()", "Dataset.q, .force, .displacement (numpy)")
         cols = {"id": self.ids}
         for j in range(self.dof):
             cols[f"q{j + 1}_rad"] = self.q[:, j]
@@ -263,8 +338,32 @@ class Fit(_Handle):
 
     @property
     def stiffness(self) -> np.ndarray:
-        """Joint stiffness [N*m/rad]; NaN for joints the data could not identify."""
-        return _c.get_doubles(lib.stiff_result_joint_stiffness, self)
+        """Joint stiffness [N*m/rad]. A joint the data could not identify is held at compliance
+        c = 0, infinitely stiff: its value is inf (see `identified` and `joint_status`)."""
+        k = _c.get_doubles(lib.stiff_result_joint_stiffness, self)
+        # The C ABI reports NaN for a joint it did not identify; the model holds it at c = 0.
+        k[np.isnan(k) & ~self.identified] = np.inf
+        return k
+
+    @property
+    def joint_status(self) -> list[str]:
+        """Per joint: 'identified' or 'not identified, held infinitely stiff (c = 0)'."""
+        k = _c.get_doubles(lib.stiff_result_joint_stiffness, self)
+        return ["identified" if ok else
+                ("not identified, held infinitely stiff (c = 0)" if math.isnan(v)
+                 else f"not identified, held at {v:.6g} N*m/rad")
+                for ok, v in zip(self.identified, k)]
+
+    def summary(self) -> str:
+        """A plain-text table: joint stiffness with standard error, or why it is not given."""
+        k, se = self.stiffness, self.stiffness_se
+        rows = []
+        for j, (kj, sj, st) in enumerate(zip(k, se, self.joint_status)):
+            if st == "identified":
+                rows.append(f"joint {j + 1}: k = {kj:.6g} N*m/rad +- {sj:.3g}")
+            else:
+                rows.append(f"joint {j + 1}: {st}")
+        return "\n".join([repr(self)] + rows)
 
     @property
     def stiffness_se(self) -> np.ndarray:
@@ -321,8 +420,8 @@ class Fit(_Handle):
         return list(self.json.get("outliers", []))
 
     def to_dataframe(self):
-        import pandas as pd
-
+        """The parameter table as a pandas DataFrame (pandas is optional: ImportError says so)."""
+        pd = _pandas("Fit.to_dataframe()", "Fit.parameter_table (a list of dicts)")
         return pd.DataFrame(self.parameter_table)
 
     def __repr__(self) -> str:
@@ -405,8 +504,9 @@ def simulate(robot: Robot, design: Optional[Dataset] = None, *, stiffness=None, 
              force_absolute_N: float = 0.0, joint_sigma_rad: float = 0.0,
              outlier_rate: float = 0.0, outlier_size_m: float = 0.0, seed: int = 1,
              tracker_position_m=None) -> Dataset:
-    """Simulate measurements of `design` on the virtual robot. The truth is a YAML file
-    (`truth`) or the joint stiffness `stiffness` [N*m/rad]."""
+    """Simulate measurements of `design` on the virtual robot. The truth is a YAML file or the
+    name of a built-in one (`truth`, e.g. "rokae_backlash"), or the joint stiffness
+    `stiffness` [N*m/rad]."""
     o = _c.NoiseOptions()
     o.struct_size = C.sizeof(o)
     o.tracker_sigma_m, o.tracker_ppm = tracker_sigma_m, tracker_ppm
@@ -416,6 +516,10 @@ def simulate(robot: Robot, design: Optional[Dataset] = None, *, stiffness=None, 
     o.joint_sigma_rad, o.outlier_rate, o.outlier_size_m = joint_sigma_rad, outlier_rate, outlier_size_m
     o.seed = seed
     k = None if stiffness is None else _c.as_array(stiffness)
+    if truth is not None:
+        from .data import find
+
+        truth = find("truths", truth)
     h = C.c_void_p()
     check(lib.stiff_simulate(C.byref(h), robot, design,
                              None if truth is None else _c.encode(os.fspath(truth)),
@@ -425,7 +529,10 @@ def simulate(robot: Robot, design: Optional[Dataset] = None, *, stiffness=None, 
 
 
 def read_noise(path) -> dict:
-    """Read a noise YAML file into keyword arguments of simulate()."""
+    """Read a noise YAML file (or a built-in one by name) into keyword arguments of simulate()."""
+    from .data import find
+
+    path = find("truths", path)
     o = _c.NoiseOptions()
     o.struct_size = C.sizeof(o)
     check(lib.stiff_noise_read(C.byref(o), _c.encode(os.fspath(path))))

@@ -19,7 +19,7 @@ from .api import Model, Robot
 
 __all__ = ["ToolPath", "read_path", "inverse_kinematics", "ik_is_analytic", "tool_poses",
            "compensate_pose", "compensate_path", "Compensation", "truth_deviation",
-           "pose_from_xyz_rpy", "xyz_rpy_from_pose", "status_text", "plot_deviation",
+           "pose_from_xyz_rpy", "xyz_rpy_from_pose", "quaternion_from_pose", "rotation_angle_between", "status_text", "plot_deviation",
            "POINT_SINGULAR", "POINT_UNREACHABLE", "POINT_BRANCH_CHANGE", "POINT_JUMP",
            "POINT_NOT_CONVERGED"]
 
@@ -52,6 +52,43 @@ def pose_from_xyz_rpy(xyz_rpy) -> np.ndarray:
     return t
 
 
+def quaternion_from_pose(poses: np.ndarray) -> np.ndarray:
+    """(N, 4) unit quaternions (qw, qx, qy, qz), qw >= 0, of (N, 4, 4) poses: no gimbal lock,
+    unlike roll-pitch-yaw (Shepperd's method: the largest of the four terms first)."""
+    r = np.asarray(poses, dtype=float).reshape(-1, 4, 4)[:, :3, :3]
+    out = np.empty((r.shape[0], 4))
+    for i, m in enumerate(r):
+        tr = m[0, 0] + m[1, 1] + m[2, 2]
+        k = int(np.argmax([tr, m[0, 0], m[1, 1], m[2, 2]]))
+        if k == 0:
+            s = 2 * math.sqrt(1 + tr)
+            q = [s / 4, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+        elif k == 1:
+            s = 2 * math.sqrt(1 + m[0, 0] - m[1, 1] - m[2, 2])
+            q = [(m[2, 1] - m[1, 2]) / s, s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+        elif k == 2:
+            s = 2 * math.sqrt(1 + m[1, 1] - m[0, 0] - m[2, 2])
+            q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s]
+        else:
+            s = 2 * math.sqrt(1 + m[2, 2] - m[0, 0] - m[1, 1])
+            q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4]
+        q = np.array(q)
+        out[i] = (q if q[0] >= 0 else -q) / np.linalg.norm(q)
+    return out
+
+
+def rotation_angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N,) angle [rad] of the rotation from the orientations of poses a to those of b."""
+    ra = np.asarray(a, dtype=float).reshape(-1, 4, 4)[:, :3, :3]
+    rb = np.asarray(b, dtype=float).reshape(-1, 4, 4)[:, :3, :3]
+    rel = np.einsum("nji,njk->nik", ra, rb)  # Ra^T Rb
+    # atan2 of |vee(R - R^T)| / 2 and (tr R - 1) / 2: accurate for small and large angles.
+    s = 0.5 * np.linalg.norm(np.stack([rel[:, 2, 1] - rel[:, 1, 2], rel[:, 0, 2] - rel[:, 2, 0],
+                                       rel[:, 1, 0] - rel[:, 0, 1]], axis=1), axis=1)
+    c = 0.5 * (np.trace(rel, axis1=1, axis2=2) - 1)
+    return np.arctan2(s, c)
+
+
 def xyz_rpy_from_pose(poses: np.ndarray) -> np.ndarray:
     """(N, 6) (x, y, z [m], rx, ry, rz [rad]) of (N, 4, 4) poses (inverse of pose_from_xyz_rpy)."""
     p = np.asarray(poses, dtype=float).reshape(-1, 4, 4)
@@ -70,6 +107,7 @@ class ToolPath:
     wrench: Optional[np.ndarray]  # (N, 6) per-point (F, M) at the load point, or None
     lines: np.ndarray             # (N,) source line of every point
     source: str
+    rapid: Optional[np.ndarray] = None  # (N,) bool: G0 (positioning) moves, no process force
 
     def __len__(self) -> int:
         return self.poses.shape[0]
@@ -77,11 +115,15 @@ class ToolPath:
 
 def read_path(path, frame: Optional[Sequence[float]] = None,
               tool_rpy: Optional[Sequence[float]] = None, segment_m: float = 0.0) -> ToolPath:
-    """Read a path: .csv (tool poses, optional wrench columns) or G-code (any other extension).
+    """Read a path: .csv (tool poses, optional wrench columns) or G-code (any other extension);
+    a file or a built-in path by name ("rokae_contour", "pocket.nc").
     `frame`: workpiece frame in the base frame (x, y, z [m], rx, ry, rz [rad]); `tool_rpy`:
     tool orientation in the workpiece frame [rad] for G-code and CSV without orientation
     (default: pointing down); `segment_m`: split G1 moves into pieces of at most this length.
     Raises ParseError with path, line and column."""
+    from .data import find
+
+    path = find("paths", path)
     o = _c.PathOptions()
     o.struct_size = C.sizeof(o)
     if frame is not None:
@@ -101,8 +143,11 @@ def read_path(path, frame: Optional[Sequence[float]] = None,
     check(lib.stiff_path_read(_c.ptr(poses), _c.ptr(wrench),
                               lines.ctypes.data_as(C.POINTER(C.c_uint32)), n, C.byref(rows),
                               C.byref(has_w), name, C.byref(o)))
+    flags = np.zeros(n, dtype=np.uint32)
+    check(lib.stiff_path_read_flags(flags.ctypes.data_as(C.POINTER(C.c_uint32)), n,
+                                    C.byref(rows), name, C.byref(o)))
     return ToolPath(poses, wrench if has_w.value else None, lines.astype(np.int64),
-                    os.fspath(path))
+                    os.fspath(path), (flags & _c.PATH_POINT_RAPID) != 0)
 
 
 def ik_is_analytic(robot: Robot) -> bool:
@@ -237,6 +282,9 @@ def truth_deviation(robot: Robot, truth, q, poses, wrench) -> np.ndarray:
     """(N, 6) deviation (position [m], rotation [rad]) of the loaded tool from the nominal
     poses with the joints at q, on the virtual robot whose truth is the YAML file `truth`:
     FK(q) + d_truth(q, W) - nominal."""
+    from .data import find
+
+    truth = find("truths", truth)
     p = _poses(poses)
     rows = p.shape[0]
     qa = np.ascontiguousarray(np.atleast_2d(q), dtype=np.float64)

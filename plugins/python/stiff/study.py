@@ -19,7 +19,7 @@ import numpy as np
 from .api import Dataset, Model, Robot, identify, simulate
 from .plan import evaluate_criteria, plan
 
-# Joint stiffness of the virtual ROKAE [N*m/rad]: the paper's kappa_F^-1(A) result (method.md);
+# Joint stiffness of the virtual ROKAE [N*m/rad]: the paper's kappa_F^-1(A) result (Jiang & Fang 2023);
 # joint 6 is not identifiable (measured point on its axis) and takes a nominal value.
 TRUE_STIFFNESS = np.array([5.0914e4, 1.6382e4, 3.1311e4, 7.7911e3, 5.6136e3, 4.0e3])
 M_ID = 5  # identified compliances c1..c5
@@ -694,7 +694,7 @@ def findings_text(s: dict) -> str:
 ## Limits of this study
 
 - The virtual robot follows the paper's joint model exactly; the real arm also has link
-  compliance, gravity, nonlinear and backlash effects, and setup errors (method.md). A design
+  compliance, gravity, nonlinear and backlash effects, and setup errors (docs/effects.md). A design
   can look better on a real arm because it happens to avoid an unmodelled effect. This study
   tests the criterion, not the paper's robot.
 - The paper reports one experiment. The `A better` row above gives how often one experiment

@@ -27,7 +27,9 @@ def test_noise_free_round_trip_recovers_stiffness(rokae_path, design_a):
     data = stiff.simulate(robot, stiff.Dataset.read(design_a, robot), stiffness=PAPER_K, tracker_sigma_m=0.0)
     fit = stiff.identify(robot, data)
     np.testing.assert_allclose(fit.stiffness[:5], PAPER_K[:5], rtol=1e-9)
-    assert np.isnan(fit.stiffness[5]) and not fit.identified[5]
+    assert np.isinf(fit.stiffness[5]) and not fit.identified[5]
+    assert fit.joint_status[5] == "not identified, held infinitely stiff (c = 0)"
+    assert "joint 6: not identified, held infinitely stiff (c = 0)" in fit.summary()
     assert "joint 6" in fit.warnings[0]
 
 
@@ -99,3 +101,17 @@ def test_plots_draw_real_data(rokae_path, design_a, tmp_path):
     plots.stiffness(fit, PAPER_K).figure.savefig(tmp_path / "k.png")
     assert (tmp_path / "k.png").stat().st_size > 1000
     plt.close("all")
+
+
+def test_dataframes_without_pandas_say_what_to_do(rokae_path, design_a, monkeypatch):
+    import sys
+
+    robot = stiff.Robot("rokae")  # built-in robots by name, as on the command line
+    assert robot.dof == 6 and robot.path.endswith("rokae.yaml")
+    data = stiff.simulate(robot, stiff.Dataset.read(design_a, robot), stiffness=PAPER_K)
+    fit = stiff.identify(robot, data)
+    monkeypatch.setitem(sys.modules, "pandas", None)  # as if pandas were not installed
+    with pytest.raises(ImportError, match="needs pandas.*Fit.parameter_table"):
+        fit.to_dataframe()
+    with pytest.raises(ImportError, match="needs pandas"):
+        data.to_dataframe()

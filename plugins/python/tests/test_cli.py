@@ -52,3 +52,24 @@ def test_demo_runs(tmp_path):
     assert "verdict:" in out and "compensated with" in out
     for name in ("report.html", "fit_joint.json", "fit_full.json", "arm.fmu", "diagnosis.json"):
         assert (tmp_path / "demo" / name).exists(), name
+
+
+def test_simulated_file_keeps_the_truth_out_unless_asked(tmp_path):
+    blind, told = tmp_path / "blind.csv", tmp_path / "told.csv"
+    run("simulate", "--robot", "rokae", "--truth", "rokae_backlash", "--count", "5", "-o", blind)
+    text = blind.read_text()
+    assert "backlash" not in text and "truth" not in text
+    run("simulate", "--robot", "rokae", "--truth", "rokae_backlash", "--count", "5",
+        "--record-truth", "-o", told)
+    assert "# truth_model: joint+backlash" in told.read_text()
+    # The same measurements either way; the recorded file still reads.
+    import stiff
+    a, b = stiff.Dataset.read(blind), stiff.Dataset.read(told)
+    assert (a.displacement == b.displacement).all()
+
+
+def test_examples_lists_and_copies_builtin_files(tmp_path):
+    out = run("examples", "--copy", tmp_path / "ex").stdout
+    assert "rokae_backlash" in out and "pocket" in out
+    assert (tmp_path / "ex" / "paths" / "pocket.nc").is_file()
+    assert (tmp_path / "ex" / "robots" / "rokae.yaml").is_file()

@@ -73,10 +73,10 @@ def test_read_path_csv_and_gcode(root):
 
 def test_gcode_arc_error_names_the_line(tmp_path):
     f = tmp_path / "arc.nc"
-    f.write_text("G21 G90\nG0 X0 Y0 Z0\nG2 X10 Y0 I5 J0 F100\n")
+    f.write_text("G21 G90\nG0 X0 Y0 Z0\nG2 X10 Y1 I5 J0 F100\n")
     with pytest.raises(stiff.ParseError) as e:
         stiff.read_path(f)
-    assert e.value.line == 3 and e.value.column == 1 and "arcs (G2)" in str(e.value)
+    assert e.value.line == 3 and e.value.column == 1 and "not on the circle" in str(e.value)
 
 
 def test_compensation_reaches_the_nominal_path_on_the_truth(rokae, fits, backlash_truth, root):
@@ -151,14 +151,14 @@ def test_cli_help_has_a_worked_example():
 
 
 @pytest.mark.parametrize("extra, message", [
-    (["--path", "{bad}"], "bad.nc:2:1: arcs (G2)"),
+    (["--path", "{bad}"], "bad.nc:2:1: arc end point is not on the circle"),
     (["--path", "{csv}"], "has no wrench columns"),
     (["--path", "{csv}", "--wrench", "1,2"], "--wrench needs 3 or 6 values"),
     (["--path", "{csv}", "--wrench", "1,2,3", "--report", "x.txt"], "use a .png or .json"),
     (["--path", "/nonexistent.csv", "--wrench", "1,2,3"], "/nonexistent.csv"),
 ])
 def test_cli_user_errors_are_one_line_and_exit_2(fits, tmp_path, extra, message):
-    (tmp_path / "bad.nc").write_text("G0 X0 Y0 Z0\nG2 X1 Y1 I1 J0 F10\n")
+    (tmp_path / "bad.nc").write_text("G0 X0 Y0 Z0\nG2 X1 Y2 I1 J0 F10\n")
     (tmp_path / "p.csv").write_text("x_mm,y_mm,z_mm\n450,0,-150\n")
     extra = [e.format(bad=tmp_path / "bad.nc", csv=tmp_path / "p.csv") for e in extra]
     p = run("compensate", "--robot", "rokae", "--fit", fits[2], *extra, "-o", tmp_path / "o.csv",
@@ -167,3 +167,70 @@ def test_cli_user_errors_are_one_line_and_exit_2(fits, tmp_path, extra, message)
     assert message in p.stderr
     assert len(p.stderr.strip().splitlines()) == 1, p.stderr
     assert "Traceback" not in p.stderr
+
+
+def _csv_rows(path):
+    lines = [l for l in path.read_text().splitlines() if not l.startswith("#")]
+    head = lines[0].split(",")
+    return head, [dict(zip(head, l.split(","))) for l in lines[1:]]
+
+
+def test_cli_unreachable_points_fail_unless_keep_going(fits, tmp_path):
+    path = tmp_path / "p.csv"
+    path.write_text("x_mm,y_mm,z_mm\n450,0,-150\n5000,0,-150\n455,0,-150\n")
+    out = tmp_path / "o.csv"
+    args = ["compensate", "--robot", "rokae", "--fit", fits[2], "--path", path,
+            "--wrench", "0,0,-100", "-o", out]
+    p = run(*args)
+    assert p.returncode == 3, p.stdout + p.stderr
+    assert "1 of 3 points cannot be compensated: row 1 (line 3): unreachable" in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and not out.exists()
+    p = run(*args, "--keep-going")
+    assert p.returncode == 0, p.stderr
+    head, rows = _csv_rows(out)
+    assert rows[1]["qcmd1_rad"] == "" and rows[1]["x_cmd_m"] == "" and rows[1]["status"] != "0"
+    assert rows[0]["qcmd1_rad"] != "" and rows[2]["status"] == "0"
+
+
+def test_cli_quaternions_rapids_and_recorded_options(fits, tmp_path, rokae):
+    prog = tmp_path / "p.nc"
+    prog.write_text("G21 G90\nG0 X0 Y0 Z20\nG1 Z0 F300\nG2 X20 Y0 I10 J0 F600\nG0 Z20\n")
+    out = tmp_path / "o.csv"
+    p = run("compensate", "--robot", "rokae", "--fit", fits[2], "--path", prog, "--frame",
+            "400,0,-150,0,0,0", "--tool-rpy", "0,90,0", "--wrench", "0,0,-100", "-o", out)
+    assert p.returncode == 0, p.stderr
+    text = out.read_text()
+    assert "# workpiece frame [mm, deg]: 400,0,-150,0,0,0" in text
+    assert "# tool orientation [deg]: 0,90,0" in text and "--wrench 0,0,-100" in text
+    head, rows = _csv_rows(out)
+    # Rapid rows carry no process force; the others the constant wrench.
+    assert rows[0]["rapid"] == "1" and rows[0]["fz_N"] == "0.0"
+    assert rows[1]["rapid"] == "0" and float(rows[1]["fz_N"]) == -100.0
+    # Quaternion columns: the same rotation as FK(q_cmd), sign fixed by qw >= 0, also at
+    # ry = 90 deg where roll and yaw are not unique.
+    for r in rows:
+        q = np.array([float(r[f"qcmd{j}_rad"]) for j in range(1, 7)])
+        rot = rokae.tool_pose(q)[:3, :3]
+        w, x, y, z = (float(r[k]) for k in ("qw_cmd", "qx_cmd", "qy_cmd", "qz_cmd"))
+        assert w >= 0 and abs(w * w + x * x + y * y + z * z - 1) < 1e-12
+        expected = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                             [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                             [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+        assert np.abs(expected - rot).max() < 1e-12
+    assert "commanded correction" in p.stdout
+
+
+def test_cli_orientation_error_reported_beside_position(fits, backlash_truth, root, tmp_path):
+    p = run("compensate", "--robot", "rokae", "--fit", fits[3], "--path",
+            root / "examples" / "paths" / "rokae_contour.csv", "--truth", backlash_truth,
+            "-o", tmp_path / "c.csv", "--report", tmp_path / "r.json")
+    assert p.returncode == 0, p.stderr
+    assert "max rot [urad]" in p.stdout
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["fits"][0]["compensated"]["max_rot_urad"] <= rep["uncompensated"]["max_rot_urad"] + 100
+    # A tolerance below what the compensation leaves makes it an error (exit 3, nothing written).
+    p = run("compensate", "--robot", "rokae", "--fit", fits[2], "--path",
+            root / "examples" / "paths" / "rokae_contour.csv", "--truth", backlash_truth,
+            "--orientation-tolerance-urad=-1e9", "-o", tmp_path / "d.csv")
+    assert p.returncode == 3 and "worsens the tool orientation" in p.stderr
+    assert not (tmp_path / "d.csv").exists()

@@ -112,16 +112,19 @@ TEST(Gcode, ReadsTheSubset) {
 
 TEST(Gcode, BadInputNamesLineAndColumn) {
   EXPECT_EQ(gcode_error("G0 X0 Y0\nG2 X10 Y0 I5 J0 F100\n"),
-            "p.nc:2:1: arcs (G2) are not supported: linearise them in the CAM post-processor "
-            "(G0/G1 only)");
-  EXPECT_NE(gcode_error("G1 X1 A30 F100\n").find("p.nc:1:7: rotary axis 'A'"), std::string::npos);
+            "p.nc:2:1: arc before the position is known (X, Y and Z not all given)");
+  const std::string off_circle = gcode_error("G0 X0 Y0 Z0\nG2 X10 Y1 I5 J0 F100\n");
+  EXPECT_EQ(off_circle.rfind("p.nc:2:1: arc end point is not on the circle", 0), 0u);
+  EXPECT_NE(gcode_error("G1 X1 A30 F100\n").find("p.nc:1:7: rotary axis word 'A30'"),
+            std::string::npos);
   EXPECT_EQ(gcode_error("G0 X0 (open\n"), "p.nc:1:7: unterminated comment '('");
   EXPECT_EQ(gcode_error("G0 X0\nG1 X5\n"), "p.nc:2:1: G1 move without a feed (F word)");
   EXPECT_EQ(gcode_error("G1 Xabc F10\n"), "p.nc:1:4: expected a number after 'X'");
   EXPECT_EQ(gcode_error("X10 Y5\n"), "p.nc:1:1: coordinates before any G0/G1 motion command");
   EXPECT_NE(gcode_error("G33 X1\n").find("p.nc:1:1: unsupported G-code G33"), std::string::npos);
   EXPECT_EQ(gcode_error("(only a comment)\n"),
-            "p.nc:1: the G-code has no G0/G1 moves with X, Y or Z");
+            "p.nc:1: the G-code has no move that reaches a known position (X, Y and Z all "
+            "given)");
 }
 
 TEST(ExamplePaths, AreReachableByTheRokaeArm) {

@@ -1,5 +1,5 @@
 /// \file diagnose.hpp
-/// Model diagnosis (docs/diagnosis.md, effects-and-diagnosis.md section 2): how good is the
+/// Model diagnosis (docs/diagnosis.md): how good is the
 /// model against the noise floor, where does it fail, which physical effect of the library is
 /// missing, and a verdict. Optionally walks the forward-stepwise loop (add the winner, re-fit,
 /// re-score conditionally).

@@ -10,7 +10,7 @@
 
 namespace stiff {
 
-/// Options of the linear least-squares identification (method.md eq. 5).
+/// Options of the linear least-squares identification (Jiang & Fang 2023).
 struct LinearOptions {
   /// Relative tolerance on the column-scaled pivoted QR diagonal below which a direction is
   /// declared unidentifiable.

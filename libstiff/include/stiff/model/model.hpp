@@ -129,7 +129,7 @@ extern template void DeflectionModel::evaluate<double>(const double*,
 extern template void DeflectionModel::evaluate<Jet>(
     const Jet*, const Measurement&, const MeasurementContext&, Vector3<Jet>*, Vector3<Jet>*) const;
 
-/// The paper's observation block (method.md eq. 3): the 3 x n matrix with
+/// The paper's observation block (Jiang & Fang 2023): the 3 x n matrix with
 /// A[r, j] = Jp(P)[r, j] * (J(L)[:, j] . W), so that d = A c for joint compliances c.
 /// `jac_meas`, `jac_load`: 6 x n geometric Jacobians; `wrench` = (F, M) at L.
 Eigen::Matrix<double, 3, Eigen::Dynamic> observation_block(

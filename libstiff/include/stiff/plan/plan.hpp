@@ -4,7 +4,7 @@
 ///
 /// The method follows Jiang & Fang (2023), section 2.2: a pool Omega = Omega_J x Omega_F of
 /// candidate poses and loads, a criterion on the stacked observation matrix A of a chosen set
-/// (the paper's kappa_F^-1(A), method.md eq. 9), and simulated annealing over N-element subsets.
+/// (the paper's kappa_F^-1(A), Jiang & Fang 2023), and simulated annealing over N-element subsets.
 /// Beside it: further criteria (D, A, E optimality, the observability index O1, a task-oriented
 /// prediction error), a Fedorov-style exchange algorithm and a continuous NLopt refinement.
 /// The maths is in docs/planning.md.
@@ -23,7 +23,7 @@
 ///
 /// Threading: every function is reentrant; a CandidatePool is immutable once finalized and may
 /// be shared between threads. Randomness uses stiff::Rng seeded from the options: the same
-/// seed gives the same plan on every platform (style.md 3.3 e).
+/// seed gives the same plan on every platform.
 /// @since 0.1
 #pragma once
 

@@ -1,4 +1,4 @@
-// backlash: lost motion of the reducers with a gravity preload (effects-and-diagnosis.md 1.5).
+// backlash: lost motion of the reducers with a gravity preload (docs/effects.md).
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {

@@ -1,5 +1,5 @@
 // complementary: load-dependent geometric stiffness (conservative congruence transformation,
-// effects-and-diagnosis.md 1.1) plus the forward-kinematics curvature of the same order.
+// docs/effects.md) plus the forward-kinematics curvature of the same order.
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {

@@ -1,5 +1,5 @@
 // coupling: symmetric off-diagonal joint compliance of adjacent joints
-// (effects-and-diagnosis.md 1.6).
+// (docs/effects.md).
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {

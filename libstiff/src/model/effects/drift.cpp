@@ -1,5 +1,5 @@
 // drift: thermal drift / offset of robot and tracker between the unloaded and the loaded
-// reading (effects-and-diagnosis.md 1.7).
+// reading (docs/effects.md).
 #include <map>
 
 #include "stiff/model/effects/common.hpp"
@@ -74,7 +74,7 @@ class Drift : public EffectT<Drift> {
   }
   std::string reference() const override {
     return "Pollack Periodica (AT960-MR warm-up test); ISO 9283 (drift of pose "
-           "characteristics); effects-and-diagnosis.md 1.7";
+           "characteristics); docs/effects.md";
   }
   unsigned requirements() const override { return kNeedsTime; }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }

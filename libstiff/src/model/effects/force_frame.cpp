@@ -1,4 +1,4 @@
-// force_frame: orientation and scale errors of the force sensor (effects-and-diagnosis.md 1.7).
+// force_frame: orientation and scale errors of the force sensor (docs/effects.md).
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {
@@ -40,7 +40,7 @@ class ForceFrame : public EffectT<ForceFrame> {
            "R_06 R(omega) diag(1+s) R_06^T F_meas (a common gain is not identifiable)";
   }
   std::string reference() const override {
-    return "OnRobot HEX-E/H datasheet (crosstalk < 5 %); effects-and-diagnosis.md 1.7";
+    return "OnRobot HEX-E/H datasheet (crosstalk < 5 %); docs/effects.md";
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
 

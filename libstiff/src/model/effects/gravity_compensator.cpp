@@ -1,5 +1,5 @@
 // gravity_compensator: configuration-dependent compliance of the joint carrying a gravity
-// compensator spring (effects-and-diagnosis.md 1.3).
+// compensator spring (docs/effects.md).
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {

@@ -1,4 +1,4 @@
-// joint: diagonal joint compliance, the paper's model (method.md eqs. 1-5).
+// joint: diagonal joint compliance, the paper's model (Jiang & Fang 2023).
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {

@@ -1,5 +1,5 @@
 // link: link compliance by the virtual joint method (VJM), reduced to the rotational springs
-// the joint compliances cannot absorb (effects-and-diagnosis.md 1.2).
+// the joint compliances cannot absorb (docs/effects.md).
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {

@@ -1,5 +1,5 @@
 // nonlinear_joint: hardening torque-torsion curve of strain-wave / cycloidal reducers, measured
-// as a secant about the gravity preload (effects-and-diagnosis.md 1.4).
+// as a secant about the gravity preload (docs/effects.md).
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {

@@ -1,5 +1,5 @@
 // point_offset: measured point (SMR) and load point away from the flange centre
-// (effects-and-diagnosis.md 1.7).
+// (docs/effects.md).
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {
@@ -41,7 +41,7 @@ class PointOffset : public EffectT<PointOffset> {
            "frame): changes every lever arm and makes joint 6 visible";
   }
   std::string reference() const override {
-    return "effects-and-diagnosis.md 1.7; Jiang & Fang 2023 (method.md: SMR on the flange "
+    return "docs/effects.md; Jiang & Fang 2023 (SMR on the flange "
            "axis leaves joint 6 unidentified)";
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }

@@ -1,5 +1,5 @@
 // tool_compliance: series compliance of the force sensor and tooling between flange and SMR
-// (effects-and-diagnosis.md 1.7).
+// (docs/effects.md).
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {
@@ -36,7 +36,7 @@ class ToolCompliance : public EffectT<ToolCompliance> {
            "the flange frame";
   }
   std::string reference() const override {
-    return "OnRobot HEX-E datasheet (deflection at nominal load); effects-and-diagnosis.md 1.7";
+    return "OnRobot HEX-E datasheet (deflection at nominal load); docs/effects.md";
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
   bool linear() const override { return true; }

@@ -1,4 +1,4 @@
-// tracker_frame: misregistration of the laser tracker's frame (effects-and-diagnosis.md 1.7).
+// tracker_frame: misregistration of the laser tracker's frame (docs/effects.md).
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {

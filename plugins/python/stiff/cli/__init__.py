@@ -9,8 +9,8 @@ import sys
 from ..errors import StiffError
 
 # Subcommand modules, in the order `stiff --help` lists them.
-COMMANDS = ["demo", "simulate", "identify", "predict", "effects", "import_"]
-OPTIONAL_COMMANDS = ["plan", "diagnose", "compensate", "fmu", "study"]
+COMMANDS = ["demo", "examples", "robot", "simulate", "identify", "predict", "effects", "import_"]
+OPTIONAL_COMMANDS = ["plan", "diagnose", "compensate", "filter", "fmu", "study"]
 
 
 class UserError(Exception):

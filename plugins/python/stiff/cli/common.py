@@ -7,37 +7,77 @@ import os
 import tempfile
 from pathlib import Path
 
-_PKG = Path(__file__).resolve().parent.parent
-
-
 def data_dir() -> Path:
     """Built-in robots and example designs: bundled into the package, or the source tree."""
-    bundled = _PKG / "_data"
-    if bundled.exists():
-        return bundled
-    src = _PKG.parent.parent.parent / "examples"
-    return src
+    from ..data import data_dir as _data_dir
+
+    return _data_dir()
 
 
 def robot_path(name_or_path: str) -> str:
     """A path, or the name of a built-in robot (rokae, puma560, ...)."""
-    p = Path(name_or_path)
-    if p.exists() or p.suffix in (".yaml", ".yml", ".urdf") or os.sep in name_or_path:
-        return str(p)
-    for ext in (".yaml", ".urdf"):
-        cand = data_dir() / "robots" / (name_or_path + ext)
-        if cand.exists():
-            return str(cand)
-    known = sorted(q.stem for q in (data_dir() / "robots").glob("*.*"))
-    from . import UserError
+    from ..data import find
 
-    raise UserError(f"no robot file '{name_or_path}' and no built-in robot of that name "
-                    f"(built-in: {', '.join(known)})")
+    try:
+        return find("robots", name_or_path)
+    except FileNotFoundError as e:
+        from . import UserError
+
+        raise UserError(e.strerror) from None
+
+
+def builtin_path(kind: str, name_or_path: str) -> str:
+    """A path, or the name of a built-in truth, noise model or path (stiff.data)."""
+    from ..data import find
+
+    try:
+        return find(kind, name_or_path)
+    except FileNotFoundError as e:
+        from . import UserError
+
+        raise UserError(e.strerror) from None
+
+
+def _vec3(text: str) -> list:
+    try:
+        v = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected x,y,z numbers, got {text!r}") from None
+    if len(v) != 3 or not all(math.isfinite(x) for x in v):
+        raise argparse.ArgumentTypeError(f"expected 3 finite numbers x,y,z, got {text!r}")
+    return v
 
 
 def add_robot(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robot", "-r", required=True,
                    help="robot file (YAML or URDF) or built-in name (e.g. rokae)")
+    g = p.add_argument_group("robot chain and tool (override the robot file; points in the "
+                             "tip/flange frame, millimetres)")
+    g.add_argument("--base", metavar="LINK",
+                   help="URDF: first link of the chain (default: base_link, else the root)")
+    g.add_argument("--tip", metavar="LINK",
+                   help="URDF: last link of the chain (default: tool0 or flange when present, "
+                   "else the only chain end; `stiff robot show` lists them)")
+    g.add_argument("--measured-point", type=_vec3, metavar="X,Y,Z",
+                   help="measured point (SMR) in the tip frame [mm]")
+    g.add_argument("--load-point", type=_vec3, metavar="X,Y,Z",
+                   help="point where the force acts, tip frame [mm] (default: the measured point)")
+    g.add_argument("--tool-mass", type=float, metavar="KG", help="tool mass [kg]")
+    g.add_argument("--tool-com", type=_vec3, metavar="X,Y,Z",
+                   help="tool centre of mass in the tip frame [mm]")
+
+
+def load_robot(args):
+    """The robot of --robot with the chain and tool options of add_robot."""
+    from .. import api
+
+    mm = lambda v: None if v is None else [x * 1e-3 for x in v]
+    return api.Robot(robot_path(args.robot), base=getattr(args, "base", None),
+                     tip=getattr(args, "tip", None),
+                     measured_point=mm(getattr(args, "measured_point", None)),
+                     load_point=mm(getattr(args, "load_point", None)),
+                     tool_mass=getattr(args, "tool_mass", None),
+                     tool_com=mm(getattr(args, "tool_com", None)))
 
 
 class Formatter(argparse.RawDescriptionHelpFormatter):

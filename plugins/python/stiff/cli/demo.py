@@ -23,7 +23,7 @@ EXAMPLE = """example:
   stiff demo                 # writes into out/demo/, report in out/demo/report.html
   stiff demo --out /tmp/demo --seed 3"""
 
-# The paper's identified stiffness (method.md), N*m/rad; joint 6 is not identified there (4000
+# The paper's identified stiffness (Jiang & Fang 2023), N*m/rad; joint 6 is not identified there (4000
 # assumed for the virtual robot).
 PAPER_STIFFNESS = np.array([5.0914e4, 1.6382e4, 3.1311e4, 7.7911e3, 5.6136e3, 4.0e3])
 

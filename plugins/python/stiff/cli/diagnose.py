@@ -8,11 +8,11 @@ import shlex
 from .. import api
 from ..diagnose import diagnose
 from . import UserError
-from .common import Formatter, add_robot, atomic_write_text, fmt, robot_path, table
+from .common import Formatter, add_robot, atomic_write_text, fmt, load_robot, robot_path, table
 
 EXAMPLE = """worked example (a hidden force-sensor clocking error on the virtual robot):
-  stiff simulate --robot rokae --count 60 --seed 1 --truth truth.yaml -o calib.csv
-  stiff simulate --robot rokae --count 40 --seed 2 --truth truth.yaml -o valid.csv
+  stiff simulate --robot rokae --count 60 --seed 1 --truth rokae_force_clocking -o calib.csv
+  stiff simulate --robot rokae --count 40 --seed 2 --truth rokae_force_clocking -o valid.csv
   stiff diagnose --robot rokae --data calib.csv --validate valid.csv --model joint \\
                  --report report.html --json diagnosis.json
       -> verdict missing_effect: force_frame (partial F = 52, p_adj = 1e-30,
@@ -117,7 +117,7 @@ def run(args):
         raise UserError("--alpha must be in (0, 1)")
     if not 1 <= args.max_steps <= 20:
         raise UserError("--max-steps must be in 1..20")
-    robot = api.Robot(robot_path(args.robot))
+    robot = load_robot(args)
     calib = api.Dataset.read(args.data, robot)
     valid = api.Dataset.read(args.validate, robot) if args.validate else None
     d = diagnose(robot, calib, valid, model=args.model, candidates=args.candidates,

@@ -5,7 +5,7 @@ from pathlib import Path
 
 from .. import api
 from ..fmu import export_fmu
-from .common import Formatter, add_robot, robot_path
+from .common import Formatter, add_robot, load_robot, robot_path
 
 EXAMPLE = """example:
   stiff fmu export --robot rokae --fit fit.json -o arm.fmu            # FMI 2.0 (ME + CS)
@@ -34,7 +34,7 @@ def register(sub):
 
 
 def run(args):
-    robot = api.Robot(robot_path(args.robot))
+    robot = load_robot(args)
     fit = api.Fit.read(args.fit)
     path = export_fmu(robot, fit, args.output, fmi_version=args.fmi, model_identifier=args.identifier)
     size = Path(path).stat().st_size

@@ -5,7 +5,7 @@ import json
 import math
 
 from .. import api
-from .common import Formatter, add_robot, fmt, robot_path, table
+from .common import Formatter, add_robot, fmt, load_robot, robot_path, table
 
 EXAMPLE = """example:
   stiff identify --robot rokae --data data.csv -o fit.json
@@ -13,7 +13,7 @@ EXAMPLE = """example:
   stiff identify --robot ur5 --data examples/real/ur5/ur5_grid.csv --model registration+tool+joint_offset+kinematic -o ur5.json
 
 --model takes effect names joined by '+' (see `stiff effects`). The model 'joint' without a
-robust loss is solved by linear least squares (method.md eq. 5); anything else by Ceres.
+robust loss is solved by linear least squares (Jiang & Fang 2023); anything else by Ceres.
 Absolute measurements (px, py, pz in the instrument frame, docs/formats.md) need the geometric
 effects: registration (one per session), tool, joint_offset, kinematic (docs/effects.md)."""
 
@@ -84,7 +84,7 @@ def print_fit(fit: api.Fit, truth_stiffness=None) -> None:
 
 
 def run(args):
-    robot = api.Robot(robot_path(args.robot))
+    robot = load_robot(args)
     data = api.Dataset.read(args.data, robot)
     fit = api.identify(robot, data, model=args.model, loss=args.loss,
                        loss_scale_m=args.loss_scale_um * 1e-6, method=args.method,

@@ -10,14 +10,15 @@ from .. import api
 from ..errors import CancelledError
 from ..plan import criteria as criterion_names
 from ..plan import evaluate_criteria, plan, plan_defaults
-from .common import Formatter, ProgressBar, add_robot, atomic_write_text, fmt, robot_path, table
+from .common import (Formatter, ProgressBar, add_robot, atomic_write_text, builtin_path, fmt,
+                     load_robot, robot_path, table)
 
 EXAMPLE = """example:
-  stiff plan --robot examples/robots/rokae.yaml --count 10 --fix 6=0 -o plan.csv   # d_opt
+  stiff plan --robot rokae --count 10 --fix 6=0 -o plan.csv                        # d_opt
   stiff plan --robot rokae --count 10 --criterion kappa_a --fix 6=0 -o plan.csv     # the paper's
   stiff plan --robot rokae --criterion task --task machining.csv -o plan.csv
   stiff plan --robot rokae --count 30 --criterion d_opt --refine --json plan.json -o plan.csv
-  stiff plan --robot rokae --evaluate examples/paper/design_kappa_a.csv   # criteria of a given set
+  stiff plan --robot rokae --evaluate design_kappa_a    # criteria of a given set (built-in)
 
 Criteria (docs/planning.md): d_opt = log det A^T A (the default: in the Monte-Carlo study
 docs/paper-study.md, under realistic tracker/force/joint errors, its sets predict the deflection
@@ -107,9 +108,9 @@ def _print_criteria(values: dict) -> None:
 def run(args):
     from . import UserError
 
-    robot = api.Robot(robot_path(args.robot))
+    robot = load_robot(args)
     if args.evaluate:
-        design = api.Dataset.read(args.evaluate, robot)
+        design = api.Dataset.read(builtin_path("paper", args.evaluate), robot)
         sigma_um = args.tracker_sigma_um if args.tracker_sigma_um is not None else 10.0
         values = evaluate_criteria(robot, design, sigma_um * 1e-6)
         print(f"{args.evaluate}: {int(values['count'])} measurements, {int(values['m'])} identifiable compliances")

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import api
-from .common import Formatter, add_robot, robot_path
+from .common import Formatter, add_robot, load_robot, robot_path
 
 EXAMPLE = """example:
   stiff predict --robot rokae --fit fit.json --data valid.csv -o predicted.csv
@@ -27,7 +27,7 @@ def register(sub):
 
 
 def run(args):
-    robot = api.Robot(robot_path(args.robot))
+    robot = load_robot(args)
     fit = api.Fit.read(args.fit)
     data = api.Dataset.read(args.data, robot)
     model = api.Model(robot, fit)

@@ -2,16 +2,18 @@
 from __future__ import annotations
 
 from .. import api
-from .common import Formatter, add_robot, robot_path
+from .common import Formatter, add_robot, atomic_write_text, builtin_path, load_robot, robot_path
 
 EXAMPLE = """example:
   stiff simulate --robot rokae --plan plan.csv --stiffness 50914,16382,31311,7791,5614,4000 \\
       --tracker-sigma-um 10 -o data.csv
-  stiff simulate --robot rokae --truth truth.yaml --noise noise.yaml --count 60 -o data.csv
+  stiff simulate --robot rokae --truth rokae_backlash --noise noise_realistic --count 60 -o data.csv
 
 The truth file names the joint stiffness and any hidden effects (docs/formats.md); the noise
 file the tracker sigma (constant + ppm), force and joint errors, outliers and the seed.
-Without --plan, --count random valid poses with loads of 15-35 N per axis are used."""
+Both take a file or the name of a built-in one (`stiff examples` lists them). Without --plan,
+--count random valid poses with loads of 15-35 N per axis are used. The output does not say
+which effects the truth holds (a blind test stays blind) unless --record-truth."""
 
 
 def register(sub):
@@ -28,7 +30,11 @@ def register(sub):
     p.add_argument("--tracker-ppm", type=float, default=0.0, help="distance-proportional tracker error [ppm]")
     p.add_argument("--force-relative", type=float, default=0.0, help="relative force error (1 sigma)")
     p.add_argument("--force-absolute-n", type=float, default=0.0, help="absolute force error [N]")
-    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--seed", type=int, default=None,
+                   help="random seed of the design and the noise (default 1; given, it also "
+                   "replaces the noise file's seed)")
+    p.add_argument("--record-truth", action="store_true",
+                   help="write the truth's effects into the output's header (# truth_model:)")
     p.add_argument("-o", "--output", required=True, help="measurement CSV to write")
     p.set_defaults(func=run)
 
@@ -36,15 +42,20 @@ def register(sub):
 def run(args):
     from . import UserError
 
-    robot = api.Robot(robot_path(args.robot))
-    design = api.Dataset.read(args.plan, robot) if args.plan else api.random_design(robot, args.count, args.seed)
+    robot = load_robot(args)
+    seed = 1 if args.seed is None else args.seed
+    design = (api.Dataset.read(builtin_path("paper", args.plan), robot) if args.plan
+              else api.random_design(robot, args.count, seed))
     noise = dict(tracker_sigma_m=args.tracker_sigma_um * 1e-6, tracker_ppm=args.tracker_ppm,
                  force_relative=args.force_relative, force_absolute_N=args.force_absolute_n,
-                 seed=args.seed)
+                 seed=seed)
     if args.noise:
-        noise = api.read_noise(args.noise)
-    if args.truth:
-        data = api.simulate(robot, design, truth=args.truth, **noise)
+        noise = api.read_noise(builtin_path("truths", args.noise))
+        if args.seed is not None:
+            noise["seed"] = args.seed
+    truth = builtin_path("truths", args.truth) if args.truth else None
+    if truth:
+        data = api.simulate(robot, design, truth=truth, **noise)
     else:
         if not args.stiffness:
             raise UserError("give the truth: --truth truth.yaml or --stiffness k1,...,kn [N*m/rad]")
@@ -54,5 +65,44 @@ def run(args):
             raise UserError(f"--stiffness: '{args.stiffness}' is not a comma-separated list of numbers")
         data = api.simulate(robot, design, stiffness=k, **noise)
     data.write(args.output)
+    if args.record_truth:
+        _record_truth(args.output, truth, args.stiffness)
     print(f"wrote {len(data)} simulated measurements to {args.output}")
     return 0
+
+
+def _record_truth(output, truth, stiffness) -> None:
+    """Add the truth (its effects, or the stiffness) to the header comments of the output."""
+    if truth:
+        note = [f"# truth_model: {'+'.join(['joint'] + _truth_effects(truth))}",
+                f"# truth_file: {truth}"]
+    else:
+        note = ["# truth_model: joint", f"# truth_stiffness_Nm_per_rad: {stiffness}"]
+    with open(output, encoding="utf-8") as f:
+        lines = f.read().splitlines()
+    k = 0
+    while k < len(lines) and lines[k].startswith("#"):
+        k += 1
+    atomic_write_text(output, "\n".join(lines[:k] + note + lines[k:]) + "\n")
+
+
+def _truth_effects(truth) -> list:
+    """Names of the block mapping under the truth file's top-level `effects:` key."""
+    import re
+
+    with open(truth, encoding="utf-8") as f:
+        lines = f.read().splitlines()
+    names, inside, indent = [], False, None
+    for line in lines:
+        body = line.split("#", 1)[0].rstrip()
+        if not body:
+            continue
+        if not line[0].isspace():
+            inside = body == "effects:"
+            continue
+        m = re.match(r"^(\s+)([A-Za-z_][A-Za-z0-9_]*)\s*:", body)
+        if inside and m:
+            indent = len(m.group(1)) if indent is None else indent
+            if len(m.group(1)) == indent:
+                names.append(m.group(2))
+    return [n for n in names if n != "joint"]

@@ -22,7 +22,7 @@ intervals; the paper's figures stand beside ours. 500 trials take a few minutes 
 def register(sub):
     p = sub.add_parser("study", help="Monte-Carlo study of the paper's claim (planning criteria)",
                        description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
-    p.add_argument("which", choices=["paper"], help="the study to run (paper: issue 9)")
+    p.add_argument("which", choices=["paper"], help="the study to run (paper: the kappa_F^-1(A) criterion of Jiang & Fang 2023 against D-optimal designs, docs/paper-study.md)")
     p.add_argument("--trials", "-n", type=int, default=500, help="Monte-Carlo trials (default 500)")
     p.add_argument("--seed", type=int, default=1, help="seed of the whole study (default 1)")
     p.add_argument("--jobs", "-j", type=int, default=min(2, os.cpu_count() or 1),

@@ -1,5 +1,5 @@
 /// \file effects/common.hpp
-/// What an effect source file includes. Generic code rules (style.md 3.3): literals as T(x),
+/// What an effect source file includes. Generic code rules: literals as T(x),
 /// never cast T to double, maths functions unqualified after `using std::sin;`.
 #pragma once
 

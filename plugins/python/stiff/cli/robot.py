@@ -1,0 +1,63 @@
+"""stiff robot: what stiff reads from a robot file (chain, limits, frames, tool) and the YAML
+form of it."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .common import Formatter, add_robot, atomic_write_text, load_robot, table
+
+EXAMPLE = """example:
+  stiff robot show --robot ur5
+  stiff robot show --robot ur5 --tip wrist_3_link --measured-point 0,0,120 --yaml ur5.yaml
+
+For a URDF the chain runs from --base (default base_link, else the root link) to --tip
+(default tool0 or flange when present, else the only chain end); `show` lists the chain ends
+it did not use. --yaml writes the chain as stiff uses it in the YAML robot format."""
+
+
+def register(sub):
+    p = sub.add_parser("robot", help="show what stiff reads from a robot file; convert to YAML",
+                       description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
+    rs = p.add_subparsers(dest="robot_command", metavar="<action>", required=True)
+    s = rs.add_parser("show", help="print the chain, joint limits, frames and tool",
+                      description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
+    add_robot(s)
+    s.add_argument("--yaml", metavar="FILE", help="also write the robot in the YAML format")
+    s.set_defaults(func=run_show)
+
+
+def _mm(v) -> str:
+    return ", ".join(f"{1e3 * x:.6g}" for x in v)
+
+
+def run_show(args):
+    robot = load_robot(args)
+    n = robot.dof
+    lo, hi = robot.limits
+    q0 = np.zeros(n)
+    pose = robot.tool_pose(q0)
+    jac = robot.jacobian(q0)
+    lines = [f"robot: {robot.name} ({robot.path}), {n} joints"]
+    lines += [f"  {note}" for note in robot.notes]
+    rows = []
+    for j, name in enumerate(robot.joint_names):
+        axis = np.round(jac[3:, j], 9) + 0.0  # no -0.000 from rounding noise
+        rows.append([j + 1, name, f"{axis[0]:+.3f} {axis[1]:+.3f} {axis[2]:+.3f}",
+                     f"{math.degrees(lo[j]):.1f}", f"{math.degrees(hi[j]):.1f}"])
+    lines += ["", table(["#", "joint", "axis at q = 0 (base)", "lower [deg]", "upper [deg]"],
+                        rows, ["<", "<", "<", ">", ">"]), ""]
+    lines.append(f"measured point (SMR), tip frame [mm]: {_mm(robot.measured_point)}")
+    lines.append(f"load point, tip frame [mm]:           {_mm(robot.load_point)}")
+    lines.append(f"tool: {robot.tool_mass:.6g} kg, centre of mass (tip frame) [mm]: "
+                 f"{_mm(robot.tool_com)}")
+    rot = pose[:3, :3]
+    lines.append(f"measured point at q = 0, base frame [mm]: {_mm(pose[:3, 3])}")
+    lines.append("tip orientation at q = 0 (rows of R): " +
+                 "; ".join(" ".join(f"{x:+.4f}" for x in r) for r in np.round(rot, 9) + 0.0))
+    print("\n".join(lines))
+    if args.yaml:
+        atomic_write_text(args.yaml, robot.to_yaml())
+        print(f"wrote {args.yaml} (YAML robot format, SI units)")
+    return 0
