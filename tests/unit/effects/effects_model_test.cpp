@@ -111,6 +111,15 @@ TEST(Effects, AutodiffJacobianMatchesCentralDifferences) {
       if (theta(k) == m.spec(k).null_value)
         theta(k) = std::min(m.spec(k).upper, m.spec(k).null_value + 0.3 * m.spec(k).typical);
     expect_jacobian_matches({"joint", name}, theta, m, data);
+    // The effect acts on these rows: a check of zero derivatives would prove nothing.
+    const auto ctx = m.contexts(data);
+    double largest = 0;
+    for (size_t r = 0; r < data.size(); ++r)
+      largest = std::max(largest, m.displacement_jacobian(theta, data.rows[r], ctx[r])
+                                      .rightCols(m.effects()[1]->size())
+                                      .cwiseAbs()
+                                      .maxCoeff());
+    EXPECT_GT(largest, 0.0) << name;
   }
 }
 
