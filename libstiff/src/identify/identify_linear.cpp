@@ -386,6 +386,8 @@ FitResult linear_fit(const RobotModel& robot,
                            "held at c = 0");
   }
   const int nc = static_cast<int>(candidates.size());
+  // Every compliance held (by the caller's statistical test or a zero column): nothing to fit.
+  if (nc == 0) throw NumericalError("identify: no joint compliance is identifiable from this data");
   Eigen::MatrixXd gs(nc, nc);
   for (int k = 0; k < nc; ++k)
     for (int l = 0; l < nc; ++l)

@@ -90,8 +90,10 @@ enum Requirement : unsigned {
   kNeedsMasses = 1u << 0,    ///< link masses (gravity torques)
   kNeedsTime = 1u << 1,      ///< a `t` column or meaningful row order
   kNeedsSessions = 1u << 2,  ///< a `session` column
-  /// Absolute rows: the effect acts on positions in the instrument frame only, never on a
-  /// loaded-minus-unloaded displacement (constant geometry and self-weight cancel there).
+  /// Absolute rows: the effect is identified from positions in the instrument frame; a
+  /// loaded-minus-unloaded displacement does not see it (constant geometry and self-weight
+  /// cancel there) or another effect already models what it sees (the tool's target offset is
+  /// point_offset's measured point). The diagnosis does not propose it on data without them.
   kNeedsAbsolute = 1u << 3,
   kNeedsTemperature = 1u << 4,  ///< a `temp` column (absolute rows)
 };

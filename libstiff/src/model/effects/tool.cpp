@@ -29,6 +29,8 @@ class Tool : public EffectT<Tool> {
     return "Mooring, Roth & Driels, Fundamentals of Manipulator Calibration (1991), tool frame";
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  // On loaded-minus-unloaded rows alone its offset is point_offset's measured point.
+  unsigned requirements() const override { return kNeedsAbsolute; }
   bool example_parameters(const Eigen::VectorXd& /*c*/, double* p) const override {
     // A target nest mounted a few centimetres off the nominal point.
     set_parameter(p, "r_x", 0.02);
