@@ -1,4 +1,5 @@
 // Version, errors, robots, datasets.
+#include <cmath>
 #include <thread>
 
 #include "boundary.hpp"
@@ -347,6 +348,14 @@ bool column_present(const Dataset& d, int column) {
       return d.has_sigma;
     case STIFF_COLUMN_TIME:
       return d.has_time;
+    case STIFF_COLUMN_ABSOLUTE:
+      return true;
+    case STIFF_COLUMN_POSITION:
+      return d.has_position;
+    case STIFF_COLUMN_SIGMA_P:
+      return d.has_sigma_p;
+    case STIFF_COLUMN_TEMPERATURE:
+      return d.has_temperature;
   }
   throw InvalidArgument("unknown column " + std::to_string(static_cast<int>(column)));
 }
@@ -394,6 +403,18 @@ stiff_status stiff_dataset_get(double* values,
           break;
         case STIFF_COLUMN_TIME:
           v.push_back(m.time);
+          break;
+        case STIFF_COLUMN_ABSOLUTE:
+          v.push_back(m.absolute ? 1.0 : 0.0);
+          break;
+        case STIFF_COLUMN_POSITION:
+          for (int k = 0; k < 3; ++k) v.push_back(m.absolute ? m.position(k) : NAN);
+          break;
+        case STIFF_COLUMN_SIGMA_P:
+          v.push_back(m.sigma_p);
+          break;
+        case STIFF_COLUMN_TEMPERATURE:
+          v.push_back(m.temperature);
           break;
       }
     }

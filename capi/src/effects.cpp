@@ -55,6 +55,8 @@ stiff_status stiff_effect_describe(
     if (e->requirements() & kNeedsMasses) needs.push_back("masses");
     if (e->requirements() & kNeedsTime) needs.push_back("time");
     if (e->requirements() & kNeedsSessions) needs.push_back("sessions");
+    if (e->requirements() & kNeedsAbsolute) needs.push_back("absolute");
+    if (e->requirements() & kNeedsTemperature) needs.push_back("temperature");
     j["needs"] = needs;
     j["parameters"] = nlohmann::json::array();
     for (const auto& p : e->parameters())

@@ -34,16 +34,26 @@ stiff_status stiff_identify(stiff_result** out,
       throw InvalidArgument("loss_scale_m must be finite and >= 0");
     if (o.method > STIFF_METHOD_CERES)
       throw InvalidArgument("unknown method " + std::to_string(o.method));
+    if (!std::isfinite(o.max_relative_se)) throw InvalidArgument("max_relative_se must be finite");
+    const double max_relative_se = o.max_relative_se == 0.0
+                                       ? IdentifyOptions{}.max_relative_se
+                                       : (o.max_relative_se < 0.0 ? 0.0 : o.max_relative_se);
     const bool linear_ok = effects.size() == 1 && effects[0] == "joint" && loss == "none";
     auto r = std::make_unique<stiff_result>();
-    if (o.method == STIFF_METHOD_LINEAR || (o.method == STIFF_METHOD_AUTO && linear_ok)) {
+    // Absolute rows need the nonlinear path (the linear one reads displacement rows only).
+    const bool displacement_only = data->data.absolute_rows() == 0;
+    if (o.method == STIFF_METHOD_LINEAR ||
+        (o.method == STIFF_METHOD_AUTO && linear_ok && displacement_only)) {
       if (!linear_ok)
         throw InvalidArgument("the linear method fits the model 'joint' without robust loss only");
-      r->fit = identify_joint_linear(robot->model, data->data);
+      LinearOptions lo;
+      lo.max_relative_se = max_relative_se;
+      r->fit = identify_joint_linear(robot->model, data->data, lo);
     } else {
       IdentifyOptions io;
       io.loss = loss;
       io.loss_scale_m = o.loss_scale_m;
+      io.max_relative_se = max_relative_se;
       if (o.max_iterations) io.max_iterations = static_cast<int>(o.max_iterations);
       if (o.progress) {
         const auto fn = o.progress;
@@ -209,7 +219,7 @@ stiff_status stiff_model_create(stiff_model** out,
     auto m = std::make_unique<stiff_model>();
     m->robot = robot->model;
     m->fit = f;
-    m->model = std::make_unique<DeflectionModel>(m->robot, f.model);
+    m->model = std::make_unique<DeflectionModel>(m->robot, f.model, nullptr, f.sessions);
     check_fit_applies(f, m->robot, *m->model, "");
     m->theta = f.theta();
     *out = m.release();
@@ -256,6 +266,34 @@ stiff_status stiff_predict(double deflection[6],
     require(q, "q");
     require(wrench, "wrench");
     predict_one(model, q, n, wrench, deflection);
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_predict_dataset(double* predicted,
+                                   size_t capacity,
+                                   size_t* needed,
+                                   const stiff_model* model,
+                                   const stiff_dataset* dataset) {
+  return guarded(__func__, [&] {
+    require(model, "model");
+    require(dataset, "dataset");
+    const Dataset& data = dataset->data;
+    const DeflectionModel& dm = *model->model;
+    validate_dataset(data, model->robot.dof(), false);
+    for (const auto& m : data.rows)
+      if (m.absolute && dm.find("registration") >= 0 && !dm.has_session(m.session))
+        throw InvalidArgument("measurement '" + m.id + "': session '" + m.session +
+                              "' was not registered by this fit; identify with its rows, or "
+                              "refit the registration of this set-up");
+    require_capacity(3 * data.rows.size(), predicted, capacity, needed);
+    const std::vector<MeasurementContext> ctx = dm.contexts(data);
+    for (size_t r = 0; r < data.rows.size(); ++r) {
+      const Eigen::Matrix<double, 6, 1> d = dm.predict(model->theta, data.rows[r], ctx[r]);
+      if (!d.allFinite())
+        throw NumericalError("row " + std::to_string(r) + ": the prediction is not finite");
+      for (int k = 0; k < 3; ++k) predicted[3 * r + k] = d(k);
+    }
     return STIFF_OK;
   });
 }

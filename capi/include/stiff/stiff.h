@@ -174,7 +174,14 @@ typedef enum stiff_column {
   STIFF_COLUMN_DISPLACEMENT = 3,
   STIFF_COLUMN_ROTATION = 4,
   STIFF_COLUMN_SIGMA = 5,
-  STIFF_COLUMN_TIME = 6
+  STIFF_COLUMN_TIME = 6,
+  /** Absolute rows (@since 0.2): ABSOLUTE rows [1 for an absolute row, else 0]; POSITION
+   *  rows x 3, the target in the instrument frame [m] (NaN on displacement rows); SIGMA_P rows
+   *  [m] (0: unknown); TEMPERATURE rows [deg C]. */
+  STIFF_COLUMN_ABSOLUTE = 7,
+  STIFF_COLUMN_POSITION = 8,
+  STIFF_COLUMN_SIGMA_P = 9,
+  STIFF_COLUMN_TEMPERATURE = 10
 } stiff_column;
 
 /** Read a measurement file (docs/formats.md). robot may be NULL (the joint count is then
@@ -283,10 +290,15 @@ typedef struct stiff_identify_options {
   uint32_t method;            /**< a stiff_method */
   stiff_progress_fn progress; /**< may be NULL */
   void* progress_user_data;
+  /** A parameter whose standard error exceeds this many times both its typical magnitude and
+   *  a third of its distance from its null value is not determined and is held
+   *  (docs/identifiability.md); 0: the default 100; < 0: off (the structural rank test only).
+   * @since 0.2 */
+  double max_relative_se;
 } stiff_identify_options;
 /* Every field spelled out: a bare {sizeof(...)} trips -Wmissing-field-initializers. */
 #define STIFF_IDENTIFY_OPTIONS_INIT \
-  { sizeof(stiff_identify_options), NULL, NULL, 0.0, 0, 0, NULL, NULL }
+  { sizeof(stiff_identify_options), NULL, NULL, 0.0, 0, 0, NULL, NULL, 0.0 }
 
 /** Identify the model from data with measured displacements. Joints or parameters that the
  *  data cannot identify are named in the result's warnings and held fixed. Errors:
@@ -371,6 +383,15 @@ STIFF_API stiff_status stiff_predict(double deflection[6],
                                      const double* q,
                                      size_t n,
                                      const double wrench[6]);
+/** What the model predicts for every row of a dataset, rows x 3 [m] (capacity >= 3 rows):
+ *  the displacement of a displacement row, the target position in the instrument frame of
+ *  an absolute row (the registration of its session; a session the fit did not register is
+ *  an INVALID_ARGUMENT error naming it). @since 0.2 */
+STIFF_API stiff_status stiff_predict_dataset(double* predicted,
+                                             size_t capacity,
+                                             size_t* needed,
+                                             const stiff_model* model,
+                                             const stiff_dataset* dataset);
 /** Batch form: q rows x n, wrench rows x 6, deflection rows x 6 (capacity >= 6 rows).
  *  @since 0.1 */
 STIFF_API stiff_status stiff_predict_batch(double* deflection,

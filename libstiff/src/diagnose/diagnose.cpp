@@ -578,6 +578,13 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
     }
     const Effect& eg = *mg->effects().back();
     c.parameters = eg.size();
+    if ((eg.requirements() & kNeedsAbsolute) && a.used.absolute_rows() == 0) {
+      c.testable = false;
+      c.identifiable = false;
+      c.reason = "untestable: it is identified from absolute positions and the data have none";
+      untestable.push_back(c);
+      continue;
+    }
     VectorXd typical;
     const MatrixXd z = candidate_regressors(a, *mg, &typical);
     GroupScore g = score_group(a, z, typical, opt.rank_tolerance);

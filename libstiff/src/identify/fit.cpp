@@ -55,6 +55,7 @@ std::string fit_to_json(const FitResult& f) {
   j["robot"] = {{"name", f.robot_name}, {"file", f.robot_path}};
   if (!f.robot_digest.empty()) j["robot"]["kinematics_digest"] = f.robot_digest;
   j["model"] = f.model;
+  if (!f.sessions.empty()) j["sessions"] = f.sessions;
   j["method"] = f.method;
   j["loss"] = {{"name", f.loss}, {"scale_m", f.loss_scale_m}};
   json params = json::array();
@@ -125,6 +126,7 @@ FitResult fit_from_json(const std::string& text, const std::string& file) {
     f.robot_path = need(j, "robot").value("file", "");
     f.robot_digest = need(j, "robot").value("kinematics_digest", "");
     f.model = need(j, "model").get<std::vector<std::string>>();
+    if (j.contains("sessions")) f.sessions = j["sessions"].get<std::vector<std::string>>();
     if (f.model.empty()) throw ParseError(file, 0, 0, "fit file has an empty model");
     f.method = j.value("method", "");
     if (j.contains("loss")) {
@@ -265,9 +267,9 @@ void write_fit(const std::string& path, const FitResult& fit) {
 }
 
 double stated_noise_m(const Dataset& data) {
-  if (data.has_sigma) {
+  if (data.has_sigma || data.has_sigma_p) {
     std::vector<double> s;
-    for (const auto& m : data.rows) s.push_back(m.sigma_d);
+    for (const auto& m : data.rows) s.push_back(m.sigma());
     std::nth_element(s.begin(), s.begin() + s.size() / 2, s.end());
     return s[s.size() / 2];
   }

@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "identify/ceres_quiet.hpp"
+#include "identify/identifiability.hpp"
 #include "identify/robust.hpp"
 #include "stiff/error.hpp"
 #include "stiff/identify/identify.hpp"
@@ -281,7 +282,7 @@ bool chunk_residuals(
     const std::vector<int>* jcols = nullptr;
     s.eval.get(row, key, jac ? &free : nullptr, &d, &jrow, &jcols);
     double* ri = r + 3 * i;
-    for (int k = 0; k < 3; ++k) ri[k] = (m.displacement(k) - d[k]) * w;
+    for (int k = 0; k < 3; ++k) ri[k] = (m.observed()(k) - d[k]) * w;
     const double sq = ri[0] * ri[0] + ri[1] * ri[1] + ri[2] * ri[2];
     // Non-finite values make Ceres log to stderr; returning false rejects the point quietly.
     if (!std::isfinite(sq)) return false;
@@ -424,7 +425,7 @@ Eigen::VectorXd weighted_residuals(const Setup& s, const Eigen::VectorXd& theta)
     const double* d = nullptr;
     s.eval.get(r, key, nullptr, &d, nullptr, nullptr);
     e.segment<3>(3 * r) =
-        (s.data->rows[r].displacement - Eigen::Map<const Eigen::Vector3d>(d)) * s.row_weight(r);
+        (s.data->rows[r].observed() - Eigen::Map<const Eigen::Vector3d>(d)) * s.row_weight(r);
   }
   return e;
 }
@@ -465,119 +466,9 @@ bool held_has_effect(const Setup& s, const Eigen::VectorXd& theta, const std::ve
   return false;
 }
 
-std::string qualified(const DeflectionModel& model, int k) {
-  return model.owner(k).name() + "." + model.spec(k).name;
-}
-
-/// Which parameters the data cannot identify at theta. Columns are taken in priority order
-/// (joint compliances first, then the effects in model order), normalised, and a column is
-/// accepted when its component orthogonal to the accepted ones has relative norm above
-/// `tolerance`; otherwise it is named with the parameters it is confounded with.
-struct Identifiability {
-  std::vector<bool> fixed;
-  std::vector<std::string> reason;
-  bool operator==(const Identifiability& o) const { return fixed == o.fixed; }
-};
-
-Identifiability check_identifiability(const DeflectionModel& model,
-                                      const Eigen::MatrixXd& j,
-                                      const Eigen::VectorXd& typical,
-                                      double tolerance) {
-  const int p = model.parameter_count();
-  // Finite but absurd data (a displacement of 1e308 m) overflow the Jacobian; the rank test
-  // below would then run a QR on an empty matrix.
-  if (!j.allFinite())
-    throw NumericalError(
-        "identify: the Jacobian is not finite (overflow): check the units and sizes of the loads "
-        "and displacements (N, N*m, m)");
-  Identifiability out;
-  out.fixed.assign(p, false);
-  out.reason.assign(p, "");
-  std::vector<int> order;
-  const int je = model.find("joint");
-  if (je >= 0)
-    for (int k = 0; k < model.effects()[je]->size(); ++k) order.push_back(model.offset(je) + k);
-  for (int k = 0; k < p; ++k)
-    if (std::find(order.begin(), order.end(), k) == order.end()) order.push_back(k);
-
-  // The same decisions on the p x p Gram matrix J^T J (Cholesky of the normalised columns in
-  // this order: the squared orthogonal rest is 1 - |L^-1 c|^2), which costs a third of the
-  // Gram-Schmidt below on tall J; taken only when every column is clearly accepted (its
-  // rest^2 is resolved to ~1e-15), else the exact path decides.
-  {
-    Eigen::MatrixXd g = Eigen::MatrixXd::Zero(p, p);
-    g.selfadjointView<Eigen::Lower>().rankUpdate(j.transpose());
-    Eigen::MatrixXd l = Eigen::MatrixXd::Zero(p, p);  // rows: accepted columns' factor
-    std::vector<int> acc;
-    Identifiability fast = out;
-    bool clear = true;
-    for (int k : order) {
-      const double norm = std::sqrt(g(k, k));
-      if (!(norm * typical(k) > 1e-9)) {
-        fast.fixed[k] = true;
-        fast.reason[k] = "it has no effect on any of these measurements";
-        continue;
-      }
-      const int a = static_cast<int>(acc.size());
-      Eigen::VectorXd y(a);
-      for (int i = 0; i < a; ++i) {
-        const int c = acc[i];
-        double v = (c > k ? g(c, k) : g(k, c)) / (std::sqrt(g(c, c)) * norm);
-        for (int m = 0; m < i; ++m) v -= l(i, m) * y(m);
-        y(i) = v / l(i, i);
-      }
-      const double rest2 = 1.0 - y.squaredNorm();
-      if (!(rest2 > 100.0 * tolerance * tolerance)) {
-        clear = false;
-        break;
-      }
-      l.row(a).head(a) = y.transpose();
-      l(a, a) = std::sqrt(rest2);
-      acc.push_back(k);
-    }
-    if (clear) return fast;
-  }
-
-  std::vector<Eigen::VectorXd> basis;
-  std::vector<int> accepted;
-  for (int k : order) {
-    const double norm = j.col(k).norm();
-    // Moving the parameter by its typical magnitude changes the residuals by less than 1e-9
-    // of one noise sigma in total: it has no effect on these measurements.
-    if (!(norm * typical(k) > 1e-9)) {
-      out.fixed[k] = true;
-      out.reason[k] = "it has no effect on any of these measurements";
-      continue;
-    }
-    Eigen::VectorXd v = j.col(k) / norm;
-    for (int pass = 0; pass < 2; ++pass)
-      for (const auto& b : basis) v -= b.dot(v) * b;
-    const double rest = v.norm();
-    if (rest > tolerance) {
-      basis.push_back(v / rest);
-      accepted.push_back(k);
-      continue;
-    }
-    out.fixed[k] = true;
-    if (accepted.empty()) {
-      out.reason[k] = "it has no effect on any of these measurements";
-      continue;
-    }
-    // Name the combination: least-squares coefficients on the accepted (normalised) columns.
-    Eigen::MatrixXd a(j.rows(), accepted.size());
-    for (size_t i = 0; i < accepted.size(); ++i)
-      a.col(i) = j.col(accepted[i]) / j.col(accepted[i]).norm();
-    const Eigen::VectorXd beta = a.colPivHouseholderQr().solve(j.col(k) / norm);
-    const double big = beta.cwiseAbs().maxCoeff();
-    std::string with;
-    for (size_t i = 0; i < accepted.size(); ++i)
-      if (std::abs(beta(i)) > 0.1 * big)
-        with += (with.empty() ? "" : ", ") + qualified(model, accepted[i]);
-    out.reason[k] = "its effect on the measurements is a combination of " + with +
-                    " (the data see only the combination)";
-  }
-  return out;
-}
+using detail::check_identifiability;
+using detail::Identifiability;
+using detail::qualified;
 
 /// Ceres iteration callback forwarding to the user's progress function.
 class Progress : public ceres::IterationCallback {
@@ -797,7 +688,7 @@ Eigen::VectorXd cost_gradient(const Setup& s,
   for (int r = 0; r < static_cast<int>(s.data->rows.size()); ++r) {
     displacement_and_jacobian(s, r, theta.data(), cols, scale.data(), false, d, blk.data());
     const double w = s.row_weight(r);
-    const Eigen::Vector3d e = (s.data->rows[r].displacement - d) * w;
+    const Eigen::Vector3d e = (s.data->rows[r].observed() - d) * w;
     double rho[3] = {0, 1, 0};
     std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
     if (loss) loss->Evaluate(e.squaredNorm(), rho);
@@ -880,20 +771,25 @@ FitResult identify(const RobotModel& robot,
     throw InvalidArgument("identify: outlier_weight must be in (0, 1]");
   if (!(opt.rank_tolerance > 0 && opt.rank_tolerance < 0.1))
     throw InvalidArgument("identify: rank_tolerance must be in (0, 0.1)");
+  if (!(opt.max_relative_se >= 0) || !std::isfinite(opt.max_relative_se))
+    throw InvalidArgument("identify: max_relative_se must be a finite value >= 0");
   detail::validate_identification_data(data, robot.dof());
   const DeflectionModel model(robot, effects, &data);  // unknown effects, missing masses
   const int n = static_cast<int>(data.rows.size());
   const int p = model.parameter_count();
   if (p == 0)
     throw InvalidArgument("identify: model '" + model.model_string() + "' has no parameters");
-  const bool weighted = opt.use_sigma && data.has_sigma;
+  const bool weighted = opt.use_sigma && (data.has_sigma || data.has_sigma_p);
   if (weighted)
     for (int r = 0; r < n; ++r)
-      if (!(data.rows[r].sigma_d > 0))
+      if (!(data.rows[r].sigma() > 0))
         throw InvalidArgument("identify: measurement " + std::to_string(r + 1) + " (id '" +
-                              data.rows[r].id +
-                              "') has sigma_d = 0; give every row a sigma_d > 0 "
+                              data.rows[r].id + "') has " +
+                              (data.rows[r].absolute ? "sigma_p" : "sigma_d") +
+                              " = 0; give every row a standard deviation > 0 "
                               "or identify without sigma weighting");
+  const bool absolute = data.absolute_rows() > 0;
+  if (absolute) check_absolute_data(robot, data, model.find("registration") >= 0);
   for (int k = 0; k < p; ++k) {
     const auto& sp = model.spec(k);
     if (!(sp.lower <= sp.upper) || !std::isfinite(sp.start))
@@ -915,7 +811,7 @@ FitResult identify(const RobotModel& robot,
   // ---- start: linear least squares for the joint compliances, spec start for the rest.
   Eigen::VectorXd theta = model.start_parameters();
   const int je = model.find("joint");
-  if (je >= 0) {
+  if (je >= 0 && !absolute) {  // the linear start reads loaded-minus-unloaded rows
     try {
       LinearOptions lo;
       lo.use_sigma = opt.use_sigma;
@@ -946,12 +842,12 @@ FitResult identify(const RobotModel& robot,
   for (int r = 0; r < n; ++r) {
     const double* d = nullptr;
     s.eval.get(r, start_key, nullptr, &d, nullptr, nullptr);
-    raw.segment<3>(3 * r) = data.rows[r].displacement - Eigen::Map<const Eigen::Vector3d>(d);
+    raw.segment<3>(3 * r) = data.rows[r].observed() - Eigen::Map<const Eigen::Vector3d>(d);
   }
   double robust_sigma = 0;
   { robust_sigma = robust::mad_sigma(std::vector<double>(raw.data(), raw.data() + raw.size())); }
   const double noise = stated > 0 ? stated : (robust_sigma > 0 ? robust_sigma : 1e-6);
-  for (int r = 0; r < n; ++r) s.row_weight(r) = 1.0 / (weighted ? data.rows[r].sigma_d : noise);
+  for (int r = 0; r < n; ++r) s.row_weight(r) = 1.0 / (weighted ? data.rows[r].sigma() : noise);
   // Robust threshold on each row's residual norm, in that row's sigma units: 3 sigma for the
   // monotone losses. Tukey's biweight gets the same Gaussian efficiency as Huber's: the classical
   // constants for 95 % are 1.345 sigma (Huber) and 4.685 sigma (Tukey) (Holland & Welsch 1977),
@@ -971,11 +867,39 @@ FitResult identify(const RobotModel& robot,
   SolveOutcome last;
   Eigen::MatrixXd last_jacobian;
   Eigen::VectorXd last_jacobian_theta;
+  double residual_sigma = 0.0;  // 0: the structural test only (the passes)
+  // The statistical test judges only values a solve fitted (`free`): a value held at its
+  // null so far is not evidence either way.
+  auto check = [&](const Eigen::MatrixXd& jac, const Eigen::VectorXd& at) {
+    std::vector<bool> fitted(p, false);
+    for (int k : free) fitted[k] = true;
+    return check_identifiability(model, jac, s.typical, opt.rank_tolerance, residual_sigma,
+                                 opt.max_relative_se, &at, &fitted);
+  };
+  // Residual standard deviation of the weighted fit at theta, as the statistics below: rows
+  // down-weighted by the robust loss count that much.
+  auto robust_residual_sigma = [&]() {
+    const Eigen::VectorXd e = weighted_residuals(s, theta);
+    double wsum = 0, wrss = 0;
+    for (int r = 0; r < n; ++r) {
+      double w = 1.0;
+      std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
+      if (loss) {
+        double rho[3];
+        loss->Evaluate(e.segment<3>(3 * r).squaredNorm(), rho);
+        w = std::min(1.0, std::max(0.0, rho[1]));
+      }
+      wsum += 3.0 * w;
+      wrss += w * w * e.segment<3>(3 * r).squaredNorm();
+    }
+    const double dof_left = wsum - static_cast<double>(free.size());
+    return dof_left > 0 ? std::sqrt(wrss / dof_left) : 1.0;
+  };
   auto fit_passes = [&]() {
     // theta as the solver will see it, (theta / typical) * typical, so that the Jacobian of
     // this check is the one of the solver's first iteration (Evaluations cache).
     for (int k = 0; k < p; ++k) theta(k) = theta(k) / s.typical(k) * s.typical(k);
-    idf = check_identifiability(model, weighted_jacobian(s, theta), s.typical, opt.rank_tolerance);
+    idf = check(weighted_jacobian(s, theta), theta);
     for (int pass = 0;; ++pass) {
       free.clear();
       for (int k = 0; k < p; ++k) {
@@ -1000,8 +924,7 @@ FitResult identify(const RobotModel& robot,
                                   (static_cast<int>(free.size()) + kJetStride - 1) / kJetStride)
           return false;  // a constant Jacobian, or columns the cache does not hold
         if (!held_has_effect(s, t, idf.fixed)) return false;
-        const Identifiability a =
-            check_identifiability(model, weighted_jacobian(s, t), s.typical, opt.rank_tolerance);
+        const Identifiability a = check(weighted_jacobian(s, t), t);
         for (int k = 0; k < p; ++k)
           if (idf.fixed[k] && !a.fixed[k]) return true;
         return false;
@@ -1010,14 +933,36 @@ FitResult identify(const RobotModel& robot,
       iterations += last.iterations;
       last_jacobian = weighted_jacobian(s, theta);
       last_jacobian_theta = theta;
-      Identifiability again =
-          check_identifiability(model, last_jacobian, s.typical, opt.rank_tolerance);
+      Identifiability again = check(last_jacobian, theta);
       if (again == idf || pass == 2) break;
       // A parameter held so far became visible (or the reverse): solve again from here, a
       // freed parameter from the value it was held at (theta unchanged: the Jacobians cached
       // at this point serve the next solve's first iteration).
       idf = again;
     }
+    // The statistical test, once, at the solution of the structurally identifiable model;
+    // what it holds goes back to its null value and the rest is solved once more.
+    residual_sigma = robust_residual_sigma();
+    const Identifiability stat = check(last_jacobian, theta);
+    residual_sigma = 0.0;
+    if (std::find(stat.statistical.begin(), stat.statistical.end(), true) == stat.statistical.end())
+      return;
+    idf = stat;
+    free.clear();
+    for (int k = 0; k < p; ++k) {
+      if (idf.fixed[k])
+        theta(k) =
+            std::min(std::max(model.spec(k).null_value, model.spec(k).lower), model.spec(k).upper);
+      else
+        free.push_back(k);
+    }
+    if (free.empty())
+      throw NumericalError("identify: no parameter of model '" + model.model_string() +
+                           "' is determined by this data");
+    last = solve(s, free, theta, opt, loss_scale, nullptr);
+    iterations += last.iterations;
+    last_jacobian = weighted_jacobian(s, theta);
+    last_jacobian_theta = theta;
   };
   // A redescending loss (Tukey) has many local minima and gives zero weight beyond its scale:
   // from the least-squares start, whose residuals carry the outliers' pull, it can stop where it
@@ -1134,6 +1079,7 @@ FitResult identify(const RobotModel& robot,
   f.robot_digest = kinematics_digest(robot);
   f.robot_path = robot.source_path;
   f.model = model.effect_names();
+  if (data.has_session) f.sessions = model.session_labels();
   f.method = "ceres";
   f.loss = opt.loss;
   f.loss_scale_m = opt.loss == "none" ? 0.0 : scale_used_m;

@@ -22,6 +22,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "identify/identifiability.hpp"
 #include "kinematics/fast_chain.hpp"
 #include "stiff/error.hpp"
 #include "stiff/identify/identify.hpp"
@@ -34,7 +35,10 @@ namespace detail {
 /// std::set per row: a fast scan that, on finding any problem, lets validate_dataset throw its
 /// (identical) error. Also checks what check_joint_vector checks (q size and finiteness).
 void validate_identification_data(const Dataset& data, int dof) {
-  if (data.rows.empty() || !data.has_displacement) validate_dataset(data, dof, true);
+  if (data.rows.empty() || !data.has_displacement || data.has_position) {
+    validate_dataset(data, dof, true);  // the full check (absolute rows have more columns)
+    if (data.has_position) return;
+  }
   const size_t n = data.rows.size();
   // Duplicate ids: open addressing on the ids' hashes (FNV-1a, inline: ids are short), the
   // full hash kept beside the row so that only equal hashes compare the strings.
@@ -290,10 +294,72 @@ Eigen::VectorXd pivoted_cholesky_diagonal(Eigen::MatrixXd g) {
 
 }  // namespace
 
+namespace {
+
+/// The linear fit with the compliances in `held` held at 0 (named in warnings by the caller).
+FitResult linear_fit(const RobotModel& robot,
+                     const Dataset& data,
+                     const LinearOptions& options,
+                     const std::vector<bool>& held,
+                     Eigen::MatrixXd* weighted_a,
+                     double* residual_sigma);
+
+}  // namespace
+
 FitResult identify_joint_linear(const RobotModel& robot,
                                 const Dataset& data,
                                 const LinearOptions& options) {
+  // The rank decision inside the fit, then the statistical test of every fit
+  // (identifiability.hpp): a compliance the data do not determine is held at 0 and the rest
+  // fitted again.
+  const int n = robot.dof();
+  std::vector<bool> held(n, false);
+  std::vector<std::string> reasons(n);
+  const DeflectionModel model(robot, {"joint"});
+  Eigen::VectorXd typical(n);
+  for (int j = 0; j < n; ++j) typical(j) = model.spec(j).typical;
+  for (int round = 0; round <= n; ++round) {
+    Eigen::MatrixXd aw;
+    double sigma = 0.0;  // residual standard deviation in the rows' weighted units
+    FitResult f = linear_fit(robot, data, options, held, &aw, &sigma);
+    const Eigen::VectorXd theta = f.theta();
+    std::vector<bool> fitted(n);
+    for (int j = 0; j < n; ++j) fitted[j] = f.parameters[j].identified;
+    const detail::Identifiability idf =
+        detail::check_identifiability(model, aw, typical, options.rank_tolerance, sigma,
+                                      options.max_relative_se, &theta, &fitted);
+    bool more = false;
+    for (int j = 0; j < n; ++j)
+      if (idf.statistical[j]) {
+        held[j] = true;
+        reasons[j] = idf.reason[j];
+        more = true;
+      }
+    if (!more) {
+      for (int j = 0; j < n; ++j)
+        if (!reasons[j].empty())
+          f.warnings.push_back(
+              "joint " + std::to_string(j + 1) + " is not identifiable from this data (joint.c" +
+              std::to_string(j + 1) + "): " + reasons[j] + "; held at c = 0 (infinitely stiff)");
+      return f;
+    }
+  }
+  throw NumericalError("identify: no joint compliance is identifiable");
+}
+
+namespace {
+
+FitResult linear_fit(const RobotModel& robot,
+                     const Dataset& data,
+                     const LinearOptions& options,
+                     const std::vector<bool>& held,
+                     Eigen::MatrixXd* weighted_a,
+                     double* residual_sigma) {
   detail::validate_identification_data(data, robot.dof());
+  if (data.absolute_rows() > 0)
+    throw InvalidArgument(
+        "the linear identification takes loaded-minus-unloaded rows only; absolute rows need "
+        "the nonlinear identification (with geometric effects such as registration+tool)");
   const int n = robot.dof();
   const int N = static_cast<int>(data.rows.size());
   const int m = 3 * N;
@@ -318,6 +384,7 @@ FitResult identify_joint_linear(const RobotModel& robot,
   std::vector<int> candidates;
   FitResult f;
   for (int j = 0; j < n; ++j) {
+    if (held[j]) continue;  // named by the caller
     if (norms(j) > 1e-12 * max_norm)
       candidates.push_back(j);
     else
@@ -327,6 +394,8 @@ FitResult identify_joint_linear(const RobotModel& robot,
                            "held at c = 0");
   }
   const int nc = static_cast<int>(candidates.size());
+  // Every compliance held (by the caller's statistical test or a zero column): nothing to fit.
+  if (nc == 0) throw NumericalError("identify: no joint compliance is identifiable from this data");
   Eigen::MatrixXd gs(nc, nc);
   for (int k = 0; k < nc; ++k)
     for (int l = 0; l < nc; ++l)
@@ -469,7 +538,12 @@ FitResult identify_joint_linear(const RobotModel& robot,
     f.chi2 = rss_w;
   else if (f.noise_floor_m > 0)
     f.chi2 = f.residuals.squaredNorm() / (f.noise_floor_m * f.noise_floor_m);
+  *weighted_a = a;
+  for (int r = 0; r < N; ++r) weighted_a->middleRows<3>(3 * r) *= ob.w(r);
+  *residual_sigma = std::sqrt(s2);
   return f;
 }
+
+}  // namespace
 
 }  // namespace stiff

@@ -1,5 +1,7 @@
 #include "stiff/io/dataset.hpp"
 
+#include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -16,7 +18,23 @@ namespace {
 constexpr double kPi = 3.141592653589793238462643383279502884;
 
 // What a column holds; `index` is the component (0..2) or joint index.
-enum class Kind { id, session, q, force, moment, displacement, rotation, sigma, time, extra };
+enum class Kind {
+  id,
+  session,
+  q,
+  force,
+  moment,
+  displacement,
+  rotation,
+  sigma,
+  time,
+  position,
+  euler,
+  temperature,
+  sigma_p,
+  sigma_o,
+  extra
+};
 
 struct Column {
   Kind kind = Kind::extra;
@@ -80,8 +98,24 @@ bool lookup_unit(Kind kind, const std::string& unit, double* scale) {
   static const std::map<std::string, double> length{{"m", 1.0}, {"mm", 1e-3}, {"um", 1e-6}};
   static const std::map<std::string, double> rotation{{"rad", 1.0}, {"mrad", 1e-3}};
   static const std::map<std::string, double> time{{"s", 1.0}, {"min", 60.0}};
+  static const std::map<std::string, double> celsius{{"C", 1.0}};
+  static const std::map<std::string, double> small_angle{
+      {"rad", 1.0}, {"deg", kPi / 180.0}, {"urad", 1e-6}};
   const std::map<std::string, double>* table = nullptr;
   switch (kind) {
+    case Kind::euler:
+      table = &angle;
+      break;
+    case Kind::temperature:
+      table = &celsius;
+      break;
+    case Kind::sigma_o:
+      table = &small_angle;
+      break;
+    case Kind::position:
+    case Kind::sigma_p:
+      table = &length;
+      break;
     case Kind::q:
       table = &angle;
       break;
@@ -113,7 +147,15 @@ bool lookup_unit(Kind kind, const std::string& unit, double* scale) {
 std::string accepted_units(Kind kind) {
   switch (kind) {
     case Kind::q:
+    case Kind::euler:
       return "_rad, _deg";
+    case Kind::temperature:
+      return "_C";
+    case Kind::sigma_o:
+      return "_rad, _deg, _urad";
+    case Kind::position:
+    case Kind::sigma_p:
+      return "_m, _mm, _um";
     case Kind::force:
       return "_N";
     case Kind::moment:
@@ -152,7 +194,10 @@ Column classify(const std::string& name, const std::string& file, int line, int 
       {"mx", Kind::moment, 0},       {"my", Kind::moment, 1},       {"mz", Kind::moment, 2},
       {"dx", Kind::displacement, 0}, {"dy", Kind::displacement, 1}, {"dz", Kind::displacement, 2},
       {"rx", Kind::rotation, 0},     {"ry", Kind::rotation, 1},     {"rz", Kind::rotation, 2},
-      {"sigma_d", Kind::sigma, 0},   {"t", Kind::time, 0}};
+      {"sigma_d", Kind::sigma, 0},   {"t", Kind::time, 0},          {"px", Kind::position, 0},
+      {"py", Kind::position, 1},     {"pz", Kind::position, 2},     {"a", Kind::euler, 0},
+      {"b", Kind::euler, 1},         {"c", Kind::euler, 2},         {"temp", Kind::temperature, 0},
+      {"sigma_p", Kind::sigma_p, 0}, {"sigma_o", Kind::sigma_o, 0}};
   // q<k>: joint columns.
   if (name.size() >= 2 && name[0] == 'q' && std::isdigit(static_cast<unsigned char>(name[1]))) {
     size_t k = 1;
@@ -243,7 +288,8 @@ Dataset parse_measurements_csv(const std::string& text_in, const std::string& fi
                        "CRLF line ends");
   Dataset data;
   std::vector<Column> columns;
-  std::set<std::string> ids;
+  std::map<std::string, std::string> ids;  // id -> its session
+  std::vector<int> row_lines;
   bool have_header = false;
   std::istringstream in(text);
   std::string line;
@@ -346,10 +392,34 @@ Dataset parse_measurements_csv(const std::string& text_in, const std::string& fi
         throw ParseError(file, line_no, 1,
                          std::string("missing required column: ") + names + " must all be present");
       };
-      group(Kind::force, "fx, fy, fz", true);
+      data.has_position = group(Kind::position, "px, py, pz", false);
+      data.has_orientation = group(Kind::euler, "a, b, c", false);
+      if (data.has_orientation && !data.has_position)
+        throw ParseError(file, line_no, 1,
+                         "Euler angles a, b, c need the absolute position columns px, py, pz");
+      // Absolute data may come without a load (the robot's own weight only).
+      data.has_force = group(Kind::force, "fx, fy, fz", !data.has_position);
       data.has_moment = group(Kind::moment, "mx, my, mz", false);
       data.has_displacement = group(Kind::displacement, "dx, dy, dz", false);
       data.has_rotation = group(Kind::rotation, "rx, ry, rz", false);
+      data.has_temperature = have.count({Kind::temperature, 0}) > 0;
+      data.has_sigma_p = have.count({Kind::sigma_p, 0}) > 0;
+      data.has_sigma_o = have.count({Kind::sigma_o, 0}) > 0;
+      if (data.has_orientation) {
+        const std::string conv = data.meta("euler");
+        if (conv == "xyz")
+          data.euler = EulerConvention::xyz;
+        else if (conv == "zyx")
+          data.euler = EulerConvention::zyx;
+        else
+          throw ParseError(
+              file, line_no, 1,
+              conv.empty()
+                  ? std::string("Euler angles a, b, c without their convention: add a metadata "
+                                "line '# euler: xyz' (R = Rx(a) Ry(b) Rz(c)) or '# euler: zyx' "
+                                "(R = Rz(a) Ry(b) Rx(c)) before the header")
+                  : "unknown Euler convention '# euler: " + conv + "' (use xyz or zyx)");
+      }
       data.has_sigma = have.count({Kind::sigma, 0}) > 0;
       data.has_time = have.count({Kind::time, 0}) > 0;
       data.has_session = have.count({Kind::session, 0}) > 0;
@@ -364,14 +434,73 @@ Dataset parse_measurements_csv(const std::string& text_in, const std::string& fi
     Measurement m;
     m.q = Eigen::VectorXd::Zero(data.dof);
     m.extra.resize(data.extra_columns.size());
+    // Which kind of row it is: a mixed file leaves the other kind's group empty.
+    int filled_p = 0, filled_d = 0, filled_e = 0;
+    for (size_t k = 0; k < fields.size(); ++k) {
+      if (fields[k].text.empty()) continue;
+      filled_p += columns[k].kind == Kind::position;
+      filled_d += columns[k].kind == Kind::displacement;
+      filled_e += columns[k].kind == Kind::euler;
+    }
+    const bool mixed = data.has_position && data.has_displacement;
+    m.absolute = data.has_position && (!data.has_displacement || filled_p > 0);
+    if (mixed && filled_p > 0 && filled_d > 0)
+      throw ParseError(file, line_no, 1,
+                       "row has both an absolute position (px, py, pz) and a displacement (dx, "
+                       "dy, dz); give one of them");
+    if (mixed && filled_p == 0 && filled_d == 0)
+      throw ParseError(file, line_no, 1,
+                       "row has neither an absolute position (px, py, pz) nor a displacement "
+                       "(dx, dy, dz)");
+    m.has_orientation = m.absolute && filled_e > 0;
+    Eigen::Vector3d euler = Eigen::Vector3d::Zero();
+    double temperature = std::nan("");
     for (size_t k = 0; k < fields.size(); ++k) {
       const Column& c = columns[k];
       const Field& f = fields[k];
+      // Cells that may stay empty: the other kind's group, a load or orientation that an
+      // absolute row does not have, per-row temperature and standard deviations.
+      if (f.text.empty()) {
+        const bool other = (m.absolute && (c.kind == Kind::displacement ||
+                                           c.kind == Kind::rotation || c.kind == Kind::sigma)) ||
+                           (!m.absolute && (c.kind == Kind::position || c.kind == Kind::euler ||
+                                            c.kind == Kind::sigma_p || c.kind == Kind::sigma_o ||
+                                            c.kind == Kind::temperature));
+        const bool optional = (m.absolute && (c.kind == Kind::force || c.kind == Kind::moment ||
+                                              c.kind == Kind::sigma_p || c.kind == Kind::sigma_o ||
+                                              (c.kind == Kind::euler && !m.has_orientation)));
+        if (other || optional) continue;
+      }
       switch (c.kind) {
+        case Kind::position:
+          m.position(c.index) = parse_number(f, c, file, line_no);
+          break;
+        case Kind::euler:
+          euler(c.index) = parse_number(f, c, file, line_no);
+          // Degrees read as radians: no Euler angle needs more than one turn.
+          if (std::abs(euler(c.index)) > 2.0 * kPi + 1e-9)
+            throw ParseError(file, line_no, f.col,
+                             "column '" + c.name + "': " + f.text +
+                                 " is more than a full turn; are these degrees in a _rad "
+                                 "column?");
+          break;
+        case Kind::temperature:
+          temperature = parse_number(f, c, file, line_no);
+          if (temperature < -273.15)
+            throw ParseError(file, line_no, f.col, "column '" + c.name + "': below absolute zero");
+          break;
+        case Kind::sigma_p:
+          m.sigma_p = parse_number(f, c, file, line_no);
+          if (m.sigma_p <= 0)
+            throw ParseError(file, line_no, f.col, "column '" + c.name + "': must be > 0");
+          break;
+        case Kind::sigma_o:
+          m.sigma_o = parse_number(f, c, file, line_no);
+          if (m.sigma_o <= 0)
+            throw ParseError(file, line_no, f.col, "column '" + c.name + "': must be > 0");
+          break;
         case Kind::id:
           if (f.text.empty()) throw ParseError(file, line_no, f.col, "empty id");
-          if (!ids.insert(f.text).second)
-            throw ParseError(file, line_no, f.col, "duplicate id '" + f.text + "'");
           m.id = f.text;
           break;
         case Kind::session:
@@ -405,10 +534,52 @@ Dataset parse_measurements_csv(const std::string& text_in, const std::string& fi
           break;
       }
     }
+    if (data.has_id) {
+      const auto found = ids.find(m.id);
+      if (found != ids.end())
+        throw ParseError(
+            file, line_no, 1,
+            "duplicate id '" + m.id + "'" +
+                (found->second != m.session ? " (already in session '" + found->second +
+                                                  "'; ids must be unique across sessions)"
+                                            : std::string()));
+      ids.emplace(m.id, m.session);
+    }
+    if (m.has_orientation && filled_e != 3)
+      throw ParseError(file, line_no, 1, "Euler angles a, b, c must be given together");
+    if (m.absolute) {
+      if (m.session.empty())
+        throw ParseError(file, line_no, 1,
+                         "absolute row without a session: every absolute row needs a "
+                         "'session' (one placement of the instrument, registered on its own)");
+      if (m.has_orientation)
+        m.orientation = euler_to_matrix(data.euler, euler(0), euler(1), euler(2));
+      if (data.has_temperature) {
+        if (std::isnan(temperature))
+          throw ParseError(file, line_no, 1, "column 'temp': empty value on an absolute row");
+        m.temperature = temperature;
+      }
+    }
     if (!data.has_id) m.id = std::to_string(data.rows.size() + 1);
+    row_lines.push_back(line_no);
     data.rows.push_back(std::move(m));
   }
   if (!have_header) throw ParseError(file, line_no > 0 ? line_no : 1, 1, "no header row");
+  // Each session registers the instrument on its own: it needs enough absolute rows.
+  std::map<std::string, int> per_session;
+  std::map<std::string, int> first_line;
+  for (size_t r = 0; r < data.rows.size(); ++r)
+    if (data.rows[r].absolute) {
+      ++per_session[data.rows[r].session];
+      first_line.emplace(data.rows[r].session, row_lines[r]);
+    }
+  for (const auto& kv : per_session)
+    if (kv.second < kMinRowsPerSession)
+      throw ParseError(
+          file, first_line[kv.first], 1,
+          "session '" + kv.first + "' has " + std::to_string(kv.second) + " absolute row" +
+              (kv.second == 1 ? "" : "s") + "; its registration needs at least " +
+              std::to_string(kMinRowsPerSession) + " (non-collinear target positions)");
   return data;
 }
 
@@ -418,11 +589,16 @@ Dataset read_measurements_csv(const std::string& path, int dof) {
 
 std::string format_measurements_csv(const Dataset& data) {
   std::ostringstream o;
-  for (const auto& kv : data.metadata) o << "# " << kv.first << ": " << kv.second << "\n";
+  Dataset meta = data;
+  if (data.has_orientation)
+    meta.set_meta("euler", data.euler == EulerConvention::xyz ? "xyz" : "zyx");
+  for (const auto& kv : meta.metadata) o << "# " << kv.first << ": " << kv.second << "\n";
+  const bool force = data.has_force || !data.has_position;
   std::vector<std::string> head;
   head.push_back("id");
   for (int j = 0; j < data.dof; ++j) head.push_back("q" + std::to_string(j + 1) + "_rad");
-  for (const char* s : {"fx_N", "fy_N", "fz_N"}) head.push_back(s);
+  if (force)
+    for (const char* s : {"fx_N", "fy_N", "fz_N"}) head.push_back(s);
   if (data.has_moment)
     for (const char* s : {"mx_Nm", "my_Nm", "mz_Nm"}) head.push_back(s);
   if (data.has_displacement)
@@ -430,23 +606,43 @@ std::string format_measurements_csv(const Dataset& data) {
   if (data.has_rotation)
     for (const char* s : {"rx_rad", "ry_rad", "rz_rad"}) head.push_back(s);
   if (data.has_sigma) head.push_back("sigma_d_m");
+  if (data.has_position)
+    for (const char* s : {"px_m", "py_m", "pz_m"}) head.push_back(s);
+  if (data.has_orientation)
+    for (const char* s : {"a_rad", "b_rad", "c_rad"}) head.push_back(s);
+  if (data.has_temperature) head.push_back("temp_C");
+  if (data.has_sigma_p) head.push_back("sigma_p_m");
+  if (data.has_sigma_o) head.push_back("sigma_o_rad");
   if (data.has_time) head.push_back("t_s");
   if (data.has_session) head.push_back("session");
   for (const auto& e : data.extra_columns) head.push_back(quote_if_needed(e));
   for (size_t k = 0; k < head.size(); ++k) o << (k ? "," : "") << head[k];
   o << "\n";
+  // A cell of the other kind's group stays empty.
+  auto cell = [&](bool present, double v) { o << "," << (present ? num(v) : std::string()); };
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const auto& m = data.rows[r];
+    const bool abs = m.absolute;
     o << quote_if_needed(m.id.empty() ? std::to_string(r + 1) : m.id);
     for (int j = 0; j < data.dof; ++j) o << "," << num(j < m.q.size() ? m.q(j) : 0.0);
-    for (int k = 0; k < 3; ++k) o << "," << num(m.force(k));
+    if (force)
+      for (int k = 0; k < 3; ++k) o << "," << num(m.force(k));
     if (data.has_moment)
       for (int k = 0; k < 3; ++k) o << "," << num(m.moment(k));
     if (data.has_displacement)
-      for (int k = 0; k < 3; ++k) o << "," << num(m.displacement(k));
+      for (int k = 0; k < 3; ++k) cell(!abs, m.displacement(k));
     if (data.has_rotation)
-      for (int k = 0; k < 3; ++k) o << "," << num(m.rotation(k));
-    if (data.has_sigma) o << "," << num(m.sigma_d);
+      for (int k = 0; k < 3; ++k) cell(!abs, m.rotation(k));
+    if (data.has_sigma) cell(!abs || m.sigma_d > 0, m.sigma_d);
+    if (data.has_position)
+      for (int k = 0; k < 3; ++k) cell(abs, m.position(k));
+    if (data.has_orientation) {
+      const Eigen::Vector3d e = matrix_to_euler(data.euler, m.orientation);
+      for (int k = 0; k < 3; ++k) cell(abs && m.has_orientation, e(k));
+    }
+    if (data.has_temperature) cell(abs, m.temperature);
+    if (data.has_sigma_p) cell(abs && m.sigma_p > 0, m.sigma_p);
+    if (data.has_sigma_o) cell(abs && m.sigma_o > 0, m.sigma_o);
     if (data.has_time) o << "," << num(m.time);
     if (data.has_session) o << "," << quote_if_needed(m.session);
     for (size_t e = 0; e < data.extra_columns.size(); ++e)
@@ -462,8 +658,10 @@ void write_measurements_csv(const std::string& path, const Dataset& data) {
 
 void validate_dataset(const Dataset& data, int dof, bool need_displacement) {
   if (data.rows.empty()) throw InvalidArgument("dataset has no measurements");
-  if (need_displacement && !data.has_displacement)
-    throw InvalidArgument("dataset has no displacement columns dx, dy, dz (is it a plan file?)");
+  if (need_displacement && !data.has_displacement && !data.has_position)
+    throw InvalidArgument(
+        "dataset has no displacement columns dx, dy, dz nor absolute positions px, py, pz (is it "
+        "a plan file?)");
   std::set<std::string> ids;
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const auto& m = data.rows[r];
@@ -473,11 +671,48 @@ void validate_dataset(const Dataset& data, int dof, bool need_displacement) {
                             std::to_string(dof) + "-joint robot");
     if (!m.q.allFinite() || !m.force.allFinite() || !m.moment.allFinite() ||
         !m.displacement.allFinite() || !m.rotation.allFinite() || !std::isfinite(m.sigma_d) ||
-        !std::isfinite(m.time))
+        !std::isfinite(m.time) || !m.position.allFinite() || !m.orientation.allFinite() ||
+        !std::isfinite(m.temperature) || !std::isfinite(m.sigma_p) || !std::isfinite(m.sigma_o))
       throw InvalidArgument(where + ": a value is not finite");
     if (m.sigma_d < 0) throw InvalidArgument(where + ": sigma_d must be >= 0");
+    if (m.sigma_p < 0 || m.sigma_o < 0)
+      throw InvalidArgument(where + ": sigma_p and sigma_o must be >= 0");
+    if (m.absolute && m.session.empty())
+      throw InvalidArgument(where + ": an absolute row needs a session");
     if (!m.id.empty() && !ids.insert(m.id).second) throw InvalidArgument(where + ": duplicate id");
   }
+}
+
+int Dataset::absolute_rows() const {
+  int n = 0;
+  for (const auto& m : rows) n += m.absolute;
+  return n;
+}
+
+Eigen::Matrix3d euler_to_matrix(EulerConvention c, double a, double b, double cc) {
+  using Eigen::AngleAxisd;
+  using Eigen::Vector3d;
+  if (c == EulerConvention::xyz)
+    return (AngleAxisd(a, Vector3d::UnitX()) * AngleAxisd(b, Vector3d::UnitY()) *
+            AngleAxisd(cc, Vector3d::UnitZ()))
+        .toRotationMatrix();
+  return (AngleAxisd(a, Vector3d::UnitZ()) * AngleAxisd(b, Vector3d::UnitY()) *
+          AngleAxisd(cc, Vector3d::UnitX()))
+      .toRotationMatrix();
+}
+
+Eigen::Vector3d matrix_to_euler(EulerConvention c, const Eigen::Matrix3d& r) {
+  // Closed forms of the two products (b in [-pi/2, pi/2]).
+  if (c == EulerConvention::xyz) {
+    // R = Rx(a) Ry(b) Rz(c): r02 = sin b, r12 = -sin a cos b, r22 = cos a cos b,
+    // r01 = -cos b sin c, r00 = cos b cos c.
+    const double b = std::asin(std::max(-1.0, std::min(1.0, r(0, 2))));
+    return {std::atan2(-r(1, 2), r(2, 2)), b, std::atan2(-r(0, 1), r(0, 0))};
+  }
+  // R = Rz(a) Ry(b) Rx(c): r20 = -sin b, r10 = sin a cos b, r00 = cos a cos b,
+  // r21 = cos b sin c, r22 = cos b cos c.
+  const double b = std::asin(std::max(-1.0, std::min(1.0, -r(2, 0))));
+  return {std::atan2(r(1, 0), r(0, 0)), b, std::atan2(r(2, 1), r(2, 2))};
 }
 
 }  // namespace stiff

@@ -1,5 +1,7 @@
 #include "stiff/model/model.hpp"
 
+#include <ceres/rotation.h>
+
 #include <cstdint>
 #include <cstring>
 #include <map>
@@ -34,7 +36,8 @@ std::vector<std::string> parse_model_string(const std::string& text) {
 
 DeflectionModel::DeflectionModel(const RobotModel& robot,
                                  const std::vector<std::string>& effects,
-                                 const Dataset* data)
+                                 const Dataset* data,
+                                 const std::vector<std::string>& sessions)
     : robot_(robot) {
   if (robot.dof() == 0) throw InvalidArgument("robot has no joints");
   if (effects.empty()) throw InvalidArgument("model has no effect (e.g. 'joint')");
@@ -45,10 +48,17 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
         sessions_[m.session] = k;
       }
   }
+  if (!data)
+    for (const auto& label : sessions)
+      if (!sessions_.count(label)) {
+        const int k = static_cast<int>(sessions_.size());
+        sessions_[label] = k;
+      }
   EffectSetup setup;
   setup.robot = &robot_;
   setup.data = data;
   setup.sessions = std::max<int>(1, static_cast<int>(sessions_.size()));
+  setup.session_labels = session_labels();
   std::set<std::string> seen;
   for (const auto& name : effects) {
     if (!seen.insert(name).second)
@@ -113,6 +123,12 @@ Eigen::VectorXd DeflectionModel::start_parameters() const {
   Eigen::VectorXd t(count_);
   for (int k = 0; k < count_; ++k) t(k) = spec(k).start;
   return t;
+}
+
+std::vector<std::string> DeflectionModel::session_labels() const {
+  std::vector<std::string> labels(sessions_.size());
+  for (const auto& kv : sessions_) labels[kv.second] = kv.first;
+  return labels;
 }
 
 int DeflectionModel::session_index(const std::string& label) const {
@@ -189,7 +205,7 @@ void DeflectionModel::evaluate_double(const double* theta,
                                       Vector3<double>* d) const {
   constexpr int kMax = 32;
   const int n = robot_.dof();
-  if (n > kMax || jet_jacobians_) {
+  if (n > kMax || jet_jacobians_ || m.absolute) {
     evaluate_into(theta, m, c, s);
     *d = s.d;
     return;
@@ -238,6 +254,52 @@ void DeflectionModel::evaluate_double(const double* theta,
   *d = s.d;
 }
 
+namespace {
+
+/// Position [m], base frame, of the point r (flange frame) through the chain with joint
+/// angles q + dq and, after each joint's `pre`, the small transform of joint_error's column
+/// (translation, rotation vector): T = prod_j pre_j E_j Rot(axis_j, q_j + dq_j) post_j.
+template <typename T>
+Vector3<T> corrected_point(const RobotModel& robot,
+                           const Eigen::VectorXd& q,
+                           const VectorX<T>& dq,
+                           const Matrix6X<T>& joint_error,
+                           const Vector3<T>& r) {
+  using std::cos;
+  using std::sin;
+  Matrix3<T> rot = Matrix3<T>::Identity();
+  Vector3<T> pos = Vector3<T>::Zero();
+  // Products with the constant transforms stay T x double (half the work of T x T).
+  auto apply = [&](const Eigen::Matrix4d& a) {  // (rot, pos) <- (rot, pos) * a
+    pos += rot * a.topRightCorner<3, 1>();
+    rot = (rot * a.topLeftCorner<3, 3>()).eval();
+  };
+  for (int j = 0; j < robot.dof(); ++j) {
+    const Joint& jt = robot.joints[j];
+    apply(jt.pre);
+    // Always applied: a Jet at value 0 still carries the derivatives.
+    const Eigen::Matrix<T, 6, 1> e = joint_error.col(j);
+    Matrix3<T> re;
+    ceres::AngleAxisToRotationMatrix(e.data() + 3, re.data());
+    pos += rot * e.template head<3>();
+    rot = (rot * re).eval();
+    // Rodrigues: Rot(a, t) = I + sin t [a]x + (1 - cos t) [a]x^2.
+    const T t = T(q(j)) + dq(j);
+    Eigen::Matrix3d k;
+    const Eigen::Vector3d& a = jt.axis;
+    k << 0, -a(2), a(1), a(2), 0, -a(0), -a(1), a(0), 0;
+    const Eigen::Matrix3d k2 = k * k;
+    const T st = sin(t), ct = T(1) - cos(t);
+    const Matrix3<T> rk = rot * k, rk2 = rot * k2;
+    for (int u = 0; u < 3; ++u)
+      for (int v = 0; v < 3; ++v) rot(u, v) += st * rk(u, v) + ct * rk2(u, v);
+    apply(jt.post);
+  }
+  return rot * r + pos;
+}
+
+}  // namespace
+
 template <typename T>
 void DeflectionModel::evaluate_into(const T* theta,
                                     const Measurement& m,
@@ -258,6 +320,25 @@ void DeflectionModel::evaluate_into(const T* theta,
   const Vector3<T> pf = c.chain.flange.block<3, 1>(0, 3).cast<T>();
   s.p_meas = rf * s.r_meas + pf;
   s.p_load = rf * s.r_load + pf;
+  if (m.absolute) {
+    // A purely geometric model of an absolute row needs no Jacobians and no deflection.
+    bool deflects = false;
+    for (const auto& e : effects_)
+      deflects = deflects || e->reads_jacobians() ||
+                 (e->stages() & (unsigned{kJointStage} | unsigned{kCartesianStage}));
+    if (!deflects) {
+      s.tau = VectorX<T>::Zero(n);
+      s.dtheta = VectorX<T>::Zero(n);
+      s.d.setZero();
+      s.rot.setZero();
+      s.dq = VectorX<T>::Zero(n);
+      s.joint_error = Matrix6X<T>::Zero(6, n);
+      for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
+      s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas);
+      for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
+      return;
+    }
+  }
   s.jac_meas.resize(6, n);
   s.jac_load.resize(6, n);
   s.tau.resize(n);
@@ -273,11 +354,22 @@ void DeflectionModel::evaluate_into(const T* theta,
     s.jac_load.template block<3, 1>(3, j) = z;
     s.tau(j) = joint_torque(wl, z, s.force, s.moment);
   }
+  // An absolute pose is reached under the robot's own weight too (zero without a mass model;
+  // a displacement row's difference cancels it).
+  if (m.absolute && c.tau_gravity.size() == n)
+    for (int j = 0; j < n; ++j) s.tau(j) += T(c.tau_gravity(j));
   s.dtheta = VectorX<T>::Zero(n);
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->joint(theta + offsets_[e], s);
   s.d = s.jac_meas.template topRows<3>() * s.dtheta;
   s.rot = s.jac_meas.template bottomRows<3>() * s.dtheta;
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->cartesian(theta + offsets_[e], s);
+  if (m.absolute) {
+    // Geometry stage, then the corrected forward kinematics of P plus its deflection.
+    s.dq = VectorX<T>::Zero(n);
+    s.joint_error = Matrix6X<T>::Zero(6, n);
+    for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
+    s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas);
+  }
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
 }
 
@@ -298,7 +390,7 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
   constexpr int kMax = 32;  // joints held in fixed-capacity buffers (no allocation)
   using Vec = Eigen::Matrix<double, S, 1>;
   const int n = robot_.dof();
-  if (n > kMax) {
+  if (n > kMax || m.absolute) {
     evaluate_into(theta, m, c, s);
     *d = s.d;
     return;

@@ -77,6 +77,7 @@ class IdentifyOptions(C.Structure):
         ("method", C.c_uint32),
         ("progress", PROGRESS_FN),
         ("progress_user_data", C.c_void_p),
+        ("max_relative_se", C.c_double),
     ]
 
 
@@ -152,6 +153,7 @@ _proto("stiff_result_warning", S, C.c_char_p, C.c_size_t, c_size_p, H, C.c_size_
 _proto("stiff_model_create", S, HP, H, H)
 _proto("stiff_model_destroy", None, H)
 _proto("stiff_predict", S, c_double_p, H, c_double_p, C.c_size_t, c_double_p)
+_proto("stiff_predict_dataset", S, c_double_p, C.c_size_t, c_size_p, H, H)
 _proto("stiff_predict_batch", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, c_double_p,
        C.c_size_t, C.c_size_t)
 _proto("stiff_effect_count", C.c_size_t)

@@ -242,6 +242,33 @@ class Dataset(_Handle):
         return self._get(5, 1)
 
     @property
+    def absolute(self) -> np.ndarray:
+        """N booleans: True for an absolute row (target position in the instrument frame)."""
+        return self._get(7, 1).astype(bool)
+
+    @property
+    def position(self) -> Optional[np.ndarray]:
+        """N x 3 target positions in the instrument frame [m] (NaN on displacement rows), or
+        None when the file has no px, py, pz columns."""
+        return self._get(8, 3)
+
+    @property
+    def temperature(self) -> Optional[np.ndarray]:
+        """N temperatures [deg C], or None without a temp column."""
+        return self._get(10, 1)
+
+    @property
+    def observed(self) -> Optional[np.ndarray]:
+        """N x 3 what a model predicts for each row: the absolute position of an absolute row,
+        the displacement of a displacement row [m] (None when neither is measured)."""
+        p, d = self.position, self.displacement
+        if p is None:
+            return d
+        if d is None:
+            return p
+        return np.where(self.absolute[:, None], p, d)
+
+    @property
     def wrench(self) -> np.ndarray:
         """N x 6 (force, moment) at the load point, base frame."""
         m = self.moment
@@ -447,10 +474,21 @@ class Model(_Handle):
                                       _c.ptr(w), rows, n))
         return out[0] if np.ndim(q) == 1 else out
 
+    def predict_dataset(self, data: "Dataset") -> np.ndarray:
+        """What the model predicts for every row of `data`, N x 3 [m]: the displacement of a
+        displacement row, the target position in the instrument frame of an absolute row (the
+        registration of its session, which the fit must have identified)."""
+        return _c.get_doubles(lib.stiff_predict_dataset, self, data).reshape(-1, 3)
+
 
 def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "none",
-             loss_scale_m: float = 0.0, method: str = "auto", max_iterations: int = 0) -> Fit:
-    """Identify the compliance model (effects joined by '+') from measured displacements."""
+             loss_scale_m: float = 0.0, method: str = "auto", max_iterations: int = 0,
+             max_relative_se: float = 100.0) -> Fit:
+    """Identify the model (effects joined by '+') from measured displacements and/or absolute
+    positions (e.g. model='registration+tool+joint_offset+kinematic' on absolute data).
+    `max_relative_se`: a parameter whose standard error exceeds this many times both its
+    typical magnitude and a third of its value is held (docs/identifiability.md); 0 keeps only
+    the structural rank test."""
     methods = {"auto": 0, "linear": 1, "ceres": 2}
     if method not in methods:
         raise ValueError(f"unknown method {method!r} (use auto, linear, ceres)")
@@ -464,6 +502,9 @@ def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "non
     o.loss_scale_m = loss_scale_m
     o.max_iterations = max_iterations
     o.method = methods[method]
+    if not (max_relative_se >= 0 and math.isfinite(max_relative_se)):
+        raise ValueError("max_relative_se must be a finite value >= 0")
+    o.max_relative_se = max_relative_se if max_relative_se > 0 else -1.0
     h = C.c_void_p()
     check(lib.stiff_identify(C.byref(h), robot, data, C.byref(o)))
     return Fit(h)

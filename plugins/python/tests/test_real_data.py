@@ -1,20 +1,23 @@
-"""stiff's geometric calibration on the shipped UR5 data against the independent reference
-(bench/peers/absolute_ref.py, docs/real-data.md). Skipped while this build of stiff has no
-geometric calibration effects."""
+"""stiff's geometric calibration of the shipped UR5 data (Jacobi 2025: grid poses to calibrate,
+the 20 random poses to validate), run as a user runs it (`stiff identify`, `stiff predict`),
+against the independent reference (bench/peers/absolute_ref.py: standard DH + Hayati terms,
+pivoted-QR identifiable set) on the same poses. On the full grid the reference reaches a mean of
+0.1005 mm and a max of 0.158 mm, and stiff is accepted at mean <= 0.105 mm and max <= 0.173 mm:
+the same relative margins over the reference apply here. To keep the test short it calibrates
+on every 4th grid pose (250); the full grid and the other models run in bench/real_data.py
+(docs/real-data.md)."""
 import csv
+import json
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
-import stiff
-
 GEOMETRY = ["registration", "tool", "joint_offset", "kinematic"]
-
-# The reference's figure on the 20 random poses after calibrating on the 1000 grid poses
-# (docs/real-data.md), and the resolution of a 20-pose mean: 1.96 s / sqrt(20) with s ~ 0.03 mm.
-REFERENCE_MEAN_MM, RESOLUTION_MM, MAX_MM = 0.1005, 0.013, 0.173
+# Margins over the reference: the accepted figures over the reference's on the full grid.
+MEAN_MARGIN, MAX_MARGIN = 0.105 / 0.1005, 0.173 / 0.158
+EVERY = 4  # grid subsample for the test
 
 
 def _positions_mm(path):
@@ -24,15 +27,25 @@ def _positions_mm(path):
                                            for x in r])
 
 
-def test_ur5_geometry_validation_matches_reference(root, tmp_path):
-    if not set(GEOMETRY) <= set(stiff.effects()):
-        pytest.skip("this build of stiff has no geometric calibration effects")
-    grid = root / "examples/real/ur5/ur5_grid.csv"
+def _grid(root, tmp_path):
+    """Every EVERY-th data row of the grid file (metadata and header kept)."""
+    lines = (root / "examples/real/ur5/ur5_grid.csv").read_text().splitlines()
+    head = [i for i, ln in enumerate(lines) if ln and not ln.startswith("#")][0]
+    body = [ln for ln in lines[head + 1:] if ln]
+    out = tmp_path / "grid.csv"
+    out.write_text("\n".join(lines[:head + 1] + body[::EVERY]) + "\n")
+    return out
+
+
+def _calibrate(root, tmp_path, model, *options):
+    """Per-pose validation errors [mm] and the fit JSON of `model` fitted on the grid subset."""
+    grid = _grid(root, tmp_path)
     test = root / "examples/real/ur5/ur5_random.csv"
-    fit, pred = tmp_path / "fit.json", tmp_path / "pred.csv"
+    tag = model + "".join(options)
+    fit, pred = tmp_path / f"{tag}.json", tmp_path / f"{tag}.csv"
     cli = [sys.executable, "-m", "stiff.cli"]
-    for cmd in (["identify", "--robot", "ur5", "--data", str(grid), "--model", "+".join(GEOMETRY),
-                 "-o", str(fit)],
+    for cmd in (["identify", "--robot", "ur5", "--data", str(grid), "--model", model,
+                 *options, "-o", str(fit)],
                 ["predict", "--robot", "ur5", "--fit", str(fit), "--data", str(test),
                  "-o", str(pred)]):
         r = subprocess.run(cli + cmd, capture_output=True, text=True)
@@ -41,5 +54,58 @@ def test_ur5_geometry_validation_matches_reference(root, tmp_path):
     with open(pred) as f:
         P = {x["id"]: [float(x[k]) * 1e3 for k in ("x_m", "y_m", "z_m")] for x in csv.DictReader(f)}
     e = np.linalg.norm(np.array([P[i] for i in ids]) - measured, axis=1)
-    assert e.mean() <= REFERENCE_MEAN_MM + RESOLUTION_MM, e.mean()
-    assert e.max() <= MAX_MM
+    return e, json.loads(fit.read_text())
+
+
+@pytest.fixture(scope="module")
+def geometry(root, tmp_path_factory):
+    """stiff's default: the structural rank test, then the statistical test."""
+    return _calibrate(root, tmp_path_factory.mktemp("ur5"), "+".join(GEOMETRY))
+
+
+@pytest.fixture(scope="module")
+def geometry_rank(root, tmp_path_factory):
+    """The reference's own rule: the structural rank test alone (--max-relative-se 0)."""
+    return _calibrate(root, tmp_path_factory.mktemp("ur5r"), "+".join(GEOMETRY),
+                      "--max-relative-se", "0")
+
+
+@pytest.fixture(scope="module")
+def reference(root, tmp_path_factory):
+    pytest.importorskip("scipy")
+    sys.path.insert(0, str(root / "bench" / "peers"))
+    import absolute_ref as ref
+
+    grid = ref.read_absolute(_grid(root, tmp_path_factory.mktemp("ref")))
+    test = ref.read_absolute(root / "examples/real/ur5/ur5_random.csv")
+    cal = ref.calibrate(ref.robot_dh("ur5"), grid, gravity=False)
+    return ref.errors(cal.predict(test), test)
+
+
+def test_ur5_geometry_with_the_references_rule_reaches_the_reference(geometry_rank, reference):
+    e, _ = geometry_rank
+    assert e.mean() <= MEAN_MARGIN * reference["mean_mm"], (e.mean(), reference["mean_mm"])
+    assert e.max() <= MAX_MARGIN * reference["max_mm"], (e.max(), reference["max_mm"])
+
+
+def test_ur5_geometry_default_mean_within_the_resolution_of_the_reference(geometry, reference):
+    # The statistical test holds a few more parameters than the rank test; the 20 poses resolve
+    # a mean to about +-0.013 mm (1.96 s / sqrt(20), s ~ 0.03 mm).
+    e, _ = geometry
+    assert e.mean() <= MEAN_MARGIN * reference["mean_mm"] + 0.013, (e.mean(), reference)
+
+
+def test_ur5_geometry_holds_and_names_what_the_data_do_not_determine(geometry):
+    _, fit = geometry
+    held = {p["effect"] + "." + p["name"] for p in fit["parameters"] if not p["identified"]}
+    # The first axis's zero, position and tilt are the registration's: held, not fitted.
+    assert {"joint_offset.dq1", "kinematic.du1", "kinematic.dv1"} <= held
+    warnings = fit.get("warnings", [])
+    for h in held:
+        assert any(w.startswith(h + " is not identifiable") for w in warnings), h
+
+
+def test_ur5_nominal_geometry_is_several_times_worse(root, tmp_path, geometry):
+    # Only the registration and the tool fitted: the geometry is what matters on this arm.
+    e_nominal, _ = _calibrate(root, tmp_path, "registration+tool")
+    assert e_nominal.mean() > 4 * geometry[0].mean()

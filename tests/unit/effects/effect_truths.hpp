@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cmath>
+#include <random>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -40,6 +41,65 @@ inline std::vector<std::string> registered_effects() {
   for (const auto& name : effect_names())
     if (name != "joint") out.push_back(name);
   return out;
+}
+
+/// What the effect requires of the data (Effect::requirements).
+inline unsigned requirements_of(const std::string& effect, const RobotModel& robot) {
+  EffectSetup setup;
+  setup.robot = &robot;
+  return make_effect(effect, setup)->requirements();
+}
+
+/// The rows the effects act on: a design of loaded-minus-unloaded rows as it is, or, when an
+/// effect acts on absolute rows only (kNeedsAbsolute), every row turned into an absolute row of
+/// one tracker placement whose frame is the robot base (position: the nominal forward
+/// kinematics of the measured point, the row's load kept), with a workshop's spread of
+/// temperatures (14-26 deg C) when an effect needs them. A session column when one is needed.
+inline Dataset data_for(const std::vector<std::string>& effects,
+                        const RobotModel& robot,
+                        Dataset data) {
+  unsigned req = 0;
+  for (const auto& e : effects) req |= requirements_of(e, robot);
+  if (req & (kNeedsSessions | kNeedsAbsolute)) {
+    data.has_session = true;
+    for (auto& m : data.rows) m.session = "s1";
+  }
+  if (!(req & kNeedsAbsolute)) return data;
+  data.has_position = true;
+  data.has_temperature = true;
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    Measurement& m = data.rows[r];
+    m.absolute = true;
+    m.position = robot.point_position(robot.chain(m.q), robot.measured_point);
+    m.temperature = 20.0 + 6.0 * std::sin(0.7 * static_cast<double>(r));
+  }
+  return data;
+}
+inline Dataset data_for(const std::string& effect, const RobotModel& robot, Dataset data) {
+  return data_for(std::vector<std::string>{"joint", effect}, robot, std::move(data));
+}
+
+/// The virtual robot's measurements of a design: simulate() for loaded-minus-unloaded rows;
+/// for effects that act on absolute rows only, the rows of data_for() with the truth's
+/// predicted positions plus Gaussian tracker noise (per axis, noise.tracker_sigma_m).
+inline Dataset measure(const RobotModel& robot,
+                       const Truth& truth,
+                       const Dataset& design,
+                       const NoiseModel& noise) {
+  unsigned req = 0;
+  for (const auto& e : truth.effects) req |= requirements_of(e, robot);
+  if (!(req & kNeedsAbsolute)) return simulate(robot, truth, design, noise);
+  Dataset data = data_for(truth.effects, robot, design);
+  const DeflectionModel m(robot, truth.effects, &data);
+  const auto ctx = m.contexts(data);
+  std::mt19937_64 rng(noise.seed);
+  std::normal_distribution<double> z(0.0, noise.tracker_sigma_m);
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    auto& row = data.rows[r];
+    row.position = m.predict(truth.theta, row, ctx[r]).head<3>();
+    for (int a = 0; a < 3; ++a) row.position(a) += z(rng);
+  }
+  return data;
 }
 
 /// The paper's 60-pose random design (loads 15-35 N per axis).

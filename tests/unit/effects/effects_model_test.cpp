@@ -18,11 +18,12 @@ const std::vector<std::string> kEffects = test::registered_effects();
 TEST(Effects, RegistryHasEveryEffectWithTexts) {
   const auto names = effect_names();
   const RobotModel robot = test::rokae();
-  const Dataset data = test::design60(1, 5);
+  const Dataset design = test::design60(1, 5);
   EffectSetup setup;
   setup.robot = &robot;
-  setup.data = &data;
   for (const auto& name : kEffects) {
+    const Dataset data = test::data_for(name, robot, design);
+    setup.data = &data;
     ASSERT_NE(std::find(names.begin(), names.end(), name), names.end()) << name;
     const auto e = make_effect(name, setup);
     EXPECT_EQ(e->name(), name);
@@ -54,8 +55,9 @@ TEST(Effects, LinkKeepsOnlyDirectionsTheJointsCannotAbsorb) {
 
 TEST(Effects, NullParametersSwitchEveryEffectOff) {
   const RobotModel robot = test::rokae();
-  const Dataset data = test::design60(2, 8);
+  const Dataset design = test::design60(2, 8);
   for (const auto& name : kEffects) {
+    const Dataset data = test::data_for(name, robot, design);
     DeflectionModel base(robot, {"joint"}, &data), full(robot, {"joint", name}, &data);
     Eigen::VectorXd t = full.null_parameters();
     t.head(6) = test::paper_stiffness().cwiseInverse();
@@ -98,8 +100,10 @@ void expect_jacobian_matches(const std::vector<std::string>& effects,
 
 TEST(Effects, AutodiffJacobianMatchesCentralDifferences) {
   const RobotModel robot = test::rokae();
-  const Dataset data = test::design60(3, 6);
+  const Dataset design = test::design60(3, 6);
   for (const auto& name : kEffects) {
+    // Absolute rows for an effect that acts on nothing else.
+    const Dataset data = test::data_for(name, robot, design);
     DeflectionModel m(robot, {"joint", name}, &data);
     Eigen::VectorXd theta = test::effect_truth(name, robot).theta;
     // Move every parameter off its null value so that every derivative is exercised.
@@ -107,14 +111,34 @@ TEST(Effects, AutodiffJacobianMatchesCentralDifferences) {
       if (theta(k) == m.spec(k).null_value)
         theta(k) = std::min(m.spec(k).upper, m.spec(k).null_value + 0.3 * m.spec(k).typical);
     expect_jacobian_matches({"joint", name}, theta, m, data);
+    // The effect acts on these rows: a check of zero derivatives would prove nothing.
+    const auto ctx = m.contexts(data);
+    double largest = 0;
+    for (size_t r = 0; r < data.size(); ++r)
+      largest = std::max(largest, m.displacement_jacobian(theta, data.rows[r], ctx[r])
+                                      .rightCols(m.effects()[1]->size())
+                                      .cwiseAbs()
+                                      .maxCoeff());
+    EXPECT_GT(largest, 0.0) << name;
   }
 }
 
 TEST(Effects, AutodiffJacobianOfAllEffectsTogether) {
   const RobotModel robot = test::rokae();
-  const Dataset data = test::design60(4, 6);
   std::vector<std::string> all = {"joint"};
   all.insert(all.end(), kEffects.begin(), kEffects.end());
+  // The first half of the rows as loaded-minus-unloaded rows, the rest as absolute rows (when
+  // an effect needs them): both kinds in one model.
+  Dataset data = test::design60(4, 6);
+  const Dataset converted = test::data_for(all, robot, data);
+  data.has_session = converted.has_session;
+  data.has_position = converted.has_position;
+  data.has_temperature = converted.has_temperature;
+  for (size_t r = 0; r < data.size(); ++r)
+    if (2 * r >= data.size())
+      data.rows[r] = converted.rows[r];
+    else
+      data.rows[r].session = converted.rows[r].session;
   DeflectionModel m(robot, all, &data);
   Eigen::VectorXd theta(m.parameter_count());
   for (int k = 0; k < m.parameter_count(); ++k)
@@ -131,8 +155,9 @@ TEST(Effects, AutodiffJacobianOfAllEffectsTogether) {
 // two parameter vectors a few typical sizes apart, to round-off.
 TEST(Effects, LinearClaimHoldsNumerically) {
   const RobotModel robot = test::rokae();
-  const Dataset data = test::design60(5, 8);
+  const Dataset design = test::design60(5, 8);
   for (const auto& name : kEffects) {
+    const Dataset data = test::data_for(name, robot, design);
     const DeflectionModel model(robot, {"joint", name}, &data);
     if (!model.effects()[1]->linear()) continue;
     ASSERT_TRUE(model.linear()) << name;

@@ -153,7 +153,19 @@ TEST(IdentifyCeres, EveryLossRuns) {
     o.loss = loss;
     const FitResult f = identify(test::rokae(), data, {"joint"}, o);
     EXPECT_EQ(f.loss, loss);
-    for (int j = 0; j < 5; ++j) EXPECT_TRUE(std::isfinite(f.parameters[j].standard_error)) << loss;
+    for (int j = 0; j < 5; ++j) {
+      // Least squares lets the 0.5 mm outliers inflate the residual scale about tenfold: the
+      // stiffest joint's compliance is then not determined (standard error above its typical
+      // magnitude and a third of its value) and is held, named in a warning.
+      if (loss == "none" && !f.parameters[j].identified) {
+        bool named = false;
+        for (const auto& w : f.warnings)
+          named = named || w.find("joint.c" + std::to_string(j + 1)) != std::string::npos;
+        EXPECT_TRUE(named) << "joint " << j + 1;
+        continue;
+      }
+      EXPECT_TRUE(std::isfinite(f.parameters[j].standard_error)) << loss << " joint " << j + 1;
+    }
   }
 }
 

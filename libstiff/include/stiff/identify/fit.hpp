@@ -37,7 +37,10 @@ struct FitResult {
   /// kinematics_digest() of the robot the fit was identified on; empty in older files.
   std::string robot_digest;
   std::vector<std::string> model;  ///< effect names
-  std::string method;              ///< "linear_least_squares" or "ceres"
+  /// Session labels in the model's order (absolute data: one registration each); empty when
+  /// the data had no sessions.
+  std::vector<std::string> sessions;
+  std::string method;  ///< "linear_least_squares" or "ceres"
   std::string loss = "none";
   double loss_scale_m = 0.0;
   std::vector<FitParameter> parameters;

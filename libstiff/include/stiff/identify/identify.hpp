@@ -17,6 +17,8 @@ struct LinearOptions {
   double rank_tolerance = 1e-8;
   /// Weight rows by 1/sigma_d when the data has sigma_d.
   bool use_sigma = true;
+  /// The statistical identifiability limit, as IdentifyOptions::max_relative_se.
+  double max_relative_se = 100.0;
 };
 
 /// Least-squares identification of the diagonal joint compliances (`joint` model), c =
@@ -47,10 +49,25 @@ struct IdentifyOptions {
   /// Sine of the angle below which a (column-scaled) Jacobian column counts as lying in the
   /// span of the columns before it: that parameter is not identifiable and is held fixed.
   double rank_tolerance = 1e-6;
+  /// A parameter whose standard error at the solution exceeds this many times its typical
+  /// magnitude (ParameterSpec::typical; two orders of magnitude: beyond any physically
+  /// plausible value) and a third of its distance from its null value is not determined by
+  /// the data: it is held at its null value, named in `warnings`, and the rest solved again
+  /// (docs/identifiability.md). 0 turns the statistical test off (structural rank only).
+  double max_relative_se = 100.0;
   /// Called after every Ceres iteration with (iteration, cost); return false to cancel (the
   /// call then throws Cancelled).
   std::function<bool(int, double)> progress;
 };
+
+/// Checks of absolute rows against the nominal robot that the file alone cannot make
+/// (identify() runs them): without a `registration` effect (`registered` false) the measured
+/// positions must lie near where the nominal robot puts the target (else the instrument frame
+/// is metres away from the base, and the message says by how much); orientations, where
+/// given, must turn between the poses of one session by the angles the robot's flange turns
+/// (this is independent of the registration and the tool, and catches an Euler convention
+/// or an angle unit mixed up). Throws InvalidArgument naming the session and the sizes.
+void check_absolute_data(const RobotModel& robot, const Dataset& data, bool registered);
 
 /// Names of the robust losses identify() accepts.
 std::vector<std::string> loss_names();

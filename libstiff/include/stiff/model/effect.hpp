@@ -10,6 +10,12 @@
 ///     (then d = J_p(P) dtheta, rot = J_r dtheta)
 ///  3. cartesian:   displacement added in the base frame (link compliance, tool compliance);
 ///  4. measurement: what the tracker reports (tracker frame rotation, drift).
+/// An absolute row (Measurement::absolute: the position of the target in the instrument's
+/// frame) also runs, between stages 3 and 4,
+///  G. geometry:    corrections of the kinematic chain (joint offsets, axis errors); the model
+///                  then evaluates the corrected forward kinematics of the measured point and
+///                  adds the deflection d of stages 1-3, so that stage 4 receives the absolute
+///                  position in `d` and maps it into the instrument frame (registration).
 /// Each effect writes its stage functions once as templates on the scalar T (double or
 /// ceres::Jet) so that Ceres differentiates them automatically; EffectT instantiates them.
 #pragma once
@@ -69,8 +75,13 @@ struct EvalState {
   /// Diagonal joint compliances c_j [rad/(N*m)] as set by the `joint` effect in stage 2
   /// (empty when the model has no joint effect); read by second-order effects in stage 3.
   VectorX<T> compliance;
-  Vector3<T> d;    ///< displacement of P [m] (stages 3-4)
+  Vector3<T> d;    ///< displacement of P [m] (stages 3-4); absolute rows: position (stage 4)
   Vector3<T> rot;  ///< small rotation of the flange [rad] (stages 3-4)
+  /// Geometry stage (absolute rows): corrections added to the joint angles [rad] and, per
+  /// joint, a small transform inserted after the joint's `pre` transform (in that frame):
+  /// translation (0-2) [m] and rotation vector (3-5) [rad]. Both start at zero.
+  VectorX<T> dq;
+  Matrix6X<T> joint_error;
 };
 
 /// What an effect needs from the robot file or the data.
@@ -79,6 +90,12 @@ enum Requirement : unsigned {
   kNeedsMasses = 1u << 0,    ///< link masses (gravity torques)
   kNeedsTime = 1u << 1,      ///< a `t` column or meaningful row order
   kNeedsSessions = 1u << 2,  ///< a `session` column
+  /// Absolute rows: the effect is identified from positions in the instrument frame; a
+  /// loaded-minus-unloaded displacement does not see it (constant geometry and self-weight
+  /// cancel there) or another effect already models what it sees (the tool's target offset is
+  /// point_offset's measured point). The diagnosis does not propose it on data without them.
+  kNeedsAbsolute = 1u << 3,
+  kNeedsTemperature = 1u << 4,  ///< a `temp` column (absolute rows)
 };
 
 /// The stages of an evaluation (Effect::stages).
@@ -87,7 +104,8 @@ enum Stage : unsigned {
   kJointStage = 1u << 1,
   kCartesianStage = 1u << 2,
   kMeasurementStage = 1u << 3,
-  kAllStages = 15u,
+  kGeometryStage = 1u << 4,
+  kAllStages = 31u,
 };
 
 /// A physical effect configured for one robot (and, where it matters, one dataset).
@@ -145,6 +163,8 @@ class Effect {
   virtual void cartesian(const Jet* p, EvalState<Jet>& s) const = 0;
   virtual void measurement(const double* p, EvalState<double>& s) const = 0;
   virtual void measurement(const Jet* p, EvalState<Jet>& s) const = 0;
+  virtual void geometry(const double* p, EvalState<double>& s) const = 0;
+  virtual void geometry(const Jet* p, EvalState<Jet>& s) const = 0;
 };
 
 /// CRTP helper: an effect defines any of
@@ -162,6 +182,8 @@ class EffectT : public Effect {
   void cartesian_t(const T*, EvalState<T>&) const {}
   template <typename T>
   void measurement_t(const T*, EvalState<T>&) const {}
+  template <typename T>
+  void geometry_t(const T*, EvalState<T>&) const {}
 
   void wrench(const double* p, EvalState<double>& s) const final { self().wrench_t(p, s); }
   void wrench(const Jet* p, EvalState<Jet>& s) const final { self().wrench_t(p, s); }
@@ -173,6 +195,8 @@ class EffectT : public Effect {
     self().measurement_t(p, s);
   }
   void measurement(const Jet* p, EvalState<Jet>& s) const final { self().measurement_t(p, s); }
+  void geometry(const double* p, EvalState<double>& s) const final { self().geometry_t(p, s); }
+  void geometry(const Jet* p, EvalState<Jet>& s) const final { self().geometry_t(p, s); }
   unsigned stages() const override {
     // A stage function the effect does not define is this class's: its member pointer type
     // names EffectT.
@@ -185,7 +209,9 @@ class EffectT : public Effect {
                 : kCartesianStage) |
            (is_same<decltype(&Derived::template measurement_t<double>), Fn>::value
                 ? 0u
-                : kMeasurementStage);
+                : kMeasurementStage) |
+           (is_same<decltype(&Derived::template geometry_t<double>), Fn>::value ? 0u
+                                                                                : kGeometryStage);
   }
 
  private:
@@ -198,6 +224,8 @@ struct EffectSetup {
   const RobotModel* robot = nullptr;
   const Dataset* data = nullptr;  ///< may be null (prediction without data)
   int sessions = 1;               ///< number of distinct sessions in the data
+  /// Their labels in the model's session order (from the data, else from a fit).
+  std::vector<std::string> session_labels;
 };
 
 using EffectFactory = std::unique_ptr<Effect> (*)(const EffectSetup&);

@@ -21,9 +21,12 @@ class DeflectionModel {
  public:
   /// Build from effect names. `data` (may be null) supplies sessions and time for effects that
   /// need them. Throws InvalidArgument for unknown names or missing requirements.
+  /// `sessions` names the sessions when there is no data (a model rebuilt from a fit:
+  /// FitResult::sessions), so that per-session parameters keep their order.
   DeflectionModel(const RobotModel& robot,
                   const std::vector<std::string>& effects,
-                  const Dataset* data = nullptr);
+                  const Dataset* data = nullptr,
+                  const std::vector<std::string>& sessions = {});
 
   const RobotModel& robot() const { return robot_; }
   const std::vector<std::unique_ptr<Effect>>& effects() const { return effects_; }
@@ -96,6 +99,10 @@ class DeflectionModel {
 
   /// Index of a session label (0 for unknown labels and for data without sessions).
   int session_index(const std::string& label) const;
+  /// True when the model knows the session label.
+  bool has_session(const std::string& label) const { return sessions_.count(label) > 0; }
+  /// Session labels in index order.
+  std::vector<std::string> session_labels() const;
 
  private:
   template <typename T>

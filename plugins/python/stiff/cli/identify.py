@@ -11,21 +11,29 @@ from .common import (Formatter, add_limits_flag, add_robot, check_joint_limits, 
 EXAMPLE = """example:
   stiff identify --robot rokae --data data.csv -o fit.json
   stiff identify --robot rokae --data data.csv --model joint+link+point_offset --loss huber -o fit.json
+  stiff identify --robot ur5 --data examples/real/ur5/ur5_grid.csv --model registration+tool+joint_offset+kinematic -o ur5.json
 
 --model takes effect names joined by '+' (see `stiff effects`). The model 'joint' without a
-robust loss is solved by linear least squares (Jiang & Fang 2023); anything else by Ceres."""
+robust loss is solved by linear least squares (Jiang & Fang 2023); anything else by Ceres.
+Absolute measurements (px, py, pz in the instrument frame, docs/formats.md) need the geometric
+effects: registration (one per session), tool, joint_offset, kinematic (docs/effects.md)."""
 
 
 def register(sub):
     p = sub.add_parser("identify", help="identify joint stiffness (and effects) from measurements",
                        description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
     add_robot(p)
-    p.add_argument("--data", "-d", required=True, help="measurement CSV with displacements")
+    p.add_argument("--data", "-d", required=True,
+                   help="measurement CSV with displacements and/or absolute positions")
     p.add_argument("--model", "-m", default="joint", help="effects joined by '+' (default: joint)")
     p.add_argument("--loss", default="none", help="none, huber, cauchy, soft_l1, tukey (default none)")
     p.add_argument("--loss-scale-um", type=float, default=0.0,
                    help="robust loss scale [um] (default: from sigma_d or the data)")
     p.add_argument("--method", default="auto", choices=["auto", "linear", "ceres"])
+    p.add_argument("--max-relative-se", type=float, default=100.0,
+                   help="hold a parameter whose standard error exceeds this many times both its "
+                        "typical magnitude and a third of its value (docs/identifiability.md); "
+                        "0: structural rank test only (default 100)")
     p.add_argument("-o", "--output", help="fit JSON to write")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of tables")
     add_limits_flag(p)
@@ -82,7 +90,8 @@ def run(args):
     data = api.Dataset.read(args.data, robot)
     check_joint_limits(robot, data, args.data, args.ignore_limits)
     fit = api.identify(robot, data, model=args.model, loss=args.loss,
-                       loss_scale_m=args.loss_scale_um * 1e-6, method=args.method)
+                       loss_scale_m=args.loss_scale_um * 1e-6, method=args.method,
+                       max_relative_se=args.max_relative_se)
     if args.output:
         fit.write(args.output)
     if args.json:

@@ -10,7 +10,10 @@ EXAMPLE = """example:
   stiff predict --robot rokae --fit fit.json --data valid.csv -o predicted.csv
 
 Writes the predicted displacement of every row in the measurement format with the same ids;
-when the data holds measured displacements, prints the RMS prediction error."""
+when the data holds measured displacements, prints the RMS prediction error. On absolute data
+(px, py, pz columns) it prints the position error (mean, RMS, max) and writes id, absolute,
+x_m, y_m, z_m: the predicted position in the instrument frame (the displacement on
+displacement rows)."""
 
 
 def register(sub):
@@ -29,7 +32,10 @@ def run(args):
     fit = api.Fit.read(args.fit)
     data = api.Dataset.read(args.data, robot)
     check_joint_limits(robot, data, args.data, args.ignore_limits)
-    pred = api.Model(robot, fit).predict(data.q, data.wrench)
+    model = api.Model(robot, fit)
+    if data.position is not None:
+        return run_absolute(args, robot, model, data)
+    pred = model.predict(data.q, data.wrench)
     measured = data.displacement
     if measured is not None:
         err = measured - pred[:, :3]
@@ -45,3 +51,34 @@ def run(args):
         print(f"wrote {args.output}")
     return 0
 
+
+
+def run_absolute(args, robot, model, data):
+    """Absolute (or mixed) data: the predicted position in the instrument frame of each
+    absolute row (displacement of the others), and the position error where measured."""
+    pred = model.predict_dataset(data)
+    err = np.linalg.norm(data.observed - pred, axis=1)
+    ab = data.absolute
+    if ab.any():
+        e = err[ab]
+        worst = int(np.flatnonzero(ab)[np.argmax(e)])
+        print(f"absolute position error on {int(ab.sum())} rows: mean {e.mean() * 1e3:.4f} mm, "
+              f"RMS {np.sqrt(np.mean(e ** 2)) * 1e3:.4f} mm, max {e.max() * 1e3:.4f} mm "
+              f"at {data.ids[worst]}")
+    if (~ab).any() and data.displacement is not None:
+        e = err[~ab]
+        print(f"displacement error on {int((~ab).sum())} rows: RMS "
+              f"{np.sqrt(np.mean(e ** 2) / 3) * 1e6:.2f} um per axis")
+    if args.output:
+        # The predicted value replaces the measured one; ids, sessions and metadata stay.
+        import csv
+        rows = data.ids
+        with open(args.output + ".tmp", "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["id", "absolute", "x_m", "y_m", "z_m"])
+            for i, r in enumerate(rows):
+                w.writerow([r, int(ab[i])] + [repr(float(v)) for v in pred[i]])
+        import os
+        os.replace(args.output + ".tmp", args.output)
+        print(f"wrote {args.output}")
+    return 0

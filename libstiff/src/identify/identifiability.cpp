@@ -1,0 +1,228 @@
+// The identifiability decision of every fit (identifiability.hpp, docs/identifiability.md).
+#include "identify/identifiability.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/QR>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "stiff/error.hpp"
+#include "stiff/model/effect.hpp"
+
+namespace stiff::detail {
+
+std::string qualified(const DeflectionModel& model, int k) {
+  return model.owner(k).name() + "." + model.spec(k).name;
+}
+
+namespace {
+
+std::string num(double v) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.3g", v);
+  return b;
+}
+
+/// Which parameters the data cannot identify at theta. Columns are taken in priority order
+/// (joint compliances first, then the effects in model order), normalised, and a column is
+/// accepted when its component orthogonal to the accepted ones has relative norm above
+/// `tolerance`; otherwise it is named with the parameters it is confounded with.
+/// The order in which parameters claim what the data show: the joint compliances first (the
+/// deflection model's core), then the effects in model order; on a geometric model (an effect
+/// that corrects the chain or registers the instrument) the model order alone, so that the
+/// registration, tool and geometry the user lists first keep what the compliances share.
+std::vector<int> priority_order(const DeflectionModel& model) {
+  const int p = model.parameter_count();
+  bool geometric = false;
+  for (const auto& e : model.effects())
+    geometric = geometric || (e->stages() & kGeometryStage) || e->name() == "registration";
+  std::vector<int> order;
+  const int je = model.find("joint");
+  if (je >= 0 && !geometric)
+    for (int k = 0; k < model.effects()[je]->size(); ++k) order.push_back(model.offset(je) + k);
+  for (int k = 0; k < p; ++k)
+    if (std::find(order.begin(), order.end(), k) == order.end()) order.push_back(k);
+  return order;
+}
+
+Identifiability structural(const DeflectionModel& model,
+                           const Eigen::MatrixXd& j,
+                           const Eigen::VectorXd& typical,
+                           double tolerance) {
+  const int p = model.parameter_count();
+  // Finite but absurd data (a displacement of 1e308 m) overflow the Jacobian; the rank test
+  // below would then run a QR on an empty matrix.
+  if (!j.allFinite())
+    throw NumericalError(
+        "identify: the Jacobian is not finite (overflow): check the units and sizes of the loads "
+        "and displacements (N, N*m, m)");
+  Identifiability out;
+  out.fixed.assign(p, false);
+  out.reason.assign(p, "");
+  const std::vector<int> order = priority_order(model);
+
+  // The same decisions on the p x p Gram matrix J^T J (Cholesky of the normalised columns in
+  // this order: the squared orthogonal rest is 1 - |L^-1 c|^2), which costs a third of the
+  // Gram-Schmidt below on tall J; taken only when every column is clearly accepted (its
+  // rest^2 is resolved to ~1e-15), else the exact path decides.
+  {
+    Eigen::MatrixXd g = Eigen::MatrixXd::Zero(p, p);
+    g.selfadjointView<Eigen::Lower>().rankUpdate(j.transpose());
+    Eigen::MatrixXd l = Eigen::MatrixXd::Zero(p, p);  // rows: accepted columns' factor
+    std::vector<int> acc;
+    Identifiability fast = out;
+    bool clear = true;
+    for (int k : order) {
+      const double norm = std::sqrt(g(k, k));
+      if (!(norm * typical(k) > 1e-9)) {
+        fast.fixed[k] = true;
+        fast.reason[k] = "it has no effect on any of these measurements";
+        continue;
+      }
+      const int a = static_cast<int>(acc.size());
+      Eigen::VectorXd y(a);
+      for (int i = 0; i < a; ++i) {
+        const int c = acc[i];
+        double v = (c > k ? g(c, k) : g(k, c)) / (std::sqrt(g(c, c)) * norm);
+        for (int m = 0; m < i; ++m) v -= l(i, m) * y(m);
+        y(i) = v / l(i, i);
+      }
+      const double rest2 = 1.0 - y.squaredNorm();
+      if (!(rest2 > 100.0 * tolerance * tolerance)) {
+        clear = false;
+        break;
+      }
+      l.row(a).head(a) = y.transpose();
+      l(a, a) = std::sqrt(rest2);
+      acc.push_back(k);
+    }
+    if (clear) return fast;
+  }
+
+  std::vector<Eigen::VectorXd> basis;
+  std::vector<int> accepted;
+  for (int k : order) {
+    const double norm = j.col(k).norm();
+    // Moving the parameter by its typical magnitude changes the residuals by less than 1e-9
+    // of one noise sigma in total: it has no effect on these measurements.
+    if (!(norm * typical(k) > 1e-9)) {
+      out.fixed[k] = true;
+      out.reason[k] = "it has no effect on any of these measurements";
+      continue;
+    }
+    Eigen::VectorXd v = j.col(k) / norm;
+    for (int pass = 0; pass < 2; ++pass)
+      for (const auto& b : basis) v -= b.dot(v) * b;
+    const double rest = v.norm();
+    if (rest > tolerance) {
+      basis.push_back(v / rest);
+      accepted.push_back(k);
+      continue;
+    }
+    out.fixed[k] = true;
+    if (accepted.empty()) {
+      out.reason[k] = "it has no effect on any of these measurements";
+      continue;
+    }
+    // Name the combination: least-squares coefficients on the accepted (normalised) columns.
+    Eigen::MatrixXd a(j.rows(), accepted.size());
+    for (size_t i = 0; i < accepted.size(); ++i)
+      a.col(i) = j.col(accepted[i]) / j.col(accepted[i]).norm();
+    const Eigen::VectorXd beta = a.colPivHouseholderQr().solve(j.col(k) / norm);
+    const double big = beta.cwiseAbs().maxCoeff();
+    std::string with;
+    for (size_t i = 0; i < accepted.size(); ++i)
+      if (std::abs(beta(i)) > 0.1 * big)
+        with += (with.empty() ? "" : ", ") + qualified(model, accepted[i]);
+    out.reason[k] = "its effect on the measurements is a combination of " + with +
+                    " (the data see only the combination)";
+  }
+  return out;
+}
+
+}  // namespace
+
+Identifiability check_identifiability(const DeflectionModel& model,
+                                      const Eigen::MatrixXd& j,
+                                      const Eigen::VectorXd& typical,
+                                      double tolerance,
+                                      double residual_sigma,
+                                      double max_relative_se,
+                                      const Eigen::VectorXd* theta,
+                                      const std::vector<bool>* fitted) {
+  Identifiability out = structural(model, j, typical, tolerance);
+  out.statistical.assign(out.fixed.size(), false);
+  if (!(max_relative_se > 0) || !(residual_sigma > 0) || !theta) return out;
+  const int p = model.parameter_count();
+  // Gram matrix of the scaled columns once; each round inverts its free block.
+  const Eigen::MatrixXd js = j * typical.asDiagonal();
+  Eigen::MatrixXd g = Eigen::MatrixXd::Zero(p, p);
+  g.selfadjointView<Eigen::Lower>().rankUpdate(js.transpose());
+  g = g.selfadjointView<Eigen::Lower>();
+  std::vector<int> rank(p);  // position in the priority order
+  {
+    const std::vector<int> order = priority_order(model);
+    for (int i = 0; i < p; ++i) rank[order[i]] = i;
+  }
+  while (true) {
+    std::vector<int> free;
+    for (int k = 0; k < p; ++k)
+      if (!out.fixed[k]) free.push_back(k);
+    const int nf = static_cast<int>(free.size());
+    if (nf == 0) break;
+    Eigen::MatrixXd gf(nf, nf);
+    for (int a = 0; a < nf; ++a)
+      for (int b = 0; b < nf; ++b) gf(a, b) = g(free[a], free[b]);
+    // Equilibrate so that the inverse is accurate for columns of very different norms.
+    const Eigen::VectorXd d = gf.diagonal().cwiseSqrt().cwiseMax(1e-300).cwiseInverse();
+    const Eigen::MatrixXd ge = d.asDiagonal() * gf * d.asDiagonal();
+    const Eigen::MatrixXd cov =
+        d.asDiagonal() * ge.ldlt().solve(Eigen::MatrixXd::Identity(nf, nf)) * d.asDiagonal();
+    // se in units of the typical magnitude; the scale a parameter must be determined to:
+    // its typical magnitude, or a third of its value when that is larger (t >= 3). Of the
+    // parameters that fail, the last in priority order is held (in a correlated group the
+    // others then become determined, as in the structural test).
+    int worst = -1;
+    double worst_se = 0.0;
+    for (int a = 0; a < nf; ++a) {
+      const double se = residual_sigma * std::sqrt(std::max(0.0, cov(a, a)));
+      const int k = free[a];
+      if (fitted && !(*fitted)[k]) continue;
+      const double from_null = std::abs((*theta)(k)-model.spec(k).null_value);
+      const double scale = std::max(1.0, from_null / (3.0 * typical(k)));
+      if (se / scale <= max_relative_se) continue;  // NaN fails
+      if (worst < 0 || rank[free[a]] > rank[free[worst]]) {
+        worst = a;
+        worst_se = std::isfinite(se) ? se : INFINITY;
+      }
+    }
+    if (worst < 0) break;
+    const int k = free[worst];
+    int partner = -1;
+    double corr = 0.0;
+    for (int b = 0; b < nf; ++b) {
+      if (b == worst) continue;
+      const double c = cov(worst, b) / std::sqrt(cov(worst, worst) * cov(b, b));
+      if (std::abs(c) > std::abs(corr)) {
+        corr = c;
+        partner = free[b];
+      }
+    }
+    const auto& sp = model.spec(k);
+    out.fixed[k] = true;
+    out.statistical[k] = true;
+    out.reason[k] = "the data determine it only to +-" + num(worst_se * typical(k)) + " " +
+                    sp.unit + " (standard error), more than its typical magnitude " +
+                    num(typical(k)) + " " + sp.unit + " and a third of its distance " +
+                    num(std::abs((*theta)(k)-sp.null_value)) + " " + sp.unit +
+                    " from its null value" +
+                    (max_relative_se != 1.0 ? " (times " + num(max_relative_se) + ")" : "") +
+                    (partner >= 0 && std::abs(corr) > 0.5
+                         ? "; it is correlated " + num(corr) + " with " + qualified(model, partner)
+                         : std::string());
+  }
+  return out;
+}
+
+}  // namespace stiff::detail

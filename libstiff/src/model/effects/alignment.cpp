@@ -1,0 +1,100 @@
+// First alignment of absolute measurements with the nominal robot (start values of the
+// registration and tool effects).
+#include <Eigen/QR>
+#include <Eigen/SVD>
+#include <map>
+
+#include "stiff/model/effects/common.hpp"
+
+namespace stiff::effects {
+namespace {
+
+Alignment compute(const RobotModel& robot, const Dataset& data) {
+  Alignment a;
+  std::map<std::string, int> index;
+  std::vector<int> row_session;
+  // Session order as DeflectionModel numbers them: first appearance over all rows.
+  for (const auto& m : data.rows)
+    if (!index.count(m.session)) {
+      index[m.session] = static_cast<int>(a.sessions.size());
+      a.sessions.push_back(m.session);
+    }
+  const int ns = static_cast<int>(a.sessions.size());
+  std::vector<Eigen::Matrix3d> rf;
+  std::vector<Eigen::Vector3d> pf, y;
+  for (const auto& m : data.rows) {
+    if (!m.absolute) continue;
+    const Eigen::Matrix4d f = robot.chain(m.q).flange;
+    rf.push_back(f.topLeftCorner<3, 3>());
+    pf.push_back(f.topRightCorner<3, 1>());
+    y.push_back(m.position);
+    row_session.push_back(index[m.session]);
+  }
+  a.rotation.assign(ns, Eigen::Matrix3d::Identity());
+  a.translation.assign(ns, Eigen::Vector3d::Zero());
+  const int n = static_cast<int>(y.size());
+  if (n == 0) return a;
+  const Eigen::Vector3d r0 = robot.measured_point;
+  Eigen::Vector3d delta = Eigen::Vector3d::Zero();
+  for (int iter = 0; iter < 50; ++iter) {
+    // Rotations and translations per session for the current point (Arun et al.).
+    for (int k = 0; k < ns; ++k) {
+      Eigen::Vector3d cx = Eigen::Vector3d::Zero(), cy = Eigen::Vector3d::Zero();
+      int count = 0;
+      for (int i = 0; i < n; ++i)
+        if (row_session[i] == k) {
+          cx += rf[i] * (r0 + delta) + pf[i];
+          cy += y[i];
+          ++count;
+        }
+      if (count == 0) continue;
+      cx /= count;
+      cy /= count;
+      Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
+      for (int i = 0; i < n; ++i)
+        if (row_session[i] == k) h += (rf[i] * (r0 + delta) + pf[i] - cx) * (y[i] - cy).transpose();
+      Eigen::JacobiSVD<Eigen::Matrix3d> svd(h, Eigen::ComputeFullU | Eigen::ComputeFullV);
+      const Eigen::Vector3d sv = svd.singularValues();
+      if (!(sv(1) > 1e-8 * std::max(sv(0), 1e-300)))
+        throw InvalidArgument("session '" + a.sessions[k] +
+                              "': its target positions are (nearly) collinear; registering the "
+                              "instrument needs points spread in a plane at least");
+      Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+      d(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
+      a.rotation[k] = svd.matrixV() * d * svd.matrixU().transpose();
+      a.translation[k] = cy - a.rotation[k] * cx;
+    }
+    // Point offset and translations jointly for these rotations (linear least squares).
+    // Normal equations: the unknowns are few (3 + 3 sessions) and the columns well scaled.
+    const int p = 3 + 3 * ns;
+    Eigen::MatrixXd ata = Eigen::MatrixXd::Zero(p, p);
+    Eigen::VectorXd atb = Eigen::VectorXd::Zero(p);
+    double bb = 0.0;
+    for (int i = 0; i < n; ++i) {
+      const int k = row_session[i];
+      const Eigen::Matrix3d b = a.rotation[k] * rf[i];
+      const Eigen::Vector3d r = y[i] - a.rotation[k] * (rf[i] * r0 + pf[i]);
+      ata.topLeftCorner<3, 3>() += b.transpose() * b;
+      ata.block<3, 3>(0, 3 + 3 * k) += b.transpose();
+      ata.block<3, 3>(3 + 3 * k, 0) += b;
+      ata.block<3, 3>(3 + 3 * k, 3 + 3 * k) += Eigen::Matrix3d::Identity();
+      atb.head<3>() += b.transpose() * r;
+      atb.segment<3>(3 + 3 * k) += r;
+      bb += r.squaredNorm();
+    }
+    const Eigen::VectorXd x = ata.completeOrthogonalDecomposition().solve(atb);
+    const Eigen::Vector3d step = x.head<3>() - delta;
+    delta = x.head<3>();
+    for (int k = 0; k < ns; ++k) a.translation[k] = x.segment<3>(3 + 3 * k);
+    a.rms = std::sqrt(std::max(0.0, bb - x.dot(atb)) / n);
+    if (step.norm() < 1e-9) break;
+  }
+  a.point_offset = delta;
+  return a;
+}
+
+}  // namespace
+
+Alignment alignment(const RobotModel& robot, const Dataset& data) { return compute(robot, data); }
+
+}  // namespace stiff::effects
