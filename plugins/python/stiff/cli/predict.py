@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 
 from .. import api
-from .common import Formatter, add_limits_flag, add_robot, check_joint_limits, load_robot, robot_path
+from .common import (Formatter, add_limits_flag, add_robot, atomic_write_text, check_joint_limits,
+                     load_robot, robot_path)
 
 EXAMPLE = """example:
   stiff predict --robot rokae --fit fit.json --data valid.csv -o predicted.csv
@@ -72,13 +73,13 @@ def run_absolute(args, robot, model, data):
     if args.output:
         # The predicted value replaces the measured one; ids, sessions and metadata stay.
         import csv
-        rows = data.ids
-        with open(args.output + ".tmp", "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["id", "absolute", "x_m", "y_m", "z_m"])
-            for i, r in enumerate(rows):
-                w.writerow([r, int(ab[i])] + [repr(float(v)) for v in pred[i]])
-        import os
-        os.replace(args.output + ".tmp", args.output)
+        import io
+
+        text = io.StringIO()
+        w = csv.writer(text, lineterminator="\n")
+        w.writerow(["id", "absolute", "x_m", "y_m", "z_m"])
+        for i, r in enumerate(data.ids):
+            w.writerow([r, int(ab[i])] + [repr(float(v)) for v in pred[i]])
+        atomic_write_text(args.output, text.getvalue())
         print(f"wrote {args.output}")
     return 0
