@@ -4,6 +4,8 @@
 // message that stiff_last_error() returns.
 #pragma once
 
+#include <Eigen/Core>
+#include <Eigen/LU>
 #include <cmath>
 #include <cstring>
 #include <exception>
@@ -140,6 +142,22 @@ Options read_options(const Options* in, bool output = false) {
   std::memcpy(&out, in, n);
   out.struct_size = static_cast<uint32_t>(sizeof(Options));
   return out;
+}
+
+/// A 4 x 4 row-major pose read from the caller's 16 doubles: finite, with an orthonormal
+/// right-handed rotation and last row 0 0 0 1, else InvalidArgument naming `what`.
+inline Eigen::Matrix4d rigid_pose_at(const double* p, const char* what) {
+  require_finite(p, 16, what);
+  Eigen::Matrix4d t;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) t(r, c) = p[4 * r + c];
+  const Eigen::Matrix3d rot = t.block<3, 3>(0, 0);
+  if ((rot.transpose() * rot - Eigen::Matrix3d::Identity()).norm() > 1e-6 ||
+      rot.determinant() < 0 || t.row(3) != Eigen::RowVector4d(0, 0, 0, 1))
+    throw InvalidArgument(std::string(what) +
+                          " is not a rigid transform (rotation part not orthonormal or last row "
+                          "not 0 0 0 1)");
+  return t;
 }
 
 }  // namespace stiff::capi

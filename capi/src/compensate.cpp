@@ -24,26 +24,12 @@ static_assert(STIFF_POINT_NOT_CONVERGED == kPointNotConverged);
 
 namespace {
 
-Eigen::Matrix4d pose_at(const double* p, const char* what) {
-  require_finite(p, 16, what);
-  Eigen::Matrix4d t;
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) t(r, c) = p[4 * r + c];
-  const Eigen::Matrix3d rot = t.block<3, 3>(0, 0);
-  if ((rot.transpose() * rot - Eigen::Matrix3d::Identity()).norm() > 1e-6 ||
-      rot.determinant() < 0 || t.row(3) != Eigen::RowVector4d(0, 0, 0, 1))
-    throw InvalidArgument(std::string(what) +
-                          " is not a rigid transform (rotation part not "
-                          "orthonormal or last row not 0 0 0 1)");
-  return t;
-}
-
 std::vector<Eigen::Matrix4d> poses_of(const double* poses, size_t rows) {
   require(poses, "poses");
   std::vector<Eigen::Matrix4d> out;
   out.reserve(rows);
   for (size_t i = 0; i < rows; ++i)
-    out.push_back(pose_at(poses + 16 * i, ("poses row " + std::to_string(i)).c_str()));
+    out.push_back(capi::rigid_pose_at(poses + 16 * i, ("poses row " + std::to_string(i)).c_str()));
   return out;
 }
 
@@ -80,8 +66,12 @@ stiff_status stiff_ik_analytic(int* analytic, const stiff_robot* robot) {
 }
 
 namespace {
-void tool_poses_into(double* poses, size_t capacity, size_t* needed, const stiff_robot* robot,
-                     const double* q, size_t rows) {
+void tool_poses_into(double* poses,
+                     size_t capacity,
+                     size_t* needed,
+                     const stiff_robot* robot,
+                     const double* q,
+                     size_t rows) {
   const RobotModel& r = robot->model;
   stiff::capi::require_capacity(stiff::capi::values_of(rows, 16, "poses"), poses, capacity, needed);
   const Eigen::MatrixXd qm = rows_of(q, rows, r.dof(), "q");
@@ -134,7 +124,7 @@ stiff_status stiff_ik(double* q_out,
     require(robot, "robot");
     require(pose, "pose");
     const RobotModel& r = robot->model;
-    const Eigen::Matrix4d t = pose_at(pose, "pose");
+    const Eigen::Matrix4d t = capi::rigid_pose_at(pose, "pose");
     const Eigen::VectorXd seed =
         q_seed ? joints_of(r, q_seed, "q_seed") : Eigen::VectorXd::Zero(r.dof());
     const InverseKinematics ik(r);
@@ -162,7 +152,9 @@ stiff_status stiff_ik_path(double* q_out,
   return guarded(__func__, [&] {
     require(robot, "robot");
     const RobotModel& r = robot->model;
-    stiff::capi::require_capacity(stiff::capi::values_of(rows, static_cast<size_t>(r.dof()), "q_out"), q_out, capacity, needed);
+    stiff::capi::require_capacity(
+        stiff::capi::values_of(rows, static_cast<size_t>(r.dof()), "q_out"), q_out, capacity,
+        needed);
     const auto p = poses_of(poses, rows);
     const Eigen::VectorXd start = q_start ? joints_of(r, q_start, "q_start") : Eigen::VectorXd();
     const IkPath path = solve_path(InverseKinematics(r), p, start);
@@ -209,7 +201,9 @@ stiff_status stiff_compensate_path(double* q_cmd,
   return guarded(__func__, [&] {
     require(model, "model");
     const RobotModel& r = model->robot;
-    stiff::capi::require_capacity(stiff::capi::values_of(rows, static_cast<size_t>(r.dof()), "q_cmd"), q_cmd, capacity, needed);
+    stiff::capi::require_capacity(
+        stiff::capi::values_of(rows, static_cast<size_t>(r.dof()), "q_cmd"), q_cmd, capacity,
+        needed);
     const auto p = poses_of(poses, rows);
     const Eigen::MatrixXd w = rows_of(wrench, rows, 6, "wrench");
     const Eigen::VectorXd start = q_start ? joints_of(r, q_start, "q_start") : Eigen::VectorXd();
@@ -235,7 +229,8 @@ stiff_status stiff_truth_deviation(double* deviation,
     require(robot, "robot");
     capi::require_string(truth_path, "truth_path");
     const RobotModel& r = robot->model;
-    stiff::capi::require_capacity(stiff::capi::values_of(rows, 6, "deviation"), deviation, capacity, needed);
+    stiff::capi::require_capacity(stiff::capi::values_of(rows, 6, "deviation"), deviation, capacity,
+                                  needed);
     const Truth truth = read_truth(truth_path, r);
     const DeflectionModel model(r, truth.effects);
     const auto p = poses_of(poses, rows);

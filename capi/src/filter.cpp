@@ -17,18 +17,7 @@ using stiff::capi::require_finite;
 namespace {
 
 Eigen::Matrix4d frame_at(const double* p, const char* what) {
-  if (!p) return Eigen::Matrix4d::Identity();
-  require_finite(p, 16, what);
-  Eigen::Matrix4d t;
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) t(r, c) = p[4 * r + c];
-  const Eigen::Matrix3d rot = t.block<3, 3>(0, 0);
-  if ((rot.transpose() * rot - Eigen::Matrix3d::Identity()).norm() > 1e-6 ||
-      rot.determinant() < 0 || t.row(3) != Eigen::RowVector4d(0, 0, 0, 1))
-    throw InvalidArgument(std::string(what) +
-                          " is not a rigid transform (rotation part not orthonormal or last row "
-                          "not 0 0 0 1)");
-  return t;
+  return p ? capi::rigid_pose_at(p, what) : Eigen::Matrix4d::Identity();
 }
 
 Eigen::Matrix4d inverse(const Eigen::Matrix4d& t) {
