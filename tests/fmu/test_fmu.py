@@ -1,5 +1,5 @@
 """FMU of the compliant-arm deflection model (issue 7), tested with fmpy against an independent
-numpy reference (docs/fmu.md; test cases of /work/shared/spec/fmu-checklist.md)."""
+numpy reference (docs/fmu.md)."""
 
 import ctypes
 import json
