@@ -1,4 +1,4 @@
-"""FMU of the compliant-arm deflection model (issue 7), tested with fmpy against an independent
+"""FMU of the compliant-arm deflection model, tested with fmpy against an independent
 numpy reference (docs/fmu.md)."""
 
 import ctypes
