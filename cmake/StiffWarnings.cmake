@@ -1,4 +1,4 @@
-# Warning flags and floating-point policy shared by every target (style.md 3.9).
+# Warning flags and floating-point policy shared by every target.
 function(stiff_target_defaults target)
   target_compile_options(${target} PRIVATE
     $<$<COMPILE_LANGUAGE:CXX>:-Wall -Wextra -Wpedantic -Wshadow>

@@ -16,7 +16,7 @@ inline std::string source_path(const std::string& rel) {
 
 inline RobotModel rokae() { return load_robot(source_path("examples/robots/rokae.yaml")); }
 
-/// The paper's identified stiffness (method.md), N*m/rad; joint 6 assumed 4000 (not identified).
+/// The paper's identified stiffness (Jiang & Fang 2023), N*m/rad; joint 6 assumed 4000 (not identified).
 inline Eigen::VectorXd paper_stiffness() {
   Eigen::VectorXd k(6);
   k << 5.0914e4, 1.6382e4, 3.1311e4, 7.7911e3, 5.6136e3, 4.0e3;

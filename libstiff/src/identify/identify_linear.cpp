@@ -1,6 +1,6 @@
 // Linear least-squares identification of joint compliances, Jiang & Fang 2023.
 //
-// Performance notes (issue 4): the observation matrix A (3N x n) is built in one pass with a
+// Performance notes: the observation matrix A (3N x n) is built in one pass with a
 // forward kinematics specialised once per robot (fast_chain.hpp: no 4x4 products, no
 // allocations per row; for modified-DH chains eight measurements at a time in vectorised loops
 // with a branch-free polynomial sincos), and the normal matrix A^T W^2 A and A^T W^2 x are

@@ -1,5 +1,5 @@
 // Diagnosis (diagnose.hpp): distribution tails against reference values, and hidden-effect
-// scenarios on the virtual robot (effects-and-diagnosis.md section 3): the hidden effect is
+// scenarios on the virtual robot (docs/diagnosis.md, section 5): the hidden effect is
 // ranked first or reported in the ambiguous group, controls stay `adequate`, a left-out
 // effect is not claimed confidently, and adding the suggested effect brings the validation
 // error to the noise floor. Multi-seed sweeps are in tests named *Slow*.

@@ -100,7 +100,7 @@ class EffectRecovery : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(EffectRecovery, WithinThreeStandardErrors) { check(GetParam(), 40); }
 
-// Heavier sweep (style.md 3.7: label-free but named Slow so that ctest -E Slow skips it).
+// Heavier sweep (label-free but named Slow so that ctest -E Slow skips it).
 TEST_P(EffectRecovery, SlowWithinThreeStandardErrors200Seeds) { check(GetParam(), 200); }
 
 INSTANTIATE_TEST_SUITE_P(Effects,

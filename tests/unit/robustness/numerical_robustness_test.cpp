@@ -1,4 +1,4 @@
-// Numerical robustness (issue 10, docs/reliability.md): near-singular poses, rank-deficient data,
+// Numerical robustness (docs/reliability.md): near-singular poses, rank-deficient data,
 // huge and tiny loads, degenerate plans, effects the data cannot identify. Each gives a warning
 // or an error that says what to do; never a NaN in a result that claims success, never a
 // silently wrong result.

@@ -1,5 +1,5 @@
 /// \file plan.hpp
-/// Measurement planning (issue 3): choose the poses AND the loads of a stiffness experiment so
+/// Measurement planning: choose the poses AND the loads of a stiffness experiment so
 /// that measurement errors leak as little as possible into the identified joint compliances.
 ///
 /// The method follows Jiang & Fang (2023), section 2.2: a pool Omega = Omega_J x Omega_F of
