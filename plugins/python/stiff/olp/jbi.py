@@ -10,7 +10,7 @@ from typing import Optional
 import numpy as np
 
 from . import frames as fr
-from .program import FilterError, Program, Target
+from .program import FilterError, Program, Target, format_numbers, parse_numbers
 
 NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _POS = re.compile(r"^(C\d+)\s*=\s*(.*?)\s*$")
@@ -32,20 +32,12 @@ class JbiFormat:
 
     @staticmethod
     def format_values(t: Target, values, min_decimals: int) -> list:
-        out = []
-        for (f, a, b), v in zip(t.spans, values):
-            old = t.program_text[f][a:b]
-            d = max(min_decimals, len(old.split(".")[1]) if "." in old else 0)
-            s = f"{v:.{d}f}"
-            out.append("0." + "0" * d if float(s) == 0 else s)
-        return out
+        return format_numbers(t, values, min_decimals)
 
     @staticmethod
     def parse_values(t: Target, texts) -> list:
-        return [float(s) for s in texts]
+        return parse_numbers(t, texts)
 
-    # RCONF <l>,<m>,<n>,<o>,<p>,<q>: flip (0) / no flip (1), upper arm (0) / lower arm (1),
-    # front (0) / rear (1), R (axis 4), T (axis 6), S (axis 1) below 180 deg (0) or not (1).
     @staticmethod
     def rconf(c) -> tuple:
         v = c.vendor_deg

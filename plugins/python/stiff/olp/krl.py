@@ -9,7 +9,8 @@ from typing import Optional
 import numpy as np
 
 from . import frames as fr
-from .program import FilterError, Program, Target, ToolLoad
+from .program import (ANGLE_EXTRA_DECIMALS, FilterError, Program, Target, ToolLoad, format_numbers,
+                      parse_numbers)
 
 NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _PAIR = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)\s+('B[01]+'|" + NUM + ")")
@@ -115,19 +116,12 @@ class KrlFormat:
 
     @staticmethod
     def format_values(t: Target, values, min_decimals: int) -> list:
-        out = []
-        for (f, a, b), v in zip(t.spans, values):
-            old = t.program_text[f][a:b]
-            # joint angles: 1e-9 deg keeps 1e-9 m at a metre of reach
-            d = max(min_decimals + (3 if t.joint else 0),
-                    len(old.split(".")[1]) if "." in old else 0)
-            s = f"{v:.{d}f}"
-            out.append("0." + "0" * d if float(s) == 0 else s)
-        return out
+        return format_numbers(t, values, min_decimals,
+                              lambda i: ANGLE_EXTRA_DECIMALS if t.joint else 0)
 
     @staticmethod
     def parse_values(t: Target, texts) -> list:
-        return [float(s) for s in texts]
+        return parse_numbers(t, texts)
 
     # ---------------------------------------------------------- configuration
     @staticmethod

@@ -68,6 +68,28 @@ class Target:
     program_text: dict = field(default_factory=dict, repr=False)  # key -> text, for printing
 
 
+# Joint angles and quaternion components are written with this many more decimals than
+# positions: 1e-9 deg keeps 1e-9 m at a metre of reach.
+ANGLE_EXTRA_DECIMALS = 3
+
+
+def format_numbers(t: Target, values, min_decimals: int, extra=lambda i: 0) -> list:
+    """The new values of t's numbers as text: at least `min_decimals` (+ extra(i) for number i)
+    decimals and never fewer than the program wrote; a zero is written 0.000..., never -0."""
+    out = []
+    for i, ((f, a, b), v) in enumerate(zip(t.spans, values)):
+        old = t.program_text[f][a:b]
+        d = max(min_decimals + extra(i), len(old.split(".")[1]) if "." in old else 0)
+        s = f"{v:.{d}f}"
+        out.append("0." + "0" * d if float(s) == 0 else s)
+    return out
+
+
+def parse_numbers(t: Target, texts) -> list:
+    """The numbers as a program reader sees them (the written text read back)."""
+    return [float(s) for s in texts]
+
+
 class Program:
     """Texts of a program's files and its targets; `fmt` prints and parses the numbers."""
 

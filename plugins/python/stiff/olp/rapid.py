@@ -7,7 +7,8 @@ import re
 import numpy as np
 
 from . import frames as fr
-from .program import FilterError, Program, Target, ToolLoad
+from .program import (ANGLE_EXTRA_DECIMALS, FilterError, Program, Target, ToolLoad, format_numbers,
+                      parse_numbers)
 
 NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _DECL = re.compile(r"\b(?:LOCAL\s+)?(?:CONST|PERS|VAR|TASK\s+PERS)\s+(robtarget|jointtarget|"
@@ -81,19 +82,13 @@ class RapidFormat:
 
     @staticmethod
     def format_values(t: Target, values, min_decimals: int) -> list:
-        out = []
-        for i, ((f, a, b), v) in enumerate(zip(t.spans, values)):
-            old = t.program_text[f][a:b]
-            # quaternions and joint angles: 3 more (1e-9 deg keeps 1e-9 m at a metre of reach)
-            d = max(min_decimals + (3 if (i >= 3 or t.joint) else 0),
-                    len(old.split(".")[1]) if "." in old else 0)
-            s = f"{v:.{d}f}"
-            out.append("0." + "0" * d if float(s) == 0 else s)
-        return out
+        # quaternion components (from the fourth number) and joint angles get more decimals
+        return format_numbers(t, values, min_decimals,
+                              lambda i: ANGLE_EXTRA_DECIMALS if (i >= 3 or t.joint) else 0)
 
     @staticmethod
     def parse_values(t: Target, texts) -> list:
-        return [float(s) for s in texts]
+        return parse_numbers(t, texts)
 
     @staticmethod
     def config_key(c) -> tuple:
