@@ -115,21 +115,18 @@ def plan(robot: Robot, count: Optional[int] = None, criterion: Optional[str] = N
     o = _c.PlanOptions()
     check(lib.stiff_plan_options_init(C.byref(o), C.sizeof(o)))
 
-    def count_arg(name, v):
-        # The C fields read 0 as "default": an explicit 0 or a negative count is refused with
-        # the one message every count gets.
-        return _c.require_count(name, v)
-
+    # The C fields read 0 as "default": an explicit 0 or a negative count is refused with the
+    # one message every count gets (require_count).
     if count is not None:
-        o.count = count_arg("count", count)
+        o.count = _c.require_count("count", count)
     if criterion is not None:
         o.criterion = _c.encode(criterion)
     if seed is not None:
         o.seed = seed
     if pool_poses is not None:
-        o.pool_poses = count_arg("pool_poses", pool_poses)
+        o.pool_poses = _c.require_count("pool_poses", pool_poses)
     if pool_loads is not None:
-        o.pool_loads = count_arg("pool_loads", pool_loads)
+        o.pool_loads = _c.require_count("pool_loads", pool_loads)
     if range_fraction is not None:
         if not range_fraction > 0:  # 0 would read as "default" in C; the library checks the rest
             raise InvalidArgumentError(f"plan: range_fraction must be in (0, 1] (got {range_fraction})")
@@ -143,7 +140,7 @@ def plan(robot: Robot, count: Optional[int] = None, criterion: Optional[str] = N
     if min_sigma_m is not None:
         o.min_sigma_m = min_sigma_m
     if annealing_iterations is not None:
-        o.annealing_iterations = count_arg("annealing_iterations", annealing_iterations)
+        o.annealing_iterations = _c.require_count("annealing_iterations", annealing_iterations)
     if annealing_t0 is not None:
         o.annealing_initial_temperature = float(annealing_t0)
     if annealing_k0 is not None:
