@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "stiff/error.hpp"
+#include "stiff/kinematics/joint_torque.hpp"
 
 namespace stiff {
 
@@ -52,7 +53,11 @@ Eigen::VectorXd gravity_torques(const RobotModel& robot, const ChainState& s) {
     const Eigen::Vector3d c = t.block<3, 3>(0, 0) * com_local + t.block<3, 1>(0, 3);
     const Eigen::Vector3d w = mass * robot.gravity;
     // Only joints up to and including `link` carry the weight of that link.
-    for (int j = 0; j <= link; ++j) tau(j) += s.axis.col(j).cross(c - s.origin.col(j)).dot(w);
+    for (int j = 0; j <= link; ++j) {
+      Eigen::Vector3d lever;
+      lever_arm(s.axis.col(j), s.origin.col(j), c, lever);
+      tau(j) += force_torque(lever, w);
+    }
   };
   for (int i = 0; i < n; ++i) add_weight(i, robot.joints[i].mass, robot.joints[i].com);
   if (n > 0) add_weight(n - 1, robot.tool_mass, robot.tool_com);

@@ -1,4 +1,5 @@
 // gravity_lumped: deflection under the robot's own weight without a mass model.
+#include "stiff/kinematics/joint_torque.hpp"
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {
@@ -59,8 +60,12 @@ class GravityLumped : public EffectT<GravityLumped> {
     int i = 0;
     for (int j = 0; j < n_; ++j) {
       const Eigen::Vector3d z = c.axis.col(j), o = c.origin.col(j);
-      for (int k = j + 1; k < n_; ++k, ++i)
-        s.dtheta(j) += p[i] * T(z.dot((Eigen::Vector3d(c.origin.col(k)) - o).cross(g_)));
+      for (int k = j + 1; k < n_; ++k, ++i) {
+        // Torque on joint j of a unit-gravity weight at the origin of joint k.
+        Eigen::Vector3d lever;
+        lever_arm(z, o, c.origin.col(k), lever);
+        s.dtheta(j) += p[i] * T(force_torque(lever, g_));
+      }
       // The last weight sits at P, which the tool and point offsets move: keep its
       // derivatives. z . ((P - o) x g) = (g x z) . (P - o).
       const Eigen::Vector3d gz = g_.cross(z);
