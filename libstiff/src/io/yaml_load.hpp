@@ -3,9 +3,11 @@
 // the first or the last depending on how it looks): each an error naming file:line:column.
 #pragma once
 
+#include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
 #include <set>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -34,21 +36,52 @@ inline void check_unique_keys(const YAML::Node& node, const std::string& file) {
   }
 }
 
+/// Where each document of a stream starts; nothing else is kept.
+class DocumentStarts final : public YAML::EventHandler {
+ public:
+  std::vector<YAML::Mark> starts;
+  void OnDocumentStart(const YAML::Mark& mark) override { starts.push_back(mark); }
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnAlias(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnScalar(const YAML::Mark&,
+                const std::string&,
+                YAML::anchor_t,
+                const std::string&) override {}
+  void OnSequenceStart(const YAML::Mark&,
+                       const std::string&,
+                       YAML::anchor_t,
+                       YAML::EmitterStyle::value) override {}
+  void OnSequenceEnd() override {}
+  void OnMapStart(const YAML::Mark&,
+                  const std::string&,
+                  YAML::anchor_t,
+                  YAML::EmitterStyle::value) override {}
+  void OnMapEnd() override {}
+};
+
 /// The document of a YAML file (an empty file gives a null node).
 inline YAML::Node load_yaml_document(const std::string& text, const std::string& file) {
   check_yaml_nesting(text, file);
-  std::vector<YAML::Node> docs;
   try {
-    docs = YAML::LoadAll(text);
+    // Documents are counted with a bound, never collected with YAML::LoadAll: yaml-cpp 0.7
+    // returns an endless stream of empty documents for a stray ',' at the top level.
+    std::istringstream in(text);
+    YAML::Parser parser(in);
+    DocumentStarts counter;
+    for (int n = 0; n < 2 && parser.HandleNextDocument(counter); ++n) {
+    }
+    if (counter.starts.size() > 1)
+      throw yaml_error_at(file, counter.starts[1],
+                          "a second YAML document ('---', or text after the end of the first); "
+                          "the file must hold one");
+    if (counter.starts.empty()) return YAML::Node();
+    YAML::Node doc = YAML::Load(text);
+    check_unique_keys(doc, file);
+    return doc;
   } catch (const YAML::ParserException& e) {
     throw yaml_error_at(file, e.mark, e.msg);
   }
-  if (docs.size() > 1)
-    throw yaml_error_at(file, docs[1].Mark(),
-                        "a second YAML document ('---'); the file must hold one");
-  if (docs.empty()) return YAML::Node();
-  check_unique_keys(docs[0], file);
-  return docs[0];
 }
 
 }  // namespace stiff::detail
