@@ -246,9 +246,10 @@ def write_doc(res):
       "stiff's own calibration is checked against.")
     w("")
     w("stiff runs with its default identifiability setting (docs/identifiability.md): the "
-      "structural rank test, then the statistical test that holds at its null value every "
-      "fitted parameter whose standard error exceeds 100 typical magnitudes and a third of its "
-      "distance from the null value (`--max-relative-se 100`, the default).")
+      "structural rank test; before the solve, on the linearised start, a parameter whose "
+      "standard error exceeds ten typical magnitudes is held; at the solution, every fitted "
+      "parameter whose standard error exceeds 100 typical magnitudes and a third of its "
+      "distance from the null value is held too (`--max-relative-se 100`, the default).")
     w("")
     w("Errors are Euclidean distances between the measured and the predicted target position; "
       "± is the 95 % confidence interval of the mean (1.96 s / sqrt(n)).")

@@ -150,13 +150,18 @@ Identifiability check_identifiability(const DeflectionModel& model,
                                       double residual_sigma,
                                       double max_relative_se,
                                       const Eigen::VectorXd* theta,
-                                      const std::vector<bool>* fitted) {
+                                      const std::vector<bool>* fitted,
+                                      const Eigen::VectorXd* residuals) {
   Identifiability out = structural(model, j, typical, tolerance);
   out.statistical.assign(out.fixed.size(), false);
-  if (!(max_relative_se > 0) || !(residual_sigma > 0) || !theta) return out;
+  if (!(max_relative_se > 0) || !theta || !(residual_sigma > 0 || residuals)) return out;
   const int p = model.parameter_count();
   // Gram matrix of the scaled columns once; each round inverts its free block.
   const Eigen::MatrixXd js = j * typical.asDiagonal();
+  // With the residuals at theta, the residual scale is that of the linear least-squares step
+  // over each round's free set.
+  Eigen::VectorXd b;
+  if (residuals) b = js.transpose() * *residuals;
   Eigen::MatrixXd g = Eigen::MatrixXd::Zero(p, p);
   g.selfadjointView<Eigen::Lower>().rankUpdate(js.transpose());
   g = g.selfadjointView<Eigen::Lower>();
@@ -179,6 +184,15 @@ Identifiability check_identifiability(const DeflectionModel& model,
     const Eigen::MatrixXd ge = d.asDiagonal() * gf * d.asDiagonal();
     const Eigen::MatrixXd cov =
         d.asDiagonal() * ge.ldlt().solve(Eigen::MatrixXd::Identity(nf, nf)) * d.asDiagonal();
+    if (residuals) {
+      Eigen::VectorXd bf(nf);
+      for (int a = 0; a < nf; ++a) bf(a) = b(free[a]);
+      const Eigen::VectorXd z = cov * bf;  // step in units of the typical magnitudes
+      const double rss = std::max(0.0, residuals->squaredNorm() - bf.dot(z));
+      const double dof = static_cast<double>(residuals->size() - nf);
+      residual_sigma = dof > 0 ? std::sqrt(rss / dof) : 0.0;
+      if (!(residual_sigma > 0)) break;
+    }
     // se in units of the typical magnitude; the scale a parameter must be determined to:
     // its typical magnitude, or a third of its value when that is larger (t >= 3). Of the
     // parameters that fail, the last in priority order is held (in a correlated group the
@@ -190,7 +204,8 @@ Identifiability check_identifiability(const DeflectionModel& model,
       const int k = free[a];
       if (fitted && !(*fitted)[k]) continue;
       const double from_null = std::abs((*theta)(k)-model.spec(k).null_value);
-      const double scale = std::max(1.0, from_null / (3.0 * typical(k)));
+      // Before a solve there is no estimate to test against: the standard error alone counts.
+      const double scale = residuals ? 1.0 : std::max(1.0, from_null / (3.0 * typical(k)));
       if (se / scale <= max_relative_se) continue;  // NaN fails
       if (worst < 0 || rank[free[a]] > rank[free[worst]]) {
         worst = a;
@@ -212,12 +227,15 @@ Identifiability check_identifiability(const DeflectionModel& model,
     const auto& sp = model.spec(k);
     out.fixed[k] = true;
     out.statistical[k] = true;
+    const std::string limit =
+        residuals ? num(max_relative_se) + " times its typical magnitude " + num(typical(k)) + " " +
+                        sp.unit + " (linearised at the start)"
+                  : "its typical magnitude " + num(typical(k)) + " " + sp.unit +
+                        " and a third of its distance " + num(std::abs((*theta)(k)-sp.null_value)) +
+                        " " + sp.unit + " from its null value" +
+                        (max_relative_se != 1.0 ? " (times " + num(max_relative_se) + ")" : "");
     out.reason[k] = "the data determine it only to +-" + num(worst_se * typical(k)) + " " +
-                    sp.unit + " (standard error), more than its typical magnitude " +
-                    num(typical(k)) + " " + sp.unit + " and a third of its distance " +
-                    num(std::abs((*theta)(k)-sp.null_value)) + " " + sp.unit +
-                    " from its null value" +
-                    (max_relative_se != 1.0 ? " (times " + num(max_relative_se) + ")" : "") +
+                    sp.unit + " (standard error), more than " + limit +
                     (partner >= 0 && std::abs(corr) > 0.5
                          ? "; it is correlated " + num(corr) + " with " + qualified(model, partner)
                          : std::string());

@@ -37,7 +37,10 @@ struct Identifiability {
 ///     such parameters is held, named with the parameter it is most correlated with, and the
 ///     test repeated until every free parameter passes. Only parameters marked in `fitted`
 ///     (those theta holds a fitted value of; all when null) can be held by this test: a value
-///     held at its null so far is not evidence either way.
+///     held at its null so far is not evidence either way. With the weighted `residuals` at
+///     theta (the rows of j; before a solve), the residual scale is that of the linear
+///     least-squares step from theta over each round's free set, and a parameter is held
+///     when its standard error alone exceeds `max_relative_se` times its typical magnitude.
 /// Throws NumericalError when j is not finite.
 Identifiability check_identifiability(const DeflectionModel& model,
                                       const Eigen::MatrixXd& j,
@@ -46,6 +49,7 @@ Identifiability check_identifiability(const DeflectionModel& model,
                                       double residual_sigma = 1.0,
                                       double max_relative_se = 0.0,
                                       const Eigen::VectorXd* theta = nullptr,
-                                      const std::vector<bool>* fitted = nullptr);
+                                      const std::vector<bool>* fitted = nullptr,
+                                      const Eigen::VectorXd* residuals = nullptr);
 
 }  // namespace stiff::detail

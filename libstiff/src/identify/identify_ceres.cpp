@@ -895,11 +895,31 @@ FitResult identify(const RobotModel& robot,
     const double dof_left = wsum - static_cast<double>(free.size());
     return dof_left > 0 ? std::sqrt(wrss / dof_left) : 1.0;
   };
+  // Before a geometric solve, a parameter the data determine only to more than ten times its
+  // typical magnitude (its standard error on the linearised start, where absolute rows are
+  // close to linear: the registration starts from a Kabsch fit of the nominal chain) is held:
+  // free, it drifts along a near-null direction to its bound, to values without meaning, and
+  // costs the solver most of its iterations (docs/identifiability.md). Ten, not the
+  // max_relative_se of the solution's test, because this one cannot weigh a fitted value.
+  constexpr double kStartRelativeSe = 10.0;
+  auto prescreen = [&](const Eigen::MatrixXd& jac) {
+    std::vector<bool> fitted(p, true);
+    const Eigen::VectorXd e = weighted_residuals(s, theta);
+    const Identifiability stat =
+        check_identifiability(model, jac, s.typical, opt.rank_tolerance, 0.0,
+                              std::min(kStartRelativeSe, opt.max_relative_se), &theta, &fitted, &e);
+    if (std::find(stat.statistical.begin(), stat.statistical.end(), true) != stat.statistical.end())
+      idf = stat;
+  };
   auto fit_passes = [&]() {
     // theta as the solver will see it, (theta / typical) * typical, so that the Jacobian of
     // this check is the one of the solver's first iteration (Evaluations cache).
     for (int k = 0; k < p; ++k) theta(k) = theta(k) / s.typical(k) * s.typical(k);
-    idf = check(weighted_jacobian(s, theta), theta);
+    {
+      const Eigen::MatrixXd jac = weighted_jacobian(s, theta);
+      idf = check(jac, theta);
+      if (absolute && opt.max_relative_se > 0) prescreen(jac);
+    }
     for (int pass = 0;; ++pass) {
       free.clear();
       for (int k = 0; k < p; ++k) {
@@ -929,12 +949,18 @@ FitResult identify(const RobotModel& robot,
           if (idf.fixed[k] && !a.fixed[k]) return true;
         return false;
       };
-      last = solve(s, free, theta, *solving, loss_scale, pass < 2 ? &visible : nullptr);
+      // The identifiable set of a geometric calibration is decided at the start, where the
+      // model is linearised (prescreen): a combination of parameters stays a combination to
+      // first order, and a member that the solution's curvature makes faintly visible is
+      // determined by nothing but that curvature. Loads are different: a point offset found
+      // by the solve can make a compliance visible, so a displacement fit watches for it.
+      const bool watch = !absolute && pass < 2;
+      last = solve(s, free, theta, *solving, loss_scale, watch ? &visible : nullptr);
       iterations += last.iterations;
       last_jacobian = weighted_jacobian(s, theta);
       last_jacobian_theta = theta;
       Identifiability again = check(last_jacobian, theta);
-      if (again == idf || pass == 2) break;
+      if (absolute || again == idf || pass == 2) break;
       // A parameter held so far became visible (or the reverse): solve again from here, a
       // freed parameter from the value it was held at (theta unchanged: the Jacobians cached
       // at this point serve the next solve's first iteration).
@@ -943,9 +969,27 @@ FitResult identify(const RobotModel& robot,
     // The statistical test, once, at the solution of the structurally identifiable model;
     // what it holds goes back to its null value and the rest is solved once more.
     residual_sigma = robust_residual_sigma();
-    const Identifiability stat = check(last_jacobian, theta);
+    Identifiability stat;
+    if (absolute) {
+      // The set decided at the start stays: a held column judged again at the solution, where
+      // the curvature breaks its exact dependencies by a hair, would only blur its partners.
+      Eigen::MatrixXd jac = last_jacobian;
+      for (int k = 0; k < p; ++k)
+        if (idf.fixed[k]) jac.col(k).setZero();
+      stat = check(jac, theta);
+      for (int k = 0; k < p; ++k)
+        if (idf.fixed[k]) {
+          stat.fixed[k] = true;
+          stat.reason[k] = idf.reason[k];
+          stat.statistical[k] = idf.statistical[k];
+        }
+    } else {
+      stat = check(last_jacobian, theta);
+    }
     residual_sigma = 0.0;
-    if (std::find(stat.statistical.begin(), stat.statistical.end(), true) == stat.statistical.end())
+    if (absolute ? stat == idf
+                 : std::find(stat.statistical.begin(), stat.statistical.end(), true) ==
+                       stat.statistical.end())
       return;
     idf = stat;
     free.clear();
@@ -1064,8 +1108,9 @@ FitResult identify(const RobotModel& robot,
   // A fit that identified nothing, or a robust fit that rejected most of the data, is a failure:
   // its parameters are the start, not an estimate (an M-estimator breaks down beyond half).
   if (rank == 0)
-    throw NumericalError("identify: the fit identified no parameter (the Jacobian at the "
-                         "solution has rank 0); check the loads and the units");
+    throw NumericalError(
+        "identify: the fit identified no parameter (the Jacobian at the "
+        "solution has rank 0); check the loads and the units");
   if (opt.loss != "none") {
     int rejected = 0;
     for (int r = 0; r < n; ++r) rejected += f.weights(r) < opt.outlier_weight;
