@@ -290,8 +290,8 @@ typedef struct stiff_identify_options {
   uint32_t method;            /**< a stiff_method */
   stiff_progress_fn progress; /**< may be NULL */
   void* progress_user_data;
-  /** A parameter whose standard error exceeds this many times both its typical magnitude and
-   *  a third of its distance from its null value is not determined and is held
+  /** A parameter whose standard error exceeds this many times its typical magnitude and also
+   *  a third of its distance from its null value (t < 3) is not determined and is held
    *  (docs/identifiability.md); 0: the default 100; < 0: off (the structural rank test only).
    * @since 0.2 */
   double max_relative_se;

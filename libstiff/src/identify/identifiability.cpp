@@ -193,10 +193,11 @@ Identifiability check_identifiability(const DeflectionModel& model,
       residual_sigma = dof > 0 ? std::sqrt(rss / dof) : 0.0;
       if (!(residual_sigma > 0)) break;
     }
-    // se in units of the typical magnitude; the scale a parameter must be determined to:
-    // its typical magnitude, or a third of its value when that is larger (t >= 3). Of the
-    // parameters that fail, the last in priority order is held (in a correlated group the
-    // others then become determined, as in the structural test).
+    // se in units of the typical magnitude. Determined: to within max_relative_se typical
+    // magnitudes, or its value three standard errors from the null (t >= 3; before a solve
+    // there is no value to test). Of the parameters that fail, the last in priority order is
+    // held (in a correlated group the others then become determined, as in the structural
+    // test).
     int worst = -1;
     double worst_se = 0.0;
     for (int a = 0; a < nf; ++a) {
@@ -204,9 +205,9 @@ Identifiability check_identifiability(const DeflectionModel& model,
       const int k = free[a];
       if (fitted && !(*fitted)[k]) continue;
       const double from_null = std::abs((*theta)(k)-model.spec(k).null_value);
-      // Before a solve there is no estimate to test against: the standard error alone counts.
-      const double scale = residuals ? 1.0 : std::max(1.0, from_null / (3.0 * typical(k)));
-      if (se / scale <= max_relative_se) continue;  // NaN fails
+      const bool determined =
+          se <= max_relative_se || (!residuals && 3.0 * se < from_null / typical(k));
+      if (determined) continue;  // NaN fails
       if (worst < 0 || rank[free[a]] > rank[free[worst]]) {
         worst = a;
         worst_se = std::isfinite(se) ? se : INFINITY;
@@ -230,10 +231,11 @@ Identifiability check_identifiability(const DeflectionModel& model,
     const std::string limit =
         residuals ? num(max_relative_se) + " times its typical magnitude " + num(typical(k)) + " " +
                         sp.unit + " (linearised at the start)"
-                  : "its typical magnitude " + num(typical(k)) + " " + sp.unit +
-                        " and a third of its distance " + num(std::abs((*theta)(k)-sp.null_value)) +
-                        " " + sp.unit + " from its null value" +
-                        (max_relative_se != 1.0 ? " (times " + num(max_relative_se) + ")" : "");
+                  : (max_relative_se != 1.0 ? num(max_relative_se) + " times " : "") +
+                        "its typical magnitude " + num(typical(k)) + " " + sp.unit +
+                        " and a third of its distance " +
+                        num(std::abs((*theta)(k)-sp.null_value)) + " " + sp.unit +
+                        " from its null value";
     out.reason[k] = "the data determine it only to +-" + num(worst_se * typical(k)) + " " +
                     sp.unit + " (standard error), more than " + limit +
                     (partner >= 0 && std::abs(corr) > 0.5

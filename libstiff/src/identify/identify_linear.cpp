@@ -321,7 +321,20 @@ FitResult identify_joint_linear(const RobotModel& robot,
   for (int round = 0; round <= n; ++round) {
     Eigen::MatrixXd aw;
     double sigma = 0.0;  // residual standard deviation in the rows' weighted units
-    FitResult f = linear_fit(robot, data, options, held, &aw, &sigma);
+    FitResult f;
+    try {
+      f = linear_fit(robot, data, options, held, &aw, &sigma);
+    } catch (const NumericalError&) {
+      // Nothing left after the statistical test: say why, not only that.
+      const auto why = std::find_if(reasons.begin(), reasons.end(),
+                                    [](const std::string& r) { return !r.empty(); });
+      if (why == reasons.end()) throw;
+      throw NumericalError(
+          "identify: no joint compliance is determined by this data (joint " +
+          std::to_string(why - reasons.begin() + 1) + ": " + *why +
+          "): the deflections the loads cause are not resolved against the residual scatter "
+          "(loads too small for the noise, too few poses, or displacements in a wrong unit)");
+    }
     const Eigen::VectorXd theta = f.theta();
     std::vector<bool> fitted(n);
     for (int j = 0; j < n; ++j) fitted[j] = f.parameters[j].identified;

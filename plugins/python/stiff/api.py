@@ -486,9 +486,9 @@ def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "non
              max_relative_se: float = 100.0) -> Fit:
     """Identify the model (effects joined by '+') from measured displacements and/or absolute
     positions (e.g. model='registration+tool+joint_offset+kinematic' on absolute data).
-    `max_relative_se`: a parameter whose standard error exceeds this many times both its
-    typical magnitude and a third of its value is held (docs/identifiability.md); 0 keeps only
-    the structural rank test."""
+    `max_relative_se`: a parameter whose standard error exceeds this many times its typical
+    magnitude and also a third of its value (t < 3) is held (docs/identifiability.md); 0 keeps
+    only the structural rank test."""
     methods = {"auto": 0, "linear": 1, "ceres": 2}
     if method not in methods:
         raise ValueError(f"unknown method {method!r} (use auto, linear, ceres)")

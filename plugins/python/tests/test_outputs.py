@@ -272,6 +272,26 @@ def test_identify_warns_about_implausible_data(good, tmp_path):
     bad = tmp_path / "mm_as_m.csv"
     bad.write_text("\n".join(text[:head + 1] + [",".join(r) for r in rows]) + "\n")
     r = cli("identify", "--robot", "rokae", "--data", bad)
+    # Nothing is determined (the compliances that would fit are thousands of typical
+    # magnitudes uncertain): the fit fails, says so and what is wrong with the data, instead of
+    # printing a stiffness.
+    assert r.returncode == 2, r.stdout
+    assert "no joint compliance is determined by this data" in r.stderr, r.stderr
+    assert "wrong unit" in r.stderr and "dz is zero in every measurement" in r.stderr, r.stderr
+    assert not r.stdout
+
+
+def test_identify_warns_about_a_stiffness_no_robot_has(good, tmp_path):
+    """Every displacement in mm declared _m: well determined, 1000 times too compliant."""
+    text = good["data"].read_text().splitlines()
+    head = [i for i, l in enumerate(text) if not l.startswith("#")][0]
+    cols = text[head].split(",")
+    rows = [l.split(",") for l in text[head + 1:]]
+    for r in rows:
+        for c in ("dx_m", "dy_m", "dz_m"):
+            r[cols.index(c)] = repr(float(r[cols.index(c)]) * 1e3)
+    bad = tmp_path / "mm_as_m.csv"
+    bad.write_text("\n".join(text[:head + 1] + [",".join(r) for r in rows]) + "\n")
+    r = cli("identify", "--robot", "rokae", "--data", bad)
     assert r.returncode == 0, r.stderr
     assert "is outside 1e2..1e8 N*m/rad" in r.stdout, r.stdout
-    assert "dz is zero in every measurement" in r.stdout, r.stdout

@@ -147,7 +147,15 @@ TEST(Robustness, HugeLoadsGiveTheSameStiffness) {
 TEST(Robustness, TinyLoadsBelowTheNoiseAreNotReportedAsIdentified) {
   Dataset design = paper_design_a();
   for (auto& m : design.rows) m.force *= 1e-6;  // micro-newtons: deflection << 10 um noise
-  const FitResult fit = identify_joint_linear(rokae(), simulated(design));
+  FitResult fit;
+  try {
+    fit = identify_joint_linear(rokae(), simulated(design));
+  } catch (const NumericalError& e) {
+    // Nothing determined is an error that says so.
+    EXPECT_NE(std::string(e.what()).find("no joint compliance is determined"), std::string::npos)
+        << e.what();
+    return;
+  }
   expect_sound(fit);
   // Either the joints are marked unidentified, or the fit warns that its values are not
   // significant; silently reporting a precise-looking stiffness would be wrong.

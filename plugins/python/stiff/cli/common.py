@@ -92,12 +92,12 @@ def check_joint_limits(robot, data, path, ignore: bool = False) -> None:
             "are wrong)")
 
 
-def plausibility_warnings(robot, data, fit) -> list:
+def plausibility_warnings(robot, data, fit=None) -> list:
     """Warnings for results no robot gives: a joint stiffness far outside the range of
-    industrial arms (1e2..1e8 N*m/rad, a decade beyond the softest and stiffest joints), or a
-    displacement larger than the reach (a unit mistake in the displacement columns)."""
+    industrial arms (1e2..1e8 N*m/rad, a decade beyond the softest and stiffest joints; with a
+    fit), or a displacement larger than the reach (a unit mistake in the displacement columns)."""
     out = []
-    for j, (k, ok) in enumerate(zip(fit.stiffness, fit.identified)):
+    for j, (k, ok) in enumerate(zip(fit.stiffness, fit.identified) if fit is not None else []):
         if ok and np.isfinite(k) and not 1e2 <= k <= 1e8:
             out.append(f"joint {j + 1}: stiffness {k:.3g} N*m/rad is outside 1e2..1e8 N*m/rad, "
                        "the range of industrial robots: check the displacement and force units "

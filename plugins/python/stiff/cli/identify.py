@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import sys
 import math
 
 from .. import api
@@ -31,8 +32,9 @@ def register(sub):
                    help="robust loss scale [um] (default: from sigma_d or the data)")
     p.add_argument("--method", default="auto", choices=["auto", "linear", "ceres"])
     p.add_argument("--max-relative-se", type=float, default=100.0,
-                   help="hold a parameter whose standard error exceeds this many times both its "
-                        "typical magnitude and a third of its value (docs/identifiability.md); "
+                   help="hold a parameter whose standard error exceeds this many times its "
+                        "typical magnitude and also a third of its value, t < 3 "
+                        "(docs/identifiability.md); "
                         "0: structural rank test only (default 100)")
     p.add_argument("-o", "--output", help="fit JSON to write")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of tables")
@@ -89,9 +91,15 @@ def run(args):
     robot = load_robot(args)
     data = api.Dataset.read(args.data, robot)
     check_joint_limits(robot, data, args.data, args.ignore_limits)
-    fit = api.identify(robot, data, model=args.model, loss=args.loss,
-                       loss_scale_m=args.loss_scale_um * 1e-6, method=args.method,
-                       max_relative_se=args.max_relative_se)
+    try:
+        fit = api.identify(robot, data, model=args.model, loss=args.loss,
+                           loss_scale_m=args.loss_scale_um * 1e-6, method=args.method,
+                           max_relative_se=args.max_relative_se)
+    except Exception:
+        # A fit that fails on implausible data: what is wrong with the data helps more.
+        for w in plausibility_warnings(robot, data):
+            print(f"warning: {w}", file=sys.stderr)
+        raise
     if args.output:
         fit.write(args.output)
     if args.json:
