@@ -144,6 +144,41 @@ def product_ur10(seed=0):
             e, st = product_errors("ur10", os.path.join(tmp, "tr.csv"),
                                    os.path.join(tmp, "te.csv"), model, tmp)
             out[name] = {"half_C": {"calibration": st, "validation": summary(e)}}
+            out[name].update(product_transfer(C, model, seed, tmp))
+    return out
+
+
+def product_transfer(C, model, seed, tmp):
+    """(a): calibrate on all of C, then register each other series (a new tracker placement)
+    with `stiff identify --start C.json --refit registration` on the reference's random 20 %
+    of its rows (or 15 poses), and evaluate on the rest."""
+    exe = stiff_exe()
+    cfit = os.path.join(tmp, "C.json")
+    _run([exe, "identify", "--robot", "ur10", "--data", str(C), "--model", model, "-o", cfit])
+    out = {"C": {"calibration": {"parameters": json.loads(Path(cfit).read_text())["fit"]["rank"]}}}
+    for k in ("B", "D", "A"):
+        S = REAL / "ur10" / ref.UR10_SERIES[k]
+        if not S.exists():
+            continue
+        n = len(ref.read_absolute(S)["q"])
+        for label, count in (("20%", None), ("15 poses", 15)):
+            r = np.random.default_rng(seed + 1).permutation(n)  # the reference's split
+            nreg = int(round(0.2 * n)) if count is None else count
+            reg, ev = np.sort(r[:nreg]), np.sort(r[nreg:])
+            rp, ep = os.path.join(tmp, "reg.csv"), os.path.join(tmp, "ev.csv")
+            write_rows(S, reg, rp)
+            write_rows(S, ev, ep)
+            fit, pred = os.path.join(tmp, "reg.json"), os.path.join(tmp, "ev_pred.csv")
+            _run([exe, "identify", "--robot", "ur10", "--data", rp, "--start", cfit,
+                  "--refit", "registration", "-o", fit])
+            _run([exe, "predict", "--robot", "ur10", "--fit", fit, "--data", ep, "-o", pred])
+            with open(pred) as f:
+                P = {x["id"]: np.array([float(x["x_m"]), float(x["y_m"]), float(x["z_m"])])
+                     for x in csv.DictReader(f)}
+            d = ref.read_absolute(ep)
+            e = np.array([np.linalg.norm(P[i] - q) for i, q in zip(d["ids"], d["p"])]) * 1e3
+            out[f"{k} ({label})"] = summary(e)
+            out[f"{k} ({label})"].pop("per_pose_mm")  # thousands of poses: the summary only
     return out
 
 
@@ -386,6 +421,26 @@ def write_doc(res):
                       f"{lab.replace('%', ' %')} | {_ci(v)} | {_f(v['max_mm'])} | "
                       f"{_f(v['rms_mm'])} | {_f(v.get('mean_deg'))} |")
         w("")
+        pr = prod.get("ur10", {})
+        if all(n in pr and "B (20%)" in pr[n] for n in ref.UR10_MODELS):
+            w("stiff: calibrated on all of C (`stiff identify`), then each series registered "
+              "to it with `stiff identify --start C.json --refit registration` on the same "
+              "rows as the reference, evaluated on the same rest (positions only):")
+            w("")
+            w("| model (stiff) | parameters | series | registration from | mean [mm] | "
+              "max [mm] | RMS [mm] |")
+            w("| --- | --- | --- | --- | --- | --- | --- |")
+            for n in ref.UR10_MODELS:
+                for k in ("B", "D", "A"):
+                    for lab in ("20%", "15 poses"):
+                        key = f"{k} ({lab})"
+                        if key not in pr[n]:
+                            continue
+                        v = pr[n][key]
+                        w(f"| {n} | {pr[n]['C']['calibration']['parameters']} | {k} | "
+                          f"{lab.replace('%', ' %')} | {_ci(v)} | {_f(v['max_mm'])} | "
+                          f"{_f(v['rms_mm'])} |")
+            w("")
         if all(n in r for n in ref.UR10_MODELS):
             hv = lambda n: r[n]["half_C"]["validation"]["mean_mm"]
             tr = lambda n: [r[n][f"{k} (20%)"]["mean_mm"] for k in "BDA" if f"{k} (20%)" in r[n]]

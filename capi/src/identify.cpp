@@ -38,7 +38,8 @@ stiff_status stiff_identify(stiff_result** out,
     const double max_relative_se = o.max_relative_se == 0.0
                                        ? IdentifyOptions{}.max_relative_se
                                        : (o.max_relative_se < 0.0 ? 0.0 : o.max_relative_se);
-    const bool linear_ok = effects.size() == 1 && effects[0] == "joint" && loss == "none";
+    const bool linear_ok =
+        effects.size() == 1 && effects[0] == "joint" && loss == "none" && !o.start;
     auto r = std::make_unique<stiff_result>();
     // Absolute rows need the nonlinear path (the linear one reads displacement rows only).
     const bool displacement_only = data->data.absolute_rows() == 0;
@@ -51,6 +52,8 @@ stiff_status stiff_identify(stiff_result** out,
       r->fit = identify_joint_linear(robot->model, data->data, lo);
     } else {
       IdentifyOptions io;
+      if (o.start) io.start = &o.start->fit;
+      if (o.refit && *o.refit) io.refit = parse_model_string(o.refit);
       io.loss = loss;
       io.loss_scale_m = o.loss_scale_m;
       io.max_relative_se = max_relative_se;

@@ -295,10 +295,17 @@ typedef struct stiff_identify_options {
    *  (docs/identifiability.md); 0: the default 100; < 0: off (the structural rank test only).
    * @since 0.2 */
   double max_relative_se;
+  /** A previous fit of the same robot (not owned; may be NULL): every parameter of the model
+   *  that it holds (same effect and name) starts from its value. @since 0.3 */
+  const stiff_result* start;
+  /** With `start`: the effects to fit, joined by '+' (e.g. "registration" for a new placement
+   *  of the instrument); every other parameter is given by `start` and kept. NULL or "": fit
+   *  everything. @since 0.3 */
+  const char* refit;
 } stiff_identify_options;
 /* Every field spelled out: a bare {sizeof(...)} trips -Wmissing-field-initializers. */
 #define STIFF_IDENTIFY_OPTIONS_INIT \
-  { sizeof(stiff_identify_options), NULL, NULL, 0.0, 0, 0, NULL, NULL, 0.0 }
+  { sizeof(stiff_identify_options), NULL, NULL, 0.0, 0, 0, NULL, NULL, 0.0, NULL, NULL }
 
 /** Identify the model from data with measured displacements. Joints or parameters that the
  *  data cannot identify are named in the result's warnings and held fixed. Errors:

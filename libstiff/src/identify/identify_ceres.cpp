@@ -796,6 +796,43 @@ FitResult identify(const RobotModel& robot,
       throw InvalidArgument("identify: parameter " + qualified(model, k) + " has an invalid spec");
   }
 
+  // A start fit: parameters matched by effect and name; with `refit`, the others are given.
+  std::vector<int> from_start(p, -1);  // index into opt.start->parameters
+  std::vector<bool> given(p, false);
+  if (!opt.refit.empty() && !opt.start)
+    throw InvalidArgument("identify: refitting some effects (" + opt.refit.front() +
+                          "...) needs the fit that gives the others (start)");
+  if (opt.start) {
+    if (!opt.start->robot_digest.empty() && opt.start->robot_digest != kinematics_digest(robot))
+      throw InvalidArgument("identify: the start fit was made for robot '" + opt.start->robot_name +
+                            "', whose kinematics differ from '" + robot.name + "'");
+    for (const auto& e : opt.refit)
+      if (model.find(e) < 0)
+        throw InvalidArgument("identify: effect '" + e + "' to refit is not in the model '" +
+                              model.model_string() + "'");
+    for (int k = 0; k < p; ++k) {
+      for (size_t i = 0; i < opt.start->parameters.size(); ++i) {
+        const FitParameter& q = opt.start->parameters[i];
+        if (q.effect == model.owner(k).name() && q.name == model.spec(k).name)
+          from_start[k] = static_cast<int>(i);
+      }
+      const bool refitted =
+          opt.refit.empty() ||
+          std::find(opt.refit.begin(), opt.refit.end(), model.owner(k).name()) != opt.refit.end();
+      if (refitted) continue;
+      if (from_start[k] < 0)
+        throw InvalidArgument("identify: " + qualified(model, k) +
+                              " is neither in the start fit nor refitted (add its effect to the "
+                              "effects to refit)");
+      const double v = opt.start->parameters[from_start[k]].value;
+      if (!std::isfinite(v) || v < model.spec(k).lower || v > model.spec(k).upper)
+        throw InvalidArgument("identify: the start fit's " + qualified(model, k) + " = " + num(v) +
+                              " is outside its range");
+      given[k] = true;
+    }
+  }
+  const bool any_given = std::find(given.begin(), given.end(), true) != given.end();
+
   FitResult f;
   Setup s;
   s.model = &model;
@@ -831,6 +868,11 @@ FitResult identify(const RobotModel& robot,
           "default compliances");
     }
   }
+  for (int k = 0; k < p; ++k)
+    if (from_start[k] >= 0) {
+      const double v = opt.start->parameters[from_start[k]].value;
+      if (std::isfinite(v)) theta(k) = v;
+    }
   for (int k = 0; k < p; ++k)
     theta(k) = std::min(std::max(theta(k), model.spec(k).lower), model.spec(k).upper);
 
@@ -870,11 +912,29 @@ FitResult identify(const RobotModel& robot,
   double residual_sigma = 0.0;  // 0: the structural test only (the passes)
   // The statistical test judges only values a solve fitted (`free`): a value held at its
   // null so far is not evidence either way.
+  // Given parameters are known: their columns take no part in the decision about the others.
+  auto without_given = [&](const Eigen::MatrixXd& jac) {
+    Eigen::MatrixXd out = jac;
+    for (int k = 0; k < p; ++k)
+      if (given[k]) out.col(k).setZero();
+    return out;
+  };
+  auto hold_given = [&](Identifiability& idf_given) {
+    for (int k = 0; k < p; ++k)
+      if (given[k]) {
+        idf_given.fixed[k] = true;
+        idf_given.statistical[k] = false;
+        idf_given.reason[k] = "given by the start fit";
+      }
+  };
   auto check = [&](const Eigen::MatrixXd& jac, const Eigen::VectorXd& at) {
     std::vector<bool> fitted(p, false);
     for (int k : free) fitted[k] = true;
-    return check_identifiability(model, jac, s.typical, opt.rank_tolerance, residual_sigma,
-                                 opt.max_relative_se, &at, &fitted);
+    Identifiability out = check_identifiability(model, any_given ? without_given(jac) : jac,
+                                                s.typical, opt.rank_tolerance, residual_sigma,
+                                                opt.max_relative_se, &at, &fitted);
+    hold_given(out);
+    return out;
   };
   // Residual standard deviation of the weighted fit at theta, as the statistics below: rows
   // down-weighted by the robust loss count that much.
@@ -905,9 +965,10 @@ FitResult identify(const RobotModel& robot,
   auto prescreen = [&](const Eigen::MatrixXd& jac) {
     std::vector<bool> fitted(p, true);
     const Eigen::VectorXd e = weighted_residuals(s, theta);
-    const Identifiability stat =
-        check_identifiability(model, jac, s.typical, opt.rank_tolerance, 0.0,
-                              std::min(kStartRelativeSe, opt.max_relative_se), &theta, &fitted, &e);
+    Identifiability stat = check_identifiability(
+        model, any_given ? without_given(jac) : jac, s.typical, opt.rank_tolerance, 0.0,
+        std::min(kStartRelativeSe, opt.max_relative_se), &theta, &fitted, &e);
+    hold_given(stat);
     if (std::find(stat.statistical.begin(), stat.statistical.end(), true) != stat.statistical.end())
       idf = stat;
   };
@@ -923,11 +984,11 @@ FitResult identify(const RobotModel& robot,
     for (int pass = 0;; ++pass) {
       free.clear();
       for (int k = 0; k < p; ++k) {
-        if (idf.fixed[k])
+        if (!idf.fixed[k])
+          free.push_back(k);
+        else if (!given[k])  // a given parameter keeps the start fit's value
           theta(k) = std::min(std::max(model.spec(k).null_value, model.spec(k).lower),
                               model.spec(k).upper);
-        else
-          free.push_back(k);
       }
       if (free.empty())
         throw NumericalError("identify: no parameter of model '" + model.model_string() +
@@ -994,11 +1055,11 @@ FitResult identify(const RobotModel& robot,
     idf = stat;
     free.clear();
     for (int k = 0; k < p; ++k) {
-      if (idf.fixed[k])
+      if (!idf.fixed[k])
+        free.push_back(k);
+      else if (!given[k])
         theta(k) =
             std::min(std::max(model.spec(k).null_value, model.spec(k).lower), model.spec(k).upper);
-      else
-        free.push_back(k);
     }
     if (free.empty())
       throw NumericalError("identify: no parameter of model '" + model.model_string() +
@@ -1146,6 +1207,14 @@ FitResult identify(const RobotModel& robot,
     fp.value = theta(k);
     fp.identified = !idf.fixed[k];
     fp.standard_error = fp.identified ? std::sqrt(f.covariance(k, k)) : NAN;
+    if (given[k]) {  // kept as the start fit has it
+      const FitParameter& q = opt.start->parameters[from_start[k]];
+      fp.identified = q.identified;
+      fp.standard_error = q.standard_error;
+      f.covariance(k, k) = q.standard_error * q.standard_error;
+      f.parameters.push_back(fp);
+      continue;
+    }
     f.parameters.push_back(fp);
     if (!fp.identified) {
       f.warnings.push_back(qualified(model, k) + " is not identifiable from this data: " +

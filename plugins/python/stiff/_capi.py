@@ -78,6 +78,8 @@ class IdentifyOptions(C.Structure):
         ("progress", PROGRESS_FN),
         ("progress_user_data", C.c_void_p),
         ("max_relative_se", C.c_double),
+        ("start", C.c_void_p),
+        ("refit", C.c_char_p),
     ]
 
 

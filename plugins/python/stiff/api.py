@@ -483,12 +483,16 @@ class Model(_Handle):
 
 def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "none",
              loss_scale_m: float = 0.0, method: str = "auto", max_iterations: int = 0,
-             max_relative_se: float = 100.0) -> Fit:
+             max_relative_se: float = 100.0, start: Optional["Fit"] = None,
+             refit: Optional[str] = None) -> Fit:
     """Identify the model (effects joined by '+') from measured displacements and/or absolute
     positions (e.g. model='registration+tool+joint_offset+kinematic' on absolute data).
     `max_relative_se`: a parameter whose standard error exceeds this many times its typical
     magnitude and also a third of its value (t < 3) is held (docs/identifiability.md); 0 keeps
-    only the structural rank test."""
+    only the structural rank test. `start`: a previous fit of the robot whose parameters start
+    this one; with `refit` (effects joined by '+', e.g. 'registration'), only those effects are
+    fitted and every other parameter is kept from `start` (a new placement of the instrument
+    registered to a calibrated robot)."""
     methods = {"auto": 0, "linear": 1, "ceres": 2}
     if method not in methods:
         raise ValueError(f"unknown method {method!r} (use auto, linear, ceres)")
@@ -505,6 +509,14 @@ def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "non
     if not (max_relative_se >= 0 and math.isfinite(max_relative_se)):
         raise ValueError("max_relative_se must be a finite value >= 0")
     o.max_relative_se = max_relative_se if max_relative_se > 0 else -1.0
+    if refit is not None and not isinstance(refit, str):
+        raise TypeError(f"refit must be a string such as 'registration', not "
+                        f"{type(refit).__name__}")
+    if start is not None:
+        if not isinstance(start, Fit):
+            raise TypeError(f"start must be a Fit, not {type(start).__name__}")
+        o.start = start._as_parameter_
+    o.refit = _c.encode(refit) if refit else None
     h = C.c_void_p()
     check(lib.stiff_identify(C.byref(h), robot, data, C.byref(o)))
     return Fit(h)

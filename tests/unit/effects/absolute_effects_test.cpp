@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <random>
 
 #include "stiff/error.hpp"
@@ -314,6 +315,92 @@ TEST(Identifiability, JointTheDataBarelySeeIsHeldNotFittedToNoise) {
   for (const auto& w : f.warnings) warned = warned || w.find("joint.c6") != std::string::npos;
   EXPECT_TRUE(warned);
   for (int j = 0; j < 5; ++j) EXPECT_TRUE(f.parameters[j].identified) << "joint " << j + 1;
+}
+
+/// Rows of `data` whose session is `label`.
+Dataset session_rows(const Dataset& data, const std::string& label, int first, int count) {
+  Dataset out = data;
+  out.rows.clear();
+  int seen = 0;
+  for (const Measurement& m : data.rows)
+    if (m.session == label && seen++ >= first && static_cast<int>(out.rows.size()) < count)
+      out.rows.push_back(m);
+  return out;
+}
+
+TEST(AbsoluteEffects, NewPlacementIsRegisteredToACalibratedRobotFromFifteenPoses) {
+  // Calibrate on placement S0; register placement S1 alone (--start --refit registration)
+  // from 15 poses; predict 200 other poses of S1. With sigma = 20 um per axis, the calibrated
+  // geometry's own error is small (200 poses), and six registration parameters from 45
+  // equations add about sqrt(6/45) of the noise: the RMS of a held-out 3-D error stays within
+  // 1.3 sqrt(3) sigma.
+  const RobotModel robot = ur5();
+  std::mt19937_64 rng(21);
+  const double sigma = 20e-6;
+  const Geometry g = random_geometry(robot.dof(), 2, rng);
+  const Dataset all = measure(robot, g, 215, sigma, rng);
+  const FitResult cal = identify(robot, session_rows(all, "S0", 0, 215), kGeometric);
+  IdentifyOptions o;
+  o.start = &cal;
+  o.refit = {"registration"};
+  const Dataset few = session_rows(all, "S1", 0, 15);
+  const FitResult reg = identify(robot, few, kGeometric, o);
+  // Every parameter but the registration is the calibration's, as it was.
+  int fitted = 0;
+  for (const FitParameter& q : reg.parameters) {
+    if (q.effect == "registration") {
+      EXPECT_TRUE(q.identified) << q.name;
+      ++fitted;
+      continue;
+    }
+    const auto c = std::find_if(
+        cal.parameters.begin(), cal.parameters.end(),
+        [&](const FitParameter& x) { return x.effect == q.effect && x.name == q.name; });
+    ASSERT_NE(c, cal.parameters.end()) << q.effect << "." << q.name;
+    EXPECT_EQ(q.value, c->value) << q.effect << "." << q.name;
+    EXPECT_EQ(q.identified, c->identified) << q.effect << "." << q.name;
+  }
+  EXPECT_EQ(fitted, 6);
+  EXPECT_EQ(reg.rank, 6);
+  const Dataset rest = session_rows(all, "S1", 15, 200);
+  const DeflectionModel m(robot, reg.model, &rest);
+  const auto ctx = m.contexts(rest);
+  double ss = 0;
+  for (size_t r = 0; r < rest.size(); ++r)
+    ss += (m.predict(reg.theta(), rest.rows[r], ctx[r]).head<3>() - rest.rows[r].position)
+              .squaredNorm();
+  const double rms = std::sqrt(ss / static_cast<double>(rest.size()));
+  EXPECT_LT(rms, 1.3 * std::sqrt(3.0) * sigma) << rms;
+}
+
+TEST(AbsoluteEffects, RefitNeedsAStartFitThatGivesEverythingElse) {
+  const RobotModel robot = ur5();
+  std::mt19937_64 rng(22);
+  const Geometry g = random_geometry(robot.dof(), 1, rng);
+  const Dataset data = measure(robot, g, 60, 20e-6, rng);
+  const FitResult cal = identify(robot, data, kGeometric);
+  IdentifyOptions o;
+  o.refit = {"registration"};
+  EXPECT_THROW(identify(robot, data, kGeometric, o), InvalidArgument);  // no start
+  o.start = &cal;
+  o.refit = {"harmonic"};  // not in the model
+  EXPECT_THROW(identify(robot, data, kGeometric, o), InvalidArgument);
+  // A model with an effect the start fit does not hold, not refitted: named.
+  o.refit = {"registration"};
+  std::vector<std::string> more = kGeometric;
+  more.push_back("harmonic");
+  try {
+    identify(robot, data, more, o);
+    FAIL();
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("harmonic."), std::string::npos) << e.what();
+  }
+  // A start fit of another robot.
+  FitResult other = cal;
+  other.robot_name = "other";
+  other.robot_digest = "fnv1a64:0000000000000000";
+  o.start = &other;
+  EXPECT_THROW(identify(robot, data, kGeometric, o), InvalidArgument);
 }
 
 }  // namespace

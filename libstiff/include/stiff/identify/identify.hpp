@@ -58,6 +58,13 @@ struct IdentifyOptions {
   /// Called after every Ceres iteration with (iteration, cost); return false to cancel (the
   /// call then throws Cancelled).
   std::function<bool(int, double)> progress;
+  /// A previous fit of the same robot (not owned; may be null): every parameter of the model
+  /// that it holds (same effect and name) starts from its value.
+  const FitResult* start = nullptr;
+  /// With `start`: the effects to fit; every other parameter of the model is given by the
+  /// start fit and kept (value, identified flag, standard error), e.g. {"registration"} to
+  /// register a new placement of the instrument to a calibrated robot. Empty: fit everything.
+  std::vector<std::string> refit;
 };
 
 /// Checks of absolute rows against the nominal robot that the file alone cannot make

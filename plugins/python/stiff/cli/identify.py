@@ -6,6 +6,7 @@ import sys
 import math
 
 from .. import api
+from . import UserError
 from .common import (Formatter, add_limits_flag, add_robot, check_joint_limits, fmt, load_robot,
                      plausibility_warnings, robot_path, table)
 
@@ -13,11 +14,16 @@ EXAMPLE = """example:
   stiff identify --robot rokae --data data.csv -o fit.json
   stiff identify --robot rokae --data data.csv --model joint+link+point_offset --loss huber -o fit.json
   stiff identify --robot ur5 --data examples/real/ur5/ur5_grid.csv --model registration+tool+joint_offset+kinematic -o ur5.json
+  stiff identify --robot ur5 --data examples/real/ur5/ur5_random.csv --start ur5.json --refit registration -o ur5_moved.json
 
 --model takes effect names joined by '+' (see `stiff effects`). The model 'joint' without a
 robust loss is solved by linear least squares (Jiang & Fang 2023); anything else by Ceres.
 Absolute measurements (px, py, pz in the instrument frame, docs/formats.md) need the geometric
-effects: registration (one per session), tool, joint_offset, kinematic (docs/effects.md)."""
+effects: registration (one per session), tool, joint_offset, kinematic (docs/effects.md).
+--start FIT --refit EFFECTS keeps every parameter of a previous fit except those of the listed
+effects, which are fitted to this data: e.g. the registration of a new placement of the tracker
+(a new session) to a robot calibrated before, from a few poses. The model is the start fit's
+unless --model is given."""
 
 
 def register(sub):
@@ -26,7 +32,8 @@ def register(sub):
     add_robot(p)
     p.add_argument("--data", "-d", required=True,
                    help="measurement CSV with displacements and/or absolute positions")
-    p.add_argument("--model", "-m", default="joint", help="effects joined by '+' (default: joint)")
+    p.add_argument("--model", "-m", default=None,
+                   help="effects joined by '+' (default: the --start fit's model, else joint)")
     p.add_argument("--loss", default="none", help="none, huber, cauchy, soft_l1, tukey (default none)")
     p.add_argument("--loss-scale-um", type=float, default=0.0,
                    help="robust loss scale [um] (default: from sigma_d or the data)")
@@ -36,6 +43,11 @@ def register(sub):
                         "typical magnitude and also a third of its value, t < 3 "
                         "(docs/identifiability.md); "
                         "0: structural rank test only (default 100)")
+    p.add_argument("--start", metavar="FIT",
+                   help="a previous fit of this robot whose parameters start this one")
+    p.add_argument("--refit", metavar="EFFECTS",
+                   help="with --start: fit only these effects (joined by '+', e.g. "
+                        "registration) and keep every other parameter of the start fit")
     p.add_argument("-o", "--output", help="fit JSON to write")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of tables")
     add_limits_flag(p)
@@ -91,10 +103,15 @@ def run(args):
     robot = load_robot(args)
     data = api.Dataset.read(args.data, robot)
     check_joint_limits(robot, data, args.data, args.ignore_limits)
+    if args.refit and not args.start:
+        raise UserError("--refit needs --start FIT: the fit that gives the other parameters")
+    start = api.Fit.read(args.start) if args.start else None
+    model = args.model or ("+".join(start.model) if start is not None else "joint")
     try:
-        fit = api.identify(robot, data, model=args.model, loss=args.loss,
+        fit = api.identify(robot, data, model=model, loss=args.loss,
                            loss_scale_m=args.loss_scale_um * 1e-6, method=args.method,
-                           max_relative_se=args.max_relative_se)
+                           max_relative_se=args.max_relative_se, start=start,
+                           refit=args.refit)
     except Exception:
         # A fit that fails on implausible data: what is wrong with the data helps more.
         for w in plausibility_warnings(robot, data):
