@@ -99,7 +99,7 @@ void add_force_noise(const Dataset& data, Noise& n) {
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const auto& m = data.rows[r];
     const double f = m.force.norm();
-    if (!(f > 0)) continue;
+    if (!(f > 0) || m.absolute) continue;  // the deflection is not what an absolute row holds
     double s2 = 0;
     for (int k = 0; k < 3; ++k) {
       const double a = rel * std::abs(m.force(k));
@@ -125,14 +125,15 @@ Noise noise_of_tracker(const Dataset& data) {
   Noise n;
   const int rows = static_cast<int>(data.rows.size());
   n.sigma = VectorXd::Ones(rows);
-  bool all_sigma = data.has_sigma;
+  // sigma_d of a displacement row, sigma_p of an absolute one: every row must state one.
+  bool all_sigma = data.has_sigma || data.has_sigma_p;
   if (all_sigma)
     for (const auto& m : data.rows)
-      if (!(m.sigma_d > 0)) all_sigma = false;
+      if (!(m.sigma() > 0)) all_sigma = false;
   if (all_sigma) {
-    for (int r = 0; r < rows; ++r) n.sigma(r) = data.rows[r].sigma_d;
+    for (int r = 0; r < rows; ++r) n.sigma(r) = data.rows[r].sigma();
     n.known = true;
-    n.source = "sigma_d";
+    n.source = data.has_sigma_p ? "sigma_p" : "sigma_d";
     n.floor_m = stated_noise_m(data);
     return n;
   }
@@ -157,7 +158,8 @@ Noise noise_of_tracker(const Dataset& data) {
     for (int b = a + 1; b < rows; ++b) {
       const auto& ma = data.rows[a];
       const auto& mb = data.rows[b];
-      if (group[b] < 0 && (ma.q - mb.q).norm() < 1e-9 &&
+      if (group[b] < 0 && ma.session == mb.session && ma.absolute == mb.absolute &&
+          (ma.q - mb.q).norm() < 1e-9 &&
           (ma.force - mb.force).norm() < 1e-6 * (1.0 + ma.force.norm()) &&
           (ma.moment - mb.moment).norm() < 1e-6 * (1.0 + ma.moment.norm()))
         group[b] = groups;
@@ -167,13 +169,13 @@ Noise noise_of_tracker(const Dataset& data) {
   std::vector<Eigen::Vector3d> sum(groups, Eigen::Vector3d::Zero());
   std::vector<int> count(groups, 0);
   for (int r = 0; r < rows; ++r) {
-    sum[group[r]] += data.rows[r].displacement;
+    sum[group[r]] += data.rows[r].observed();
     ++count[group[r]];
   }
   double ss = 0;
   int dof = 0;
   for (int r = 0; r < rows; ++r)
-    ss += (data.rows[r].displacement - sum[group[r]] / count[group[r]]).squaredNorm();
+    ss += (data.rows[r].observed() - sum[group[r]] / count[group[r]]).squaredNorm();
   for (int g = 0; g < groups; ++g) dof += 3 * (count[g] - 1);
   if (dof >= 3 && ss > 0) {
     const double s = std::sqrt(ss / dof);
@@ -325,7 +327,7 @@ Analysis analyse(const Context& cx,
     for (int r = 0; r < rows; ++r) {
       const Eigen::Vector3d d = a.model->predict(a.theta, calib.rows[r], ctx_all[r]).head<3>();
       a.pred_all.row(r) = d.transpose();
-      y.segment<3>(3 * r) = (calib.rows[r].displacement - d) / noise.sigma(r);
+      y.segment<3>(3 * r) = (calib.rows[r].observed() - d) / noise.sigma(r);
       if (round == 0 && !fixed)
         x.middleRows(3 * r, 3) =
             a.model->displacement_jacobian(a.theta, calib.rows[r], ctx_all[r]) / noise.sigma(r);
@@ -382,7 +384,7 @@ Analysis analyse(const Context& cx,
   for (int i = 0; i < nu; ++i) {
     const auto& m = a.used.rows[i];
     x.middleRows(3 * i, 3) = a.model->displacement_jacobian(a.theta, m, a.ctx[i]) * a.w(i);
-    const Eigen::Vector3d e = m.displacement - a.pred_all.row(a.used_rows[i]).transpose();
+    const Eigen::Vector3d e = m.observed() - a.pred_all.row(a.used_rows[i]).transpose();
     a.r.segment<3>(3 * i) = e * a.w(i);
     ss_m += e.squaredNorm();
   }
@@ -423,7 +425,7 @@ Analysis analyse(const Context& cx,
     double ss = 0;
     for (size_t r = 0; r < v.rows.size(); ++r) {
       const Eigen::Vector3d e =
-          v.rows[r].displacement - a.model->predict(a.theta, v.rows[r], vctx[r]).head<3>();
+          v.rows[r].observed() - a.model->predict(a.theta, v.rows[r], vctx[r]).head<3>();
       q.validation_error_m.push_back(e.norm());
       ss += e.squaredNorm();
     }
@@ -709,7 +711,7 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
     PoseResidual p;
     p.row = r;
     p.id = calib.rows[r].id;
-    const Eigen::Vector3d e = calib.rows[r].displacement - a.pred_all.row(r).transpose();
+    const Eigen::Vector3d e = calib.rows[r].observed() - a.pred_all.row(r).transpose();
     for (int k = 0; k < 3; ++k) {
       p.residual_m[k] = e(k);
       p.predicted_m[k] = a.pred_all(r, k);
@@ -1023,12 +1025,14 @@ struct Chain {
                "explains it" + extra;
         return std::string("unexplained");
       }
-      *why = known ? "the residuals are at the noise floor (" + chi + ") and no candidate " +
-                         "effect is significant" + extra
-                   : "no candidate effect is significant (the noise level is unknown: give "
-                     "sigma_d, # tracker_sigma_m or replicated measurements for an absolute "
-                     "check)" +
-                         extra;
+      *why =
+          known
+              ? "the residuals are at the noise floor (" + chi + ") and no candidate " +
+                    "effect is significant" + extra
+              : "no candidate effect is significant (the noise level is unknown: give "
+                "sigma_d or sigma_p, # tracker_sigma_m or replicated measurements for an absolute "
+                "check)" +
+                    extra;
       return std::string("adequate");
     };
     if (!claims(L)) return nothing("");
@@ -1142,7 +1146,7 @@ Diagnosis diagnose(const RobotModel& robot,
   d.noise_source = noise.source;
   if (!noise.known)
     d.warnings.push_back(
-        "the noise level is unknown (no sigma_d, no # tracker_sigma_m, no replicated "
+        "the noise level is unknown (no sigma_d or sigma_p, no # tracker_sigma_m, no replicated "
         "measurements): tests use the residual variance; the absolute (chi2) check is skipped");
 
   Chain chain{&cx, candidates, {}, {}};
