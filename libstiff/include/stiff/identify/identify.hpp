@@ -84,8 +84,10 @@ std::vector<std::string> loss_names();
 /// automatic derivatives, bounds from each ParameterSpec, the joint compliances started from the
 /// linear least-squares solution and every other parameter from its spec start. Parameters (or
 /// combinations) the data cannot separate are found on the column-scaled Jacobian, held at
-/// their null value, marked unidentified and named in `warnings`; the check is repeated at
-/// the solution (a parameter such as c6 can become visible once offsets are known).
+/// their null value, marked unidentified and named in `warnings`; on displacement data the
+/// check is repeated at the solution (a parameter such as c6 can become visible once offsets
+/// are known), on absolute data the set is decided on the linearised start and kept
+/// (docs/identifiability.md).
 /// Standard errors from the final Jacobian, scaled by the residual variance; robust weights
 /// and an outlier list. Throws InvalidArgument for bad data, unknown effects or losses,
 /// effects whose requirements the robot lacks; NumericalError when nothing is identifiable;
