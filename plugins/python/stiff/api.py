@@ -144,15 +144,33 @@ class Robot(_Handle):
         check(lib.stiff_robot_limits(_c.ptr(lo), _c.ptr(hi), n, C.byref(needed), self))
         return lo, hi
 
-    def tool_pose(self, q: Sequence[float]) -> np.ndarray:
-        """4 x 4 pose of the measured point at joint positions q [rad], base frame [m]."""
-        qa = _c.as_array(q)
-        out = np.empty(16)
-        check(lib.stiff_robot_tool_pose(_c.ptr(out), self, _c.ptr(qa), qa.size))
-        return out.reshape(4, 4)
+    def tool_pose(self, q) -> np.ndarray:
+        """Pose of the measured point at joint positions q [rad], base frame [m]: 4 x 4 for
+        one pose (n values), (N, 4, 4) for N poses (N x n), in one call."""
+        qa = np.asarray(q, dtype=np.float64)
+        if qa.ndim == 1:
+            qa = _c.as_array(q)
+            out = np.empty(16)
+            check(lib.stiff_robot_tool_pose(_c.ptr(out), self, _c.ptr(qa), qa.size))
+            return out.reshape(4, 4)
+        if qa.ndim != 2:
+            raise ValueError(f"q must be n or N x n joint values, got shape {qa.shape}")
+        qa = np.ascontiguousarray(qa)
+        out = np.empty((qa.shape[0], 4, 4))
+        needed = C.c_size_t()
+        check(lib.stiff_tool_poses(_c.ptr(out), out.size, C.byref(needed), self, _c.ptr(qa),
+                                   qa.shape[0], qa.shape[1]))
+        return out
 
-    def jacobian(self, q: Sequence[float]) -> np.ndarray:
-        """6 x n geometric Jacobian at the measured point, base frame."""
+    def jacobian(self, q) -> np.ndarray:
+        """Geometric Jacobian at the measured point, base frame: 6 x n for one pose (n
+        values), (N, 6, n) for N poses (N x n)."""
+        qa = np.asarray(q, dtype=np.float64)
+        if qa.ndim == 2:
+            return np.stack([self.jacobian(row) for row in qa]) if len(qa) else \
+                np.empty((0, 6, self.dof))
+        if qa.ndim != 1:
+            raise ValueError(f"q must be n or N x n joint values, got shape {qa.shape}")
         qa = _c.as_array(q)
         return _c.get_doubles(lib.stiff_robot_jacobian, self, _c.ptr(qa), qa.size).reshape(6, -1)
 

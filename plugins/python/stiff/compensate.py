@@ -167,15 +167,8 @@ def _poses(poses) -> np.ndarray:
 
 
 def tool_poses(robot: Robot, q) -> np.ndarray:
-    """(N, 4, 4) tool poses at joint rows q (N x n) [rad]: e.g. FK(q_cmd)."""
-    qa = np.ascontiguousarray(np.atleast_2d(q), dtype=np.float64)
-    if qa.ndim != 2:
-        raise ValueError(f"q must be n or N x n joint values, got shape {np.shape(q)}")
-    out = np.empty((qa.shape[0], 4, 4))
-    needed = C.c_size_t()
-    check(lib.stiff_tool_poses(_c.ptr(out), out.size, C.byref(needed), robot, _c.ptr(qa),
-                               qa.shape[0], qa.shape[1]))
-    return out
+    """(N, 4, 4) tool poses at joint rows q (N x n, or one row n) [rad]: e.g. FK(q_cmd)."""
+    return robot.tool_pose(np.atleast_2d(np.asarray(q, dtype=np.float64)))
 
 
 def inverse_kinematics(robot: Robot, pose, q_seed=None, *, path: Optional[bool] = None):

@@ -50,6 +50,24 @@ def test_prediction_matches_the_paper_model(rokae_path):
         np.testing.assert_allclose(model.predict(q, f)[:3], expected, rtol=1e-10, atol=1e-15)
 
 
+def test_tool_pose_and_jacobian_take_a_batch(rokae_path):
+    # (N, n) in, (N, ...) out, row for row the same as one pose at a time (the batch pose is
+    # one C call, the per-pose call another: they must agree to the last bit of the chain).
+    robot = stiff.Robot(rokae_path)
+    lo, hi = robot.limits
+    q = np.random.default_rng(4).uniform(np.maximum(lo, -3), np.minimum(hi, 3), (7, robot.dof))
+    poses, jac = robot.tool_pose(q), robot.jacobian(q)
+    assert poses.shape == (7, 4, 4) and jac.shape == (7, 6, robot.dof)
+    for i in range(7):
+        np.testing.assert_allclose(poses[i], robot.tool_pose(q[i]), rtol=0, atol=1e-15)
+        np.testing.assert_array_equal(jac[i], robot.jacobian(q[i]))
+    assert robot.tool_pose(q[:0]).shape == (0, 4, 4)
+    with pytest.raises(stiff.InvalidArgumentError, match="5 values per row"):
+        robot.tool_pose(q[:, :5])  # wrong width: named, not read past
+    with pytest.raises(ValueError):
+        robot.tool_pose(q[None])
+
+
 def test_errors_carry_status_and_location(tmp_path, rokae_path):
     bad = tmp_path / "bad.csv"
     bad.write_text("id,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,fx_N,fy_N,fz_N\na,1,2,3,4,5,6,1,2,zz\n")
