@@ -298,6 +298,81 @@ Vector3<T> corrected_point(const RobotModel& robot,
   return rot * r + pos;
 }
 
+/// corrected_point for Jets by the chain rule: the chain once in double, then the point's
+/// derivatives with respect to each joint's dq, error translation and error rotation vector
+/// and to r, applied to the Jets' derivative parts. The same first derivatives as the Jet
+/// chain product (which costs about twenty times as much: 3 x 3 products of Jets per joint).
+/// With the error transform after joint j's `pre` frame B = (R_B, p_B) and its rotation
+/// frame E = (R_E, p_E) = B * (R(w), t), a change of
+///  - dq_j turns everything after E about z = R_E a_j through p_E: dP = z x (P - p_E);
+///  - t_j moves it: dP = R_B dt;
+///  - w_j turns it about R_E J_r(w) dw through p_E (R(w + dw) = R(w) Exp(J_r(w) dw), J_r the
+///    right Jacobian of SO(3)): dP = (R_E J_r dw) x (P - p_E);
+///  - r moves P by R_T dr (R_T the final rotation).
+Vector3<Jet> corrected_point(const RobotModel& robot,
+                             const Eigen::VectorXd& q,
+                             const VectorX<Jet>& dq,
+                             const Matrix6X<Jet>& joint_error,
+                             const Vector3<Jet>& r) {
+  const int n = robot.dof();
+  constexpr int kMax = 32;
+  if (n > kMax) return corrected_point<Jet>(robot, q, dq, joint_error, r);
+  Eigen::Matrix3d rb[kMax], re[kMax], jr[kMax];
+  Eigen::Vector3d pb[kMax], pe[kMax], ze[kMax];
+  Eigen::Matrix3d rot = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d pos = Eigen::Vector3d::Zero();
+  for (int j = 0; j < n; ++j) {
+    const Joint& jt = robot.joints[j];
+    pos += rot * jt.pre.topRightCorner<3, 1>();
+    rot = (rot * jt.pre.topLeftCorner<3, 3>()).eval();
+    rb[j] = rot;
+    pb[j] = pos;
+    Eigen::Vector3d t, w;
+    for (int k = 0; k < 3; ++k) {
+      t(k) = joint_error(k, j).a;
+      w(k) = joint_error(3 + k, j).a;
+    }
+    Eigen::Matrix3d rw;
+    ceres::AngleAxisToRotationMatrix(w.data(), rw.data());
+    pos += rot * t;
+    rot = (rot * rw).eval();
+    re[j] = rot;
+    pe[j] = pos;
+    ze[j] = rot * jt.axis;
+    // Right Jacobian of SO(3) at w (series below 1e-4 rad, where the closed form cancels).
+    Eigen::Matrix3d k;
+    k << 0, -w(2), w(1), w(2), 0, -w(0), -w(1), w(0), 0;
+    const double th = w.norm();
+    const double c1 = th < 1e-4 ? 0.5 - th * th / 24 : (1 - std::cos(th)) / (th * th);
+    const double c2 = th < 1e-4 ? 1.0 / 6 - th * th / 120 : (th - std::sin(th)) / (th * th * th);
+    jr[j] = Eigen::Matrix3d::Identity() - c1 * k + c2 * k * k;
+    rot = (rot * Eigen::AngleAxisd(q(j) + dq(j).a, jt.axis).toRotationMatrix()).eval();
+    pos += rot * jt.post.topRightCorner<3, 1>();
+    rot = (rot * jt.post.topLeftCorner<3, 3>()).eval();
+  }
+  const Eigen::Vector3d ra(r(0).a, r(1).a, r(2).a);
+  const Eigen::Vector3d p = rot * ra + pos;
+  using Vec = Eigen::Matrix<double, kJetStride, 1>;
+  Vec v[3] = {Vec::Zero(), Vec::Zero(), Vec::Zero()};
+  auto add = [&](const Eigen::Vector3d& col, const Vec& d) {
+    for (int k = 0; k < 3; ++k) v[k] += col(k) * d;
+  };
+  for (int j = 0; j < n; ++j) {
+    const Eigen::Vector3d lever = p - pe[j];
+    add(ze[j].cross(lever), dq(j).v);
+    // (R_E J_r e_i) x lever for each component i of w.
+    const Eigen::Matrix3d turn = re[j] * jr[j];
+    for (int i = 0; i < 3; ++i) {
+      add(rb[j].col(i), joint_error(i, j).v);
+      add(turn.col(i).cross(lever), joint_error(3 + i, j).v);
+    }
+  }
+  for (int i = 0; i < 3; ++i) add(rot.col(i), r(i).v);
+  Vector3<Jet> out;
+  for (int k = 0; k < 3; ++k) out(k) = Jet(p(k), v[k]);
+  return out;
+}
+
 }  // namespace
 
 template <typename T>
