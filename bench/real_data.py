@@ -75,6 +75,23 @@ def write_rows(src, idx, dst):
     Path(dst).write_text("\n".join(lines[:head + 1] + [body[i] for i in idx]) + "\n")
 
 
+def library_seconds(robot, train, model):
+    """The identification alone, in this process through the Python package (as the
+    reference's least_squares is timed): best of three; None without the package."""
+    try:
+        import stiff
+    except ImportError:
+        return None
+    r = stiff.Robot(robot)
+    d = stiff.Dataset.read(str(train), r)
+    best = math.inf
+    for _ in range(3):
+        t = time.perf_counter()
+        stiff.identify(r, d, model=model)
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
 def product_errors(robot, train, test, model, tmp):
     """Calibrate with stiff on `train`, predict `test`: per-pose position errors [mm],
     the number of identified parameters, calibration RMS [mm] and the identify time [s]."""
@@ -85,6 +102,7 @@ def product_errors(robot, train, test, model, tmp):
     _run([exe, "identify", "--robot", robot, "--data", str(train), "--model", model,
           "-o", fit])
     seconds = time.perf_counter() - t
+    library = library_seconds(robot, train, model)
     _run([exe, "predict", "--robot", robot, "--fit", fit, "--data", str(test), "-o", pred])
     js = json.loads(Path(fit).read_text())
     with open(pred) as f:
@@ -95,7 +113,7 @@ def product_errors(robot, train, test, model, tmp):
     fitstats = js.get("fit", {})
     return e, {"parameters": fitstats.get("rank"),
                "rms_mm": (fitstats.get("rms_m") or float("nan")) * 1e3 * math.sqrt(3),
-               "seconds": seconds}
+               "seconds": seconds, "library_seconds": library}
 
 
 def summary(e):
@@ -461,8 +479,9 @@ def write_doc(res):
         w("")
     w("## Speed")
     w("")
-    w("| run | reference: rank test + fit [s] | of which least_squares [s] | stiff identify [s] |")
-    w("| --- | --- | --- | --- |")
+    w("| run | reference: rank test + fit [s] | of which least_squares [s] | stiff identify, "
+      "command [s] | stiff identify, library [s] | least_squares / library |")
+    w("| --- | --- | --- | --- | --- | --- |")
     for ds, key in (("ur5", None), ("ur10", "half_C")):
         if ds not in res["reference"]:
             continue
@@ -470,17 +489,23 @@ def write_doc(res):
             rr = res["reference"][ds][n]
             c = rr[key]["calibration"] if key else rr["calibration"]
             pp = prod.get(ds, {})
-            ps = "-"
+            ps = pl = ratio = "-"
             if n in pp:
                 pc = pp[n][key]["calibration"] if key else pp[n]["calibration"]
                 ps = _f(pc["seconds"], ".3f")
+                lib_s = pc.get("library_seconds")
+                pl = _f(lib_s, ".3f")
+                if lib_s and c.get("least_squares_seconds"):
+                    ratio = f"{c['least_squares_seconds'] / lib_s:.1f}"
             w(f"| {ds} {n}{' (half of C)' if key else ''} | {_f(c['seconds'], '.2f')} | "
-              f"{_f(c.get('least_squares_seconds'), '.2f')} | {ps} |")
+              f"{_f(c.get('least_squares_seconds'), '.2f')} | {ps} | {pl} | {ratio} |")
     w("")
     w("The reference's time covers its identifiability test and the least-squares fit "
-      "(scipy's finite-difference Jacobian); stiff's is the wall time of `stiff identify` "
-      "including the start of the process. Both are measured on the same machine in the same "
-      "run; a loaded machine slows both.")
+      "(scipy's finite-difference Jacobian); stiff's command time is the wall time of "
+      "`stiff identify` including the start of the process (Python, about 0.2 s), its library "
+      "time the identification alone (`stiff.identify` in this process, best of three: "
+      "identifiability tests, solve, statistics). Both are measured on the same machine in "
+      "the same run; a loaded machine slows both.")
     w("")
     DOC.write_text("\n".join(L))
     if "ur5" in res["reference"]:
