@@ -85,6 +85,26 @@ stiff_status stiff_identify(stiff_result** out,
   });
 }
 
+stiff_status stiff_robot_calibrated(stiff_robot** out,
+                                    const stiff_robot* robot,
+                                    const stiff_result* fit) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require(robot, "robot");
+    std::vector<std::string> left_out;
+    auto r = std::make_unique<stiff_robot>();
+    r->model = calibrated_robot(robot->model, fit_of(fit), &left_out);
+    r->report = robot->report;
+    r->report.notes.push_back(
+        "calibrated: the joint offsets, kinematic errors and tool of the "
+        "fit built into the chain");
+    for (const auto& l : left_out) r->report.notes.push_back("not built in: " + l);
+    *out = r.release();
+    return STIFF_OK;
+  });
+}
+
 void stiff_result_destroy(stiff_result* result) { delete result; }
 
 stiff_status stiff_result_read_json(stiff_result** out, const char* path) {

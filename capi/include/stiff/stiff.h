@@ -315,6 +315,15 @@ STIFF_API stiff_status stiff_identify(stiff_result** out,
                                       const stiff_robot* robot,
                                       const stiff_dataset* data,
                                       const stiff_identify_options* options);
+/** The calibrated robot: `robot` with the fit's pose-independent geometry (joint offsets,
+ *  kinematic errors, tool) built into its chain, for OLP and ROS tools that take a robot
+ *  description (stiff_robot_to_yaml writes it). Effects that depend on the pose or the load,
+ *  and the registration, are not part of a description: stiff_robot_notes names them.
+ *  INVALID_ARGUMENT if the fit is not of this robot. Release with stiff_robot_destroy.
+ *  @since 0.3 */
+STIFF_API stiff_status stiff_robot_calibrated(stiff_robot** out,
+                                              const stiff_robot* robot,
+                                              const stiff_result* fit);
 /** Release a result; NULL is a no-op. @since 0.1 */
 STIFF_API void stiff_result_destroy(stiff_result* result);
 /** Read / write a fit file (JSON, docs/formats.md). Writing is atomic. @since 0.1 */

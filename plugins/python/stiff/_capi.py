@@ -121,6 +121,7 @@ _proto("stiff_robot_points", S, c_double_p, c_double_p, c_double_p, c_double_p, 
 _proto("stiff_robot_notes", S, C.c_char_p, C.c_size_t, c_size_p, H)
 _proto("stiff_robot_to_yaml", S, C.c_char_p, C.c_size_t, c_size_p, H)
 _proto("stiff_robot_destroy", None, H)
+_proto("stiff_robot_calibrated", S, HP, H, H)
 _proto("stiff_robot_dof", S, c_size_p, H)
 _proto("stiff_robot_name", S, C.c_char_p, C.c_size_t, c_size_p, H)
 _proto("stiff_robot_limits", S, c_double_p, c_double_p, C.c_size_t, c_size_p, H)

@@ -125,6 +125,19 @@ class Robot(_Handle):
         """The robot as stiff uses it, in the YAML format (SI units), loadable again."""
         return _c.get_string(lib.stiff_robot_to_yaml, self)
 
+    def calibrated(self, fit: "Fit") -> "Robot":
+        """This robot with the fit's pose-independent geometry (joint offsets, kinematic
+        errors, tool) built into its chain; `notes` names what a robot description cannot
+        hold (registration, compliance, harmonics). `to_yaml()` writes it for other tools."""
+        if not isinstance(fit, Fit):
+            raise TypeError(f"fit must be a Fit, not {type(fit).__name__}")
+        h = C.c_void_p()
+        check(lib.stiff_robot_calibrated(C.byref(h), self, fit))
+        r = Robot.__new__(Robot)
+        r._own(h)
+        r.path = self.path
+        return r
+
     @property
     def dof(self) -> int:
         n = C.c_size_t()

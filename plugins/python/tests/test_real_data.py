@@ -162,3 +162,42 @@ def test_ur10_new_tracker_placement_registered_from_15_poses(root, tmp_path):
         P = {x["id"]: [float(x[k]) for k in ("x_m", "y_m", "z_m")] for x in csv.DictReader(f)}
     e = np.linalg.norm(np.array([P[i] for i in d["ids"]]) - d["p"], axis=1) * 1e3
     assert e.mean() <= 0.615, e.mean()
+
+
+def test_ur5_calibrated_robot_description(root, tmp_path):
+    """The calibrated robot (Robot.calibrated, `stiff robot show --fit --yaml`) carries the
+    fitted geometry: its plain forward kinematics, put in the tracker frame by the fit's
+    registration, predicts the validation poses as the fit does (to round-off), and its YAML
+    loads back to the same chain."""
+    import stiff
+    robot = stiff.Robot("ur5")
+    grid = stiff.Dataset.read(_grid(root, tmp_path), robot)
+    fit = stiff.identify(robot, grid, model="+".join(GEOMETRY))
+    cal = robot.calibrated(fit)
+    assert cal.name == "ur5_calibrated"
+    assert any(n.startswith("not built in: registration") for n in cal.notes), cal.notes
+    test = stiff.Dataset.read(root / "examples/real/ur5/ur5_random.csv", robot)
+    predicted = stiff.Model(robot, fit).predict_dataset(test)
+    reg = {p["name"]: p["value"] for p in fit.json["parameters"] if p["effect"] == "registration"}
+    from scipy.spatial.transform import Rotation
+    w = [reg["omega_x_ur5"], reg["omega_y_ur5"], reg["omega_z_ur5"]]
+    t = np.array([reg["t_x_ur5"], reg["t_y_ur5"], reg["t_z_ur5"]])
+    base = cal.tool_pose(test.q)[:, :3, 3]
+    in_tracker = base @ Rotation.from_rotvec(w).as_matrix().T + t
+    assert np.abs(in_tracker - predicted).max() < 1e-9
+    # The nominal chain misses the geometry by tenths of a millimetre.
+    assert np.abs(robot.tool_pose(test.q)[:, :3, 3] @ Rotation.from_rotvec(w).as_matrix().T
+                  + t - predicted).max() > 1e-4
+    out = tmp_path / "cal.yaml"
+    r = subprocess.run([sys.executable, "-m", "stiff.cli", "robot", "show", "--robot", "ur5",
+                        "--fit", str(_save(fit, tmp_path)), "--yaml", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    again = stiff.Robot(out)
+    assert np.abs(again.tool_pose(test.q) - cal.tool_pose(test.q)).max() < 1e-12
+
+
+def _save(fit, tmp_path):
+    path = tmp_path / "fit.json"
+    fit.write(path)
+    return path

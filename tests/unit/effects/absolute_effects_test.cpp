@@ -403,5 +403,43 @@ TEST(AbsoluteEffects, RefitNeedsAStartFitThatGivesEverythingElse) {
   EXPECT_THROW(identify(robot, data, kGeometric, o), InvalidArgument);
 }
 
+TEST(AbsoluteEffects, CalibratedRobotCarriesTheFittedGeometry) {
+  // The calibrated robot's plain forward kinematics, put in the instrument frame by the fit's
+  // registration, is the model's prediction: the geometry is built into the description.
+  const RobotModel robot = ur5();
+  std::mt19937_64 rng(23);
+  const Geometry g = random_geometry(robot.dof(), 1, rng);
+  const Dataset data = measure(robot, g, 120, 20e-6, rng);
+  std::vector<std::string> model = kGeometric;
+  model.push_back("harmonic");  // depends on the pose: left out, and named
+  const FitResult fit = identify(robot, data, model);
+  std::vector<std::string> left_out;
+  const RobotModel cal = calibrated_robot(robot, fit, &left_out);
+  ASSERT_EQ(left_out.size(), 2u);
+  EXPECT_EQ(left_out[0].rfind("registration", 0), 0u);
+  EXPECT_EQ(left_out[1].rfind("harmonic", 0), 0u);
+  const FitResult geometric = identify(robot, data, kGeometric);
+  const RobotModel cal2 = calibrated_robot(robot, geometric);
+  const DeflectionModel m(robot, kGeometric, &data);
+  const auto ctx = m.contexts(data);
+  Eigen::Vector3d w, t;
+  for (const FitParameter& q : geometric.parameters)
+    for (int k = 0; k < 3; ++k) {
+      if (q.name == std::string("omega_") + "xyz"[k] + "_S0") w(k) = q.value;
+      if (q.name == std::string("t_") + "xyz"[k] + "_S0") t(k) = q.value;
+    }
+  const Eigen::Matrix3d r = Eigen::AngleAxisd(w.norm(), w.normalized()).matrix();
+  for (size_t i = 0; i < data.size(); i += 7) {
+    const Eigen::Vector3d model_p = m.predict(geometric.theta(), data.rows[i], ctx[i]).head<3>();
+    const Eigen::Vector3d robot_p = r * cal2.tool_pose(data.rows[i].q).topRightCorner<3, 1>() + t;
+    EXPECT_LT((model_p - robot_p).norm(), 1e-12) << "row " << i;
+  }
+  EXPECT_EQ(cal2.name, "ur5_calibrated");
+  // A fit of another robot is refused.
+  FitResult other = geometric;
+  other.robot_digest = "fnv1a64:0000000000000000";
+  EXPECT_THROW(calibrated_robot(robot, other), InvalidArgument);
+}
+
 }  // namespace
 }  // namespace stiff

@@ -90,6 +90,17 @@ void check_fit_applies(const FitResult& fit,
                        const DeflectionModel& model,
                        const std::string& what);
 
+/// The robot with the fit's pose-independent geometry built into its description: the joint
+/// offsets and kinematic errors into each joint's fixed transform (pre_j <- pre_j E_j
+/// Rot(a_j, dq_j), the corrected chain of the model), the tool offset into the measured point;
+/// general convention, named "<name>_calibrated". Effects that depend on the pose or the load
+/// (compliance, gravity, harmonics, temperature) or describe the instrument (registration) are
+/// not part of a robot description: each is named with why in `left_out`. Throws
+/// InvalidArgument unless the fit applies to this robot (check_fit_applies).
+RobotModel calibrated_robot(const RobotModel& robot,
+                            const FitResult& fit,
+                            std::vector<std::string>* left_out = nullptr);
+
 /// Predicted (dx, dy, dz, rx, ry, rz) of every row of `data` under a fit. The model is rebuilt
 /// from the fit's effect names for this robot.
 Eigen::MatrixXd predict_dataset(const RobotModel& robot, const FitResult& fit, const Dataset& data);

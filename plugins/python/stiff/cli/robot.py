@@ -11,10 +11,15 @@ from .common import Formatter, add_robot, atomic_write_text, load_robot, table
 EXAMPLE = """example:
   stiff robot show --robot ur5
   stiff robot show --robot ur5 --tip wrist_3_link --measured-point 0,0,120 --yaml ur5.yaml
+  stiff identify --robot ur5 --data examples/real/ur5/ur5_grid.csv --model registration+tool+joint_offset+kinematic -o ur5.json
+  stiff robot show --robot ur5 --fit ur5.json --yaml ur5_calibrated.yaml
 
 For a URDF the chain runs from --base (default base_link, else the root link) to --tip
 (default tool0 or flange when present, else the only chain end); `show` lists the chain ends
-it did not use. --yaml writes the chain as stiff uses it in the YAML robot format."""
+it did not use. --yaml writes the chain as stiff uses it in the YAML robot format. With --fit
+(an absolute calibration of this robot) it shows and writes the calibrated robot: the fit's
+joint offsets, kinematic errors and tool built into the chain, for tools that take a robot
+description; what a description cannot hold (registration, compliance, harmonics) is listed."""
 
 
 def register(sub):
@@ -25,6 +30,8 @@ def register(sub):
                       description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
     add_robot(s)
     s.add_argument("--yaml", metavar="FILE", help="also write the robot in the YAML format")
+    s.add_argument("--fit", metavar="FIT",
+                   help="a calibration of this robot: show and write the calibrated robot")
     s.set_defaults(func=run_show)
 
 
@@ -34,12 +41,16 @@ def _mm(v) -> str:
 
 def run_show(args):
     robot = load_robot(args)
+    if args.fit:
+        from .. import api
+        robot = robot.calibrated(api.Fit.read(args.fit))
     n = robot.dof
     lo, hi = robot.limits
     q0 = np.zeros(n)
     pose = robot.tool_pose(q0)
     jac = robot.jacobian(q0)
-    lines = [f"robot: {robot.name} ({robot.path}), {n} joints"]
+    lines = [f"robot: {robot.name} ({robot.path}{', ' + args.fit if args.fit else ''}), "
+             f"{n} joints"]
     lines += [f"  {note}" for note in robot.notes]
     rows = []
     for j, name in enumerate(robot.joint_names):

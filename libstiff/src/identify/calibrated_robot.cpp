@@ -1,0 +1,134 @@
+// The calibrated robot: a fit's pose-independent geometry built into the robot description.
+#include <ceres/rotation.h>
+
+#include <Eigen/Geometry>
+
+#include "stiff/error.hpp"
+#include "stiff/identify/fit.hpp"
+#include "stiff/model/effect.hpp"
+#include "stiff/model/model.hpp"
+
+namespace stiff {
+
+namespace {
+
+/// The geometry stage and the measured point of one effect at joint angles q.
+struct Contribution {
+  Eigen::VectorXd dq;
+  Eigen::Matrix<double, 6, Eigen::Dynamic> joint_error;
+  Eigen::Vector3d r_meas, r_load, force, moment;
+};
+
+Contribution contribution(const Effect& e,
+                          const double* p,
+                          const RobotModel& robot,
+                          const Measurement& m,
+                          const MeasurementContext& c) {
+  const int n = robot.dof();
+  EvalState<double> s;
+  s.robot = &robot;
+  s.measurement = &m;
+  s.context = &c;
+  s.force.setZero();
+  s.moment.setZero();
+  s.r_meas = robot.measured_point;
+  s.r_load = robot.load_point;
+  s.dq = Eigen::VectorXd::Zero(n);
+  s.joint_error = Eigen::MatrixXd::Zero(6, n);
+  e.wrench(p, s);
+  e.geometry(p, s);
+  return {s.dq, s.joint_error, s.r_meas, s.r_load, s.force, s.moment};
+}
+
+bool same(const Contribution& a, const Contribution& b) {
+  return (a.dq - b.dq).cwiseAbs().maxCoeff() < 1e-15 &&
+         (a.joint_error - b.joint_error).cwiseAbs().maxCoeff() < 1e-15 &&
+         (a.r_meas - b.r_meas).norm() < 1e-15;
+}
+
+}  // namespace
+
+RobotModel calibrated_robot(const RobotModel& robot,
+                            const FitResult& fit,
+                            std::vector<std::string>* left_out) {
+  const int n = robot.dof();
+  // Absolute rows at nominal positions for every session of the fit, so that the model has the
+  // fit's parameters (a registration needs poses spread in space to start from); the first two
+  // tell an effect that depends on the pose from one that does not.
+  Dataset data;
+  data.dof = n;
+  data.has_id = data.has_position = true;
+  data.has_session = !fit.sessions.empty();
+  const std::vector<std::string> sessions =
+      fit.sessions.empty() ? std::vector<std::string>{""} : fit.sessions;
+  constexpr int kPoses = 6;
+  for (size_t k = 0; k < sessions.size(); ++k)
+    for (int pose = 0; pose < kPoses; ++pose) {
+      Measurement m;
+      m.id = "pose" + std::to_string(kPoses * k + pose);
+      m.session = sessions[k];
+      m.absolute = true;
+      m.q = Eigen::VectorXd::Zero(n);
+      for (int j = 0; j < n; ++j) {
+        const double lo = std::max(robot.joints[j].lower, -3.0);
+        const double hi = std::min(robot.joints[j].upper, 3.0);
+        m.q(j) = lo + (0.2 + 0.06 * ((3 * pose + 7 * j) % 11)) * (hi - lo);
+      }
+      m.position = robot.tool_pose(m.q).topRightCorner<3, 1>();
+      data.rows.push_back(m);
+    }
+  const DeflectionModel model(robot, fit.model, &data);
+  check_fit_applies(fit, robot, model, "calibrated robot");
+  const Eigen::VectorXd theta = fit.theta();
+  const auto ctx = model.contexts(data);
+
+  Eigen::VectorXd dq = Eigen::VectorXd::Zero(n);
+  Eigen::MatrixXd joint_error = Eigen::MatrixXd::Zero(6, n);
+  Eigen::Vector3d r_meas = robot.measured_point;
+  std::vector<std::string> out;
+  for (size_t e = 0; e < model.effects().size(); ++e) {
+    const Effect& eff = *model.effects()[e];
+    const double* p = theta.data() + model.offset(static_cast<int>(e));
+    const unsigned stages = eff.stages();
+    const bool chain_only = (stages & ~(unsigned{kGeometryStage} | unsigned{kWrenchStage})) == 0 &&
+                            !eff.reads_jacobians();
+    const Contribution a = contribution(eff, p, robot, data.rows[0], ctx[0]);
+    const Contribution b = contribution(eff, p, robot, data.rows[1], ctx[1]);
+    const bool fixed_geometry = chain_only && same(a, b) &&
+                                (a.r_load - robot.load_point).norm() == 0 && a.force.norm() == 0 &&
+                                a.moment.norm() == 0;
+    if (!fixed_geometry) {
+      out.push_back(eff.name() + (eff.name() == "registration"
+                                      ? ": the instrument's placement, not the robot's"
+                                      : ": depends on the pose, the load or the instrument"));
+      continue;
+    }
+    dq += a.dq;
+    joint_error += a.joint_error;
+    r_meas += a.r_meas - robot.measured_point;
+  }
+
+  // pre_j <- pre_j E_j Rot(a_j, dq_j): the corrected chain of the model (model.cpp), in which
+  // the joint offset turns with the joint.
+  RobotModel cal = robot;
+  for (int j = 0; j < n; ++j) {
+    Joint& jt = cal.joints[j];
+    Eigen::Matrix4d e = Eigen::Matrix4d::Identity();
+    Eigen::Matrix3d r;
+    const Eigen::Vector3d w = joint_error.block<3, 1>(3, j);
+    ceres::AngleAxisToRotationMatrix(w.data(), r.data());
+    e.topLeftCorner<3, 3>() = r;
+    e.topRightCorner<3, 1>() = joint_error.block<3, 1>(0, j);
+    Eigen::Matrix4d z = Eigen::Matrix4d::Identity();
+    z.topLeftCorner<3, 3>() = Eigen::AngleAxisd(dq(j), jt.axis.normalized()).toRotationMatrix();
+    jt.pre = jt.pre * e * z;
+  }
+  cal.measured_point = r_meas;
+  if (cal.load_point == robot.measured_point) cal.load_point = r_meas;  // one tool point
+  cal.convention = Convention::urdf;  // general transforms: no DH table describes them
+  cal.name = robot.name + "_calibrated";
+  if (left_out) *left_out = out;
+  return cal;
+}
+
+}  // namespace stiff
