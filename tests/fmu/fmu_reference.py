@@ -49,7 +49,7 @@ def load_capi():
     return lib
 
 
-def fit_json(compliance):
+def fit_json(compliance, robot_name="rokae", robot_file=ROBOT):
     params = [
         {"effect": "joint", "name": f"c{j + 1}", "unit": "rad/(N*m)", "value": float(c)}
         for j, c in enumerate(compliance)
@@ -57,7 +57,7 @@ def fit_json(compliance):
     return {
         "format": "stiff-fit",
         "version": 1,
-        "robot": {"name": "rokae", "file": str(ROBOT)},
+        "robot": {"name": robot_name, "file": str(robot_file)},
         "model": ["joint"],
         "method": "linear_least_squares",
         "parameters": params,
@@ -74,17 +74,38 @@ class Exporter:
         if self.lib.stiff_robot_load(ctypes.byref(self.robot), str(ROBOT).encode()) != 0:
             raise RuntimeError(self.lib.stiff_last_error().decode())
 
-    def export(self, name, fmi_version=2, compliance=None, model_identifier=None):
+    def load_robot(self, path):
+        """Handle of another robot file (freed with the process)."""
+        robot = ctypes.c_void_p()
+        if self.lib.stiff_robot_load(ctypes.byref(robot), str(path).encode()) != 0:
+            raise RuntimeError(self.lib.stiff_last_error().decode())
+        name = ctypes.create_string_buffer(256)
+        self.lib.stiff_robot_name.argtypes = [ctypes.c_char_p, ctypes.c_size_t,
+                                              ctypes.POINTER(ctypes.c_size_t), ctypes.c_void_p]
+        assert self.lib.stiff_robot_name(name, len(name), None, robot) == 0
+        dof = ctypes.c_size_t()
+        self.lib.stiff_robot_dof.argtypes = [ctypes.POINTER(ctypes.c_size_t), ctypes.c_void_p]
+        assert self.lib.stiff_robot_dof(ctypes.byref(dof), robot) == 0
+        return robot, name.value.decode(), dof.value
+
+    def export(self, name, fmi_version=2, compliance=None, model_identifier=None,
+               robot_file=None):
+        robot, robot_name = self.robot, "rokae"
+        if robot_file is not None:
+            robot, robot_name, dof = self.load_robot(robot_file)
+            compliance = np.full(dof, 5e-5) if compliance is None else compliance
         compliance = 1.0 / STIFFNESS if compliance is None else compliance
         fit_path = self.tmp / (name + ".fit.json")
-        fit_path.write_text(json.dumps(fit_json(compliance)))
+        fit_path.write_text(json.dumps(fit_json(compliance, robot_name, robot_file or ROBOT)))
         fit = ctypes.c_void_p()
         if self.lib.stiff_result_read_json(ctypes.byref(fit), str(fit_path).encode()) != 0:
             raise RuntimeError(self.lib.stiff_last_error().decode())
         opts = FmuOptions(ctypes.sizeof(FmuOptions), fmi_version, model_identifier, None)
         out = self.tmp / (name + ".fmu")
-        status = self.lib.stiff_fmu_export(str(out).encode(), self.robot, fit, ctypes.byref(opts))
+        status = self.lib.stiff_fmu_export(str(out).encode(), robot, fit, ctypes.byref(opts))
         self.lib.stiff_result_destroy(fit)
+        if robot is not self.robot:
+            self.lib.stiff_robot_destroy(robot)
         if status != 0:
             raise RuntimeError(self.lib.stiff_last_error().decode())
         return str(out)

@@ -37,7 +37,8 @@ struct Var {
   double max = 1e300;
   std::string unit;
   std::string description;
-  int size = 1;  // arrays: element count
+  int size = 1;                // arrays: element count
+  std::vector<double> starts;  // arrays: start of each element (empty: `start` for all)
 };
 
 bool is_identifier(const std::string& s) {
@@ -107,41 +108,111 @@ std::vector<Var> build_variables(const DeflectionModel& model, int fmi) {
   static const char* kDefl[6] = {"dx", "dy", "dz", "rx", "ry", "rz"};
   static const char* kTool[3] = {"x_tool", "y_tool", "z_tool"};
   std::vector<Var> v;
-  if (fmi == 3) v.push_back({"time", Role::time, 0, 0, -1e300, 1e300, "s", "simulation time", 1});
+  if (fmi == 3)
+    v.push_back({"time", Role::time, 0, 0, -1e300, 1e300, "s", "simulation time", 1, {}});
   for (int j = 0; j < n; ++j)
-    v.push_back({"q" + std::to_string(j + 1), Role::q, j, 0.0, -1e300, 1e300, "rad",
-                 "commanded (unloaded) position of joint " + std::to_string(j + 1), 1});
+    v.push_back({"q" + std::to_string(j + 1),
+                 Role::q,
+                 j,
+                 0.0,
+                 -1e300,
+                 1e300,
+                 "rad",
+                 "commanded (unloaded) position of joint " + std::to_string(j + 1),
+                 1,
+                 {}});
   for (int k = 0; k < 6; ++k)
-    v.push_back({kWrench[k], Role::wrench, k, 0.0, -1e300, 1e300, k < 3 ? "N" : "N.m",
+    v.push_back({kWrench[k],
+                 Role::wrench,
+                 k,
+                 0.0,
+                 -1e300,
+                 1e300,
+                 k < 3 ? "N" : "N.m",
                  std::string(k < 3 ? "force" : "moment") + " on the tool at the load point, " +
                      "frame selected by wrench_frame",
-                 1});
+                 1,
+                 {}});
   if (fmi == 3) {
-    v.push_back({"q", Role::q_array, 0, 0.0, -1e300, 1e300, "rad",
-                 "joint positions as an array (same storage as q1..qn)", n});
-    v.push_back({"wrench", Role::wrench_array, 0, 0.0, -1e300, 1e300, "",
-                 "(fx fy fz [N], mx my mz [N.m]) as an array (same storage as fx..mz)", 6});
+    v.push_back({"q",
+                 Role::q_array,
+                 0,
+                 0.0,
+                 -1e300,
+                 1e300,
+                 "rad",
+                 "joint positions as an array (same storage as q1..qn)",
+                 n,
+                 {}});
+    v.push_back({"wrench",
+                 Role::wrench_array,
+                 0,
+                 0.0,
+                 -1e300,
+                 1e300,
+                 "",
+                 "(fx fy fz [N], mx my mz [N.m]) as an array (same storage as fx..mz)",
+                 6,
+                 {}});
   }
-  v.push_back({"wrench_frame", Role::wrench_frame, 0, 0.0, 0, 1, "",
-               "frame of the wrench inputs: 0 = robot base, 1 = tool (flange orientation)", 1});
+  v.push_back({"wrench_frame",
+               Role::wrench_frame,
+               0,
+               0.0,
+               0,
+               1,
+               "",
+               "frame of the wrench inputs: 0 = robot base, 1 = tool (flange orientation)",
+               1,
+               {}});
   for (int k = 0; k < model.parameter_count(); ++k) {
     const ParameterSpec& s = model.spec(k);
-    v.push_back({model.owner(k).name() + "_" + s.name, Role::parameter, k, 0.0, s.lower, s.upper,
-                 fmi_unit(s.unit), s.meaning, 1});
+    v.push_back({model.owner(k).name() + "_" + s.name,
+                 Role::parameter,
+                 k,
+                 0.0,
+                 s.lower,
+                 s.upper,
+                 fmi_unit(s.unit),
+                 s.meaning,
+                 1,
+                 {}});
   }
   for (int k = 0; k < 6; ++k)
-    v.push_back({kDefl[k], Role::deflection, k, 0, -1e300, 1e300, k < 3 ? "m" : "rad",
+    v.push_back({kDefl[k],
+                 Role::deflection,
+                 k,
+                 0,
+                 -1e300,
+                 1e300,
+                 k < 3 ? "m" : "rad",
                  std::string(k < 3 ? "displacement" : "small rotation") +
                      " of the tool point under the wrench, base frame",
-                 1});
+                 1,
+                 {}});
   for (int k = 0; k < 3; ++k)
-    v.push_back({kTool[k], Role::tool_position, k, 0, -1e300, 1e300, "m",
-                 "position of the loaded (deflected) tool point, base frame", 1});
+    v.push_back({kTool[k],
+                 Role::tool_position,
+                 k,
+                 0,
+                 -1e300,
+                 1e300,
+                 "m",
+                 "position of the loaded (deflected) tool point, base frame",
+                 1,
+                 {}});
   for (int j = 0; j < n; ++j)
-    v.push_back({"q_cmd" + std::to_string(j + 1), Role::q_cmd, j, 0, -1e300, 1e300, "rad",
+    v.push_back({"q_cmd" + std::to_string(j + 1),
+                 Role::q_cmd,
+                 j,
+                 0,
+                 -1e300,
+                 1e300,
+                 "rad",
                  "compensated target of joint " + std::to_string(j + 1) +
                      ": puts the loaded tool where q puts the unloaded one",
-                 1});
+                 1,
+                 {}});
   std::set<std::string> names;
   for (const auto& x : v)
     if (!names.insert(x.name).second)
@@ -293,7 +364,9 @@ std::string model_description(const std::vector<Var>& vars,
     if (has_bound(v.max) && v.role != Role::time) attrs += " max=\"" + num(v.max) + "\"";
     std::string start;
     if (with_start) {
-      for (int e = 0; e < v.size; ++e) start += (e ? " " : "") + num(v.start);
+      for (int e = 0; e < v.size; ++e)
+        start +=
+            (e ? " " : "") + num(v.starts.empty() ? v.start : v.starts[static_cast<size_t>(e)]);
       if (type == "Integer" || type == "Int32") start = std::to_string(static_cast<int>(v.start));
       attrs += " start=\"" + start + "\"";
     }
@@ -530,9 +603,13 @@ void export_fmu(const RobotModel& robot,
   const DeflectionModel model(robot, fit.model);
   check_fit_applies(fit, robot, model, "fmu export");
   std::vector<Var> vars = build_variables(model, options.fmi_version);
+  // Joint inputs start at a home pose away from singularities: at the all-zero pose of most
+  // arms (a wrist singularity) any load leaves the compensation unconverged from the first read.
+  const Eigen::VectorXd home = home_pose(robot);
   for (auto& v : vars) {
-    if (v.role != Role::parameter) continue;
-    v.start = fit.parameters[static_cast<size_t>(v.index)].value;
+    if (v.role == Role::parameter) v.start = fit.parameters[static_cast<size_t>(v.index)].value;
+    if (v.role == Role::q) v.start = home(v.index);
+    if (v.role == Role::q_array) v.starts.assign(home.data(), home.data() + home.size());
   }
 
   const std::string platform = options.fmi_version == 2 ? "linux64" : "x86_64-linux";

@@ -1,6 +1,7 @@
 #include "stiff/kinematics/robot_model.hpp"
 
 #include <Eigen/SVD>
+#include <algorithm>
 #include <cmath>
 
 #include "stiff/error.hpp"
@@ -70,6 +71,80 @@ JacobianConditioning translational_conditioning(const RobotModel& robot, const E
   const auto& sv = svd.singularValues();
   const double smin = sv(sv.size() - 1);
   return {smin, smin > 0 ? sv(0) / smin : INFINITY};
+}
+
+namespace {
+
+// Singular values of the compensation's Jacobian at q divided by the largest, ascending.
+Eigen::VectorXd relative_singular_values(const RobotModel& robot, const Eigen::VectorXd& q) {
+  const Matrix6X<double> j = robot.jacobian(q);
+  Eigen::MatrixXd a;
+  if (robot.dof() >= 6) {
+    double length = robot.measured_point.norm();
+    for (const auto& joint : robot.joints)
+      length += joint.pre.block<3, 1>(0, 3).norm() + joint.post.block<3, 1>(0, 3).norm();
+    a = j;
+    if (length > 0) a.topRows<3>() /= length;
+  } else {
+    a = j.topRows<3>();
+  }
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(a);
+  Eigen::VectorXd s = svd.singularValues().reverse();
+  if (s.size() == 0 || !(s(s.size() - 1) > 0)) return Eigen::VectorXd::Zero(s.size());
+  return s / s(s.size() - 1);
+}
+
+// a better than b: compared from the smallest value up, so that where two directions are
+// singular (the all-zero pose of many arms) lifting one of them already counts.
+bool more_dexterous(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+  for (Eigen::Index i = 0; i < a.size(); ++i) {
+    if (a(i) > b(i) + 1e-9) return true;
+    if (a(i) < b(i) - 1e-9) return false;
+  }
+  return false;
+}
+
+}  // namespace
+
+double compensation_dexterity(const RobotModel& robot, const Eigen::VectorXd& q) {
+  const Eigen::VectorXd s = relative_singular_values(robot, q);
+  return s.size() == 0 ? 0.0 : s(0);
+}
+
+Eigen::VectorXd home_pose(const RobotModel& robot) {
+  constexpr double kPi = 3.141592653589793238462643383279502884;
+  const int n = robot.dof();
+  Eigen::VectorXd mid(n), half(n);
+  for (int i = 0; i < n; ++i) {
+    const Joint& j = robot.joints[static_cast<size_t>(i)];
+    mid(i) = 0.5 * (j.lower + j.upper);
+    // Beyond +-pi about the middle a revolute joint only repeats angles.
+    half(i) = std::min(0.5 * (j.upper - j.lower), kPi);
+  }
+  Eigen::VectorXd q = mid;
+  Eigen::VectorXd best = relative_singular_values(robot, q);
+  for (int sweep = 0; sweep < 8; ++sweep) {
+    bool moved = false;
+    for (int i = 0; i < n; ++i) {
+      Eigen::VectorXd trial = q;
+      double value = q(i);
+      for (double f : {0.0, -2.0 / 3.0, -1.0 / 3.0, 1.0 / 3.0, 2.0 / 3.0}) {
+        trial(i) = mid(i) + f * half(i);
+        const Eigen::VectorXd s = relative_singular_values(robot, trial);
+        // Strictly better only: a joint the Jacobian does not see stays where it is.
+        if (more_dexterous(s, best)) {
+          best = s;
+          value = trial(i);
+        }
+      }
+      if (value != q(i)) {
+        q(i) = value;
+        moved = true;
+      }
+    }
+    if (!moved) break;
+  }
+  return q;
 }
 
 void check_joint_vector(const RobotModel& robot,

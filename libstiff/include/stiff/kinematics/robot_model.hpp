@@ -157,6 +157,24 @@ struct JacobianConditioning {
 };
 JacobianConditioning translational_conditioning(const RobotModel& robot, const Eigen::VectorXd& q);
 
+/// Inverse condition number sigma_min / sigma_max (0 at a singularity, 1 at best) of the
+/// Jacobian that the pose compensation inverts at q: for n >= 6 joints the 6 x n geometric
+/// Jacobian at the measured point with its translational rows divided by the arm's length
+/// (sum of the link offsets and the measured point's offset, so that both halves are
+/// dimensionless), for n < 6 the translational 3 x n Jacobian (position only).
+double compensation_dexterity(const RobotModel& robot, const Eigen::VectorXd& q);
+
+/// A home pose for a robot description that names none, away from singularities: from the
+/// middle of every joint's range, one joint at a time takes the value of
+/// {m, m +- h/3, m +- 2h/3} (m the middle, h the half range, at most pi) that most raises
+/// the Jacobian's singular values relative to the largest, compared from the smallest up (so
+/// that at a pose singular in two directions lifting one counts), sweeping the joints until
+/// no joint moves (at most 8 sweeps). It stays
+/// at least a third of the half range inside every limit. Deterministic; a joint that does not
+/// change the dexterity (the base axis, the flange axis through the measured point) stays at
+/// the middle.
+Eigen::VectorXd home_pose(const RobotModel& robot);
+
 /// Check that q has the robot's joint count and finite values; throws InvalidArgument naming
 /// `where` otherwise.
 void check_joint_vector(const RobotModel& robot,
