@@ -109,7 +109,7 @@ std::shared_ptr<const Layout> read_layout(const std::string& resources_dir) {
   r.expect("robot", 0, &rest);
   layout->robot.name = rest;
   const int n = r.integer(r.expect("dof", 1)[1]);
-  if (n < 1 || n > 64) r.fail("dof must be 1..64");
+  if (n < 1 || n > kMaxJoints) r.fail("dof must be 1.." + std::to_string(kMaxJoints));
   for (int j = 0; j < n; ++j) {
     t = r.expect("joint", 16 + 3 + 16 + 2 + 1 + 3);
     Joint joint;
@@ -140,11 +140,15 @@ std::shared_ptr<const Layout> read_layout(const std::string& resources_dir) {
   }
   const int count = r.integer(r.expect("variables", 1)[1]);
   if (count < 1 || count > 100000) r.fail("bad variable count");
+  // References: the fixed ones below kParameters, then one per model parameter.
+  const int max_vr = static_cast<int>(fmu_format::vr::kParameters) + 100000;
   for (int k = 0; k < count; ++k) {
-    t = r.expect("var", 7);
+    t = r.expect("var", 0);
+    if (t.size() < 5) r.fail("'var' needs <vr> <name> <role> <index> <start>... <min> <max>");
     Variable v;
-    v.vr = static_cast<uint32_t>(r.integer(t[1]));
-    if (v.vr != static_cast<uint32_t>(k)) r.fail("value references must be 0, 1, 2, ... in order");
+    const int ref = r.integer(t[1]);
+    if (ref < 0 || ref > max_vr) r.fail("value reference " + t[1] + " out of range");
+    v.vr = static_cast<uint32_t>(ref);
     v.name = t[2];
     int role = -1;
     for (int i = 0; i < fmu_format::kRoleCount; ++i)
@@ -152,9 +156,18 @@ std::shared_ptr<const Layout> read_layout(const std::string& resources_dir) {
     if (role < 0) r.fail("unknown role '" + t[3] + "'");
     v.role = static_cast<Role>(role);
     v.index = r.integer(t[4]);
-    v.start = r.number(t[5]);
-    v.min = r.number(t[6]);
-    v.max = r.number(t[7]);
+    const size_t size = v.size(n);
+    if (t.size() != 5 + size + 2)
+      r.fail("'var " + v.name + "' needs " + std::to_string(size) + " start value(s), min, max");
+    for (size_t e = 0; e < size; ++e) v.starts.push_back(r.number(t[5 + e]));
+    v.start = v.starts.front();
+    v.min = r.number(t[5 + size]);
+    v.max = r.number(t[6 + size]);
+    if (static_cast<size_t>(ref) >= layout->by_vr.size())
+      layout->by_vr.resize(static_cast<size_t>(ref) + 1, -1);
+    if (layout->by_vr[static_cast<size_t>(ref)] >= 0)
+      r.fail("value reference " + t[1] + " given twice");
+    layout->by_vr[static_cast<size_t>(ref)] = static_cast<int>(layout->variables.size());
     int limit = 1;
     switch (v.role) {
       case Role::q:
@@ -203,6 +216,12 @@ void Model::reset() {
       case Role::wrench:
         values_.wrench[i] = v.start;
         break;
+      case Role::q_array:
+        for (size_t k = 0; k < values_.q.size(); ++k) values_.q[k] = v.starts[k];
+        break;
+      case Role::wrench_array:
+        for (size_t k = 0; k < 6; ++k) values_.wrench[k] = v.starts[k];
+        break;
       case Role::wrench_frame:
         values_.wrench_frame = static_cast<int>(v.start);
         break;
@@ -220,7 +239,9 @@ void Model::reset() {
 }
 
 const Variable* Model::variable(uint32_t vr) const {
-  return vr < layout_->variables.size() ? &layout_->variables[vr] : nullptr;
+  if (vr >= layout_->by_vr.size()) return nullptr;
+  const int i = layout_->by_vr[vr];
+  return i < 0 ? nullptr : &layout_->variables[static_cast<size_t>(i)];
 }
 
 Status Model::set_real(const Variable& var, const double* v, std::string* msg) {

@@ -23,8 +23,9 @@ struct Variable {
   uint32_t vr = 0;
   std::string name;
   Role role = Role::time;
-  int index = 0;  ///< joint, wrench component, parameter or output index
-  double start = 0.0;
+  int index = 0;               ///< joint, wrench component, parameter or output index
+  double start = 0.0;          ///< scalars
+  std::vector<double> starts;  ///< arrays: one per element
   double min = -1e300;
   double max = 1e300;
   bool is_integer() const { return role == Role::wrench_frame; }
@@ -38,7 +39,8 @@ struct Layout {
   int fmi = 2;
   RobotModel robot;
   std::vector<std::string> effects;
-  std::vector<Variable> variables;  ///< variables[vr].vr == vr
+  std::vector<Variable> variables;  ///< in the model file's order
+  std::vector<int> by_vr;           ///< index into `variables` of each value reference, or -1
   std::unique_ptr<DeflectionModel> model;
 };
 
@@ -113,7 +115,7 @@ class Model {
   bool compensation_valid_ = false;
   Status compensation_status_ = Status::ok;
   std::string compensation_message_;
-  bool compensation_reported_ = false;  ///< the warning of this evaluation was logged
+  bool compensation_reported_ = false;           ///< the warning of this evaluation was logged
   double out_[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};  ///< d (6) and loaded tool position (3)
   Eigen::Matrix3d flange_rotation_ = Eigen::Matrix3d::Identity();  ///< unloaded, at q
   Eigen::Vector3d p_unloaded_ = Eigen::Vector3d::Zero();           ///< tool point at q

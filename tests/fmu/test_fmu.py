@@ -34,6 +34,8 @@ Q = [0.3, -0.4, 0.5, 0.2, 0.9, -0.3]  # a pose away from singularities [rad]
 W = [300.0, -200.0, 150.0, 10.0, -5.0, 8.0]  # (F [N], M [N*m])
 WRENCH = ["fx", "fy", "fz", "mx", "my", "mz"]
 DEFL = ["dx", "dy", "dz", "rx", "ry", "rz"]
+ROBOTS = sorted(p for p in (pathlib.Path(__file__).resolve().parents[2] / "examples" / "robots")
+                .iterdir() if p.suffix in (".yaml", ".urdf"))
 
 
 # ---------------------------------------------------------------- helpers
@@ -610,6 +612,79 @@ def test_export_errors(exporter, tmp_path):
         exporter.export("bad_c", compliance=-1 / STIFFNESS)
 
 
+# ---------------------------------------------------------------- value references
+def _effects_fit(exporter, effects):
+    """A fit of the ROKAE arm with `effects`, every parameter at 0.3 of its typical value."""
+    lib = exporter.lib
+    lib.stiff_effect_describe.argtypes = [ctypes.c_char_p, ctypes.c_size_t,
+                                          ctypes.POINTER(ctypes.c_size_t), ctypes.c_void_p,
+                                          ctypes.c_char_p]
+    buf = ctypes.create_string_buffer(1 << 16)
+    params = []
+    for name in effects:
+        assert lib.stiff_effect_describe(buf, len(buf), None, exporter.robot, name.encode()) == 0
+        for p in json.loads(buf.value.decode())["parameters"]:
+            lo, hi = float(p["lower"]), float(p["upper"])
+            params.append({"effect": name, "name": p["name"],
+                           "value": float(np.clip(0.3 * float(p["typical"]), lo, hi))})
+    return {"format": "stiff-fit", "version": 1, "robot": {"name": "rokae"},
+            "model": list(effects), "parameters": params}
+
+
+def _export_fit(exporter, fit, out, version):
+    from fmu_reference import FmuOptions
+
+    lib = exporter.lib
+    fit_path = out.with_suffix(".fit.json")
+    fit_path.write_text(json.dumps(fit))
+    res = ctypes.c_void_p()
+    assert lib.stiff_result_read_json(ctypes.byref(res), str(fit_path).encode()) == 0, \
+        lib.stiff_last_error()
+    opts = FmuOptions(ctypes.sizeof(FmuOptions), version, None, None)
+    status = lib.stiff_fmu_export(str(out).encode(), exporter.robot, res, ctypes.byref(opts))
+    lib.stiff_result_destroy(res)
+    assert status == 0, lib.stiff_last_error()
+    return str(out)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_fixed_variables_keep_their_value_references(exporter, tmp_path, version):
+    """A master that stores connections by value reference survives a re-export with another
+    model: dx was 19 in a joint FMU and 25 in joint + point_offset. The map of docs/fmu.md."""
+    fmus = [_export_fit(exporter, _effects_fit(exporter, effects), tmp_path / f"m{i}.fmu", version)
+            for i, effects in enumerate((["joint"], ["joint", "point_offset"], ["point_offset"]))]
+    fmus.append(exporter.export(f"ur10_{version}", version,
+                                robot_file=ROBOTS[[p.stem for p in ROBOTS].index("ur10")]))
+    refs = []
+    for path in fmus:
+        md = read_model_description(path)
+        refs.append({v.name: v.valueReference for v in md.modelVariables})
+    fixed = {f"q{j}": j for j in range(1, 7)}
+    fixed.update({n: 100 + k for k, n in enumerate(WRENCH)})
+    fixed.update({"wrench_frame": 120})
+    fixed.update({n: 200 + k for k, n in enumerate(DEFL)})
+    fixed.update({n: 210 + k for k, n in enumerate(["x_tool", "y_tool", "z_tool"])})
+    fixed.update({f"q_cmd{j}": 300 + j for j in range(1, 7)})
+    if version == 3:
+        fixed["time"] = 0
+    arrays = {"q": 110, "wrench": 111}  # FMI 3 with array inputs
+    for r in refs:
+        assert {n: r[n] for n in fixed} == fixed
+        assert all(r[n] == x for n, x in arrays.items() if n in r)
+        params = {n: x for n, x in r.items() if n not in fixed and n not in arrays}
+        assert params and min(params.values()) >= 1000  # the model's parameters, after the range
+    # The model's parameters differ; each is numbered from 1000 in model order.
+    assert refs[1]["joint_c1"] == 1000 and refs[1]["point_offset_" + next(
+        n.split("point_offset_")[1] for n in refs[2] if n.startswith("point_offset_"))] == 1006
+    # And the FMUs work through those references.
+    for path in fmus[:3]:
+        a = Instance(path).start()
+        a.set_inputs(Q, W)
+        assert np.all(np.isfinite(a.deflection())) and np.all(np.isfinite(a.qcmd()))
+        a.free()
+        assert a.log.errors() == []
+
+
 # ---------------------------------------------------------------- every effect vs the C ABI
 def test_all_effects_match_c_abi(exporter, tmp_path):
     """The FMU evaluates whatever effects the fit names with the library's own code: compare a
@@ -793,8 +868,6 @@ def test_absurd_wrench_is_reported_as_overflow(fmu):
 
 
 # ---------------------------------------------------------------- start pose
-ROBOTS = sorted(p for p in (pathlib.Path(__file__).resolve().parents[2] / "examples" / "robots")
-                .iterdir() if p.suffix in (".yaml", ".urdf"))
 
 
 @pytest.mark.parametrize("robot", ROBOTS, ids=[p.stem for p in ROBOTS])

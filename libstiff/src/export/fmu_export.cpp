@@ -29,8 +29,9 @@ namespace {
 using fmu_format::Role;
 
 struct Var {
+  uint32_t vr = 0;  // value reference (fmu_format::vr)
   std::string name;
-  Role role;
+  Role role = Role::time;
   int index = 0;
   double start = 0.0;
   double min = -1e300;
@@ -103,120 +104,71 @@ std::string fmi_unit(std::string u) {
 }
 
 std::vector<Var> build_variables(const DeflectionModel& model, int fmi) {
+  namespace vr = fmu_format::vr;
   const int n = model.robot().dof();
   static const char* kWrench[6] = {"fx", "fy", "fz", "mx", "my", "mz"};
   static const char* kDefl[6] = {"dx", "dy", "dz", "rx", "ry", "rz"};
   static const char* kTool[3] = {"x_tool", "y_tool", "z_tool"};
   std::vector<Var> v;
-  if (fmi == 3)
-    v.push_back({"time", Role::time, 0, 0, -1e300, 1e300, "s", "simulation time", 1, {}});
+  const auto add = [&](uint32_t ref, std::string name, Role role, int index, std::string unit,
+                       std::string description, int size = 1, double min = -1e300,
+                       double max = 1e300) {
+    Var x;
+    x.vr = ref;
+    x.name = std::move(name);
+    x.role = role;
+    x.index = index;
+    x.min = min;
+    x.max = max;
+    x.unit = std::move(unit);
+    x.description = std::move(description);
+    x.size = size;
+    v.push_back(std::move(x));
+  };
+  if (fmi == 3) add(vr::kTime, "time", Role::time, 0, "s", "simulation time");
   for (int j = 0; j < n; ++j)
-    v.push_back({"q" + std::to_string(j + 1),
-                 Role::q,
-                 j,
-                 0.0,
-                 -1e300,
-                 1e300,
-                 "rad",
-                 "commanded (unloaded) position of joint " + std::to_string(j + 1),
-                 1,
-                 {}});
+    add(vr::kQ + static_cast<uint32_t>(j + 1), "q" + std::to_string(j + 1), Role::q, j, "rad",
+        "commanded (unloaded) position of joint " + std::to_string(j + 1));
   for (int k = 0; k < 6; ++k)
-    v.push_back({kWrench[k],
-                 Role::wrench,
-                 k,
-                 0.0,
-                 -1e300,
-                 1e300,
-                 k < 3 ? "N" : "N.m",
-                 std::string(k < 3 ? "force" : "moment") + " on the tool at the load point, " +
-                     "frame selected by wrench_frame",
-                 1,
-                 {}});
+    add(vr::kWrench + static_cast<uint32_t>(k), kWrench[k], Role::wrench, k, k < 3 ? "N" : "N.m",
+        std::string(k < 3 ? "force" : "moment") +
+            " on the tool at the load point, frame selected by wrench_frame");
   if (fmi == 3) {
-    v.push_back({"q",
-                 Role::q_array,
-                 0,
-                 0.0,
-                 -1e300,
-                 1e300,
-                 "rad",
-                 "joint positions as an array (same storage as q1..qn)",
-                 n,
-                 {}});
-    v.push_back({"wrench",
-                 Role::wrench_array,
-                 0,
-                 0.0,
-                 -1e300,
-                 1e300,
-                 "",
-                 "(fx fy fz [N], mx my mz [N.m]) as an array (same storage as fx..mz)",
-                 6,
-                 {}});
+    add(vr::kQArray, "q", Role::q_array, 0, "rad",
+        "joint positions as an array (same storage as q1..qn)", n);
+    add(vr::kWrenchArray, "wrench", Role::wrench_array, 0, "",
+        "(fx fy fz [N], mx my mz [N.m]) as an array (same storage as fx..mz)", 6);
   }
-  v.push_back({"wrench_frame",
-               Role::wrench_frame,
-               0,
-               0.0,
-               0,
-               1,
-               "",
-               "frame of the wrench inputs: 0 = robot base, 1 = tool (flange orientation)",
-               1,
-               {}});
+  add(vr::kWrenchFrame, "wrench_frame", Role::wrench_frame, 0, "",
+      "frame of the wrench inputs: 0 = robot base, 1 = tool (flange orientation)", 1, 0, 1);
+  for (int k = 0; k < 6; ++k)
+    add(vr::kDeflection + static_cast<uint32_t>(k), kDefl[k], Role::deflection, k,
+        k < 3 ? "m" : "rad",
+        std::string(k < 3 ? "displacement" : "small rotation") +
+            " of the tool point under the wrench, base frame");
+  for (int k = 0; k < 3; ++k)
+    add(vr::kToolPosition + static_cast<uint32_t>(k), kTool[k], Role::tool_position, k, "m",
+        "position of the loaded (deflected) tool point, base frame");
+  for (int j = 0; j < n; ++j)
+    add(vr::kQCmd + static_cast<uint32_t>(j + 1), "q_cmd" + std::to_string(j + 1), Role::q_cmd, j,
+        "rad",
+        "compensated target of joint " + std::to_string(j + 1) +
+            ": puts the loaded tool where q puts the unloaded one");
+  // The model's own parameters come after the fixed variables, in the model's order.
   for (int k = 0; k < model.parameter_count(); ++k) {
     const ParameterSpec& s = model.spec(k);
-    v.push_back({model.owner(k).name() + "_" + s.name,
-                 Role::parameter,
-                 k,
-                 0.0,
-                 s.lower,
-                 s.upper,
-                 fmi_unit(s.unit),
-                 s.meaning,
-                 1,
-                 {}});
+    add(vr::kParameters + static_cast<uint32_t>(k), model.owner(k).name() + "_" + s.name,
+        Role::parameter, k, fmi_unit(s.unit), s.meaning, 1, s.lower, s.upper);
   }
-  for (int k = 0; k < 6; ++k)
-    v.push_back({kDefl[k],
-                 Role::deflection,
-                 k,
-                 0,
-                 -1e300,
-                 1e300,
-                 k < 3 ? "m" : "rad",
-                 std::string(k < 3 ? "displacement" : "small rotation") +
-                     " of the tool point under the wrench, base frame",
-                 1,
-                 {}});
-  for (int k = 0; k < 3; ++k)
-    v.push_back({kTool[k],
-                 Role::tool_position,
-                 k,
-                 0,
-                 -1e300,
-                 1e300,
-                 "m",
-                 "position of the loaded (deflected) tool point, base frame",
-                 1,
-                 {}});
-  for (int j = 0; j < n; ++j)
-    v.push_back({"q_cmd" + std::to_string(j + 1),
-                 Role::q_cmd,
-                 j,
-                 0,
-                 -1e300,
-                 1e300,
-                 "rad",
-                 "compensated target of joint " + std::to_string(j + 1) +
-                     ": puts the loaded tool where q puts the unloaded one",
-                 1,
-                 {}});
   std::set<std::string> names;
-  for (const auto& x : v)
+  std::set<uint32_t> refs;
+  for (const auto& x : v) {
     if (!names.insert(x.name).second)
       throw InvalidArgument("fmu export: two FMU variables would be named '" + x.name + "'");
+    if (!refs.insert(x.vr).second)
+      throw InvalidArgument("fmu export: two FMU variables would have value reference " +
+                            std::to_string(x.vr));
+  }
   return v;
 }
 
@@ -262,10 +214,12 @@ std::string model_file(const RobotModel& robot,
   o << "effects " << model.effects().size();
   for (const auto& e : model.effects()) o << ' ' << e->name();
   o << "\nvariables " << vars.size() << "\n";
-  for (size_t k = 0; k < vars.size(); ++k) {
-    const Var& v = vars[k];
-    o << "var " << k << ' ' << v.name << ' ' << fmu_format::kRoleNames[static_cast<int>(v.role)]
-      << ' ' << v.index << ' ' << num(v.start) << ' ' << num(v.min) << ' ' << num(v.max) << "\n";
+  for (const Var& v : vars) {
+    o << "var " << v.vr << ' ' << v.name << ' ' << fmu_format::kRoleNames[static_cast<int>(v.role)]
+      << ' ' << v.index;
+    for (int e = 0; e < v.size; ++e)
+      o << ' ' << num(v.starts.empty() ? v.start : v.starts[static_cast<size_t>(e)]);
+    o << ' ' << num(v.min) << ' ' << num(v.max) << "\n";
   }
   o << "end\n";
   return o.str();
@@ -371,7 +325,7 @@ std::string model_description(const std::vector<Var>& vars,
       attrs += " start=\"" + start + "\"";
     }
     if (v3) {
-      o << "    <" << type << " name=\"" << xml(v.name) << "\" valueReference=\"" << k
+      o << "    <" << type << " name=\"" << xml(v.name) << "\" valueReference=\"" << v.vr
         << "\" causality=\"" << causality << "\" variability=\"" << variability << "\"";
       if (!initial.empty()) o << " initial=\"" << initial << "\"";
       o << " description=\"" << xml(v.description) << "\"" << attrs;
@@ -380,7 +334,7 @@ std::string model_description(const std::vector<Var>& vars,
       else
         o << "/>\n";
     } else {
-      o << "    <ScalarVariable name=\"" << xml(v.name) << "\" valueReference=\"" << k
+      o << "    <ScalarVariable name=\"" << xml(v.name) << "\" valueReference=\"" << v.vr
         << "\" causality=\"" << causality << "\" variability=\"" << variability << "\"";
       if (!initial.empty()) o << " initial=\"" << initial << "\"";
       o << " description=\"" << xml(v.description) << "\">\n      <" << type << attrs
@@ -389,13 +343,13 @@ std::string model_description(const std::vector<Var>& vars,
   }
   o << "  </ModelVariables>\n  <ModelStructure>\n";
   // FMI 2: 1-based indices of ScalarVariables; FMI 3: value references.
-  auto ref = [&](size_t k) { return std::to_string(v3 ? k : k + 1); };
+  auto ref = [&](size_t k) { return std::to_string(v3 ? vars[k].vr : k + 1); };
   std::string deps;
   for (size_t i : inputs) deps += (deps.empty() ? "" : " ") + ref(i);
   if (v3) {
     for (size_t k : outputs)
-      o << "    <Output valueReference=\"" << k << "\" dependencies=\"" << deps << "\"/>\n";
-    for (size_t k : outputs) o << "    <InitialUnknown valueReference=\"" << k << "\"/>\n";
+      o << "    <Output valueReference=\"" << ref(k) << "\" dependencies=\"" << deps << "\"/>\n";
+    for (size_t k : outputs) o << "    <InitialUnknown valueReference=\"" << ref(k) << "\"/>\n";
   } else {
     o << "    <Outputs>\n";
     for (size_t k : outputs)
@@ -524,8 +478,8 @@ std::string documentation(const std::vector<Var>& vars,
        "(Debian 12) on x86-64 Linux.</p>\n<table border=\"1\">\n"
        "<tr><th>vr</th><th>name</th><th>unit</th><th>description</th></tr>\n";
   for (size_t k = 0; k < vars.size(); ++k)
-    o << "<tr><td>" << k << "</td><td>" << xml(vars[k].name) << "</td><td>" << xml(vars[k].unit)
-      << "</td><td>" << xml(vars[k].description) << "</td></tr>\n";
+    o << "<tr><td>" << vars[k].vr << "</td><td>" << xml(vars[k].name) << "</td><td>"
+      << xml(vars[k].unit) << "</td><td>" << xml(vars[k].description) << "</td></tr>\n";
   o << "</table>\n<p>Licences: see licenses/ (FMI headers BSD-2-Clause, Eigen MPL-2.0).</p>\n"
        "</body></html>\n";
   return o.str();

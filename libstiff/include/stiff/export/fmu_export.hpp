@@ -12,7 +12,7 @@
 ///     instantiation (and checks against the GUID it is given),
 ///   - resources/robot.yaml: the robot in the project's YAML format, for humans.
 ///
-/// resources/model.txt, format "stiff-fmu-model" version 1 (ASCII, one record per line, tokens
+/// resources/model.txt, format "stiff-fmu-model" version 2 (ASCII, one record per line, tokens
 /// separated by blanks, numbers with 17 significant digits so that they round-trip exactly;
 /// lines starting with '#' are comments):
 ///   stiff-fmu-model 1
@@ -27,10 +27,13 @@
 ///   gravity <gx> <gy> <gz>
 ///   effects <count> <name>...
 ///   variables <count>
-///   var <vr> <name> <role> <index> <start> <min> <max>      (vr = 0 .. count-1, in order)
+///   var <vr> <name> <role> <index> <start>... <min> <max>
+///       (vr: the fixed references of fmu_format::vr, unique; one start per element: n for
+///       q_array, 6 for wrench_array, else 1)
 ///   end
 #pragma once
 
+#include <cstdint>
 #include <string>
 
 #include "stiff/identify/fit.hpp"
@@ -66,7 +69,26 @@ std::string fmu_binaries_dir(const FmuExportOptions& options = {});
 namespace fmu_format {
 
 /// Version of resources/model.txt written by export_fmu and read by the FMU binary.
-constexpr int kVersion = 1;
+/// 2: fixed value references, one start value per array element.
+constexpr int kVersion = 2;
+
+/// Value references (docs/fmu.md): fixed, the same in every FMU whatever its robot and model,
+/// so that a master that stores connections by reference survives a re-export. Joint j
+/// (1-based) adds j; the model's parameters follow after the reserved range, in model order.
+namespace vr {
+constexpr uint32_t kTime = 0;            ///< FMI 3 independent variable
+constexpr uint32_t kQ = 0;               ///< q<j>: kQ + j = 1 .. n
+constexpr uint32_t kWrench = 100;        ///< fx fy fz mx my mz: 100 .. 105
+constexpr uint32_t kQArray = 110;        ///< FMI 3 array input q[n]
+constexpr uint32_t kWrenchArray = 111;   ///< FMI 3 array input wrench[6]
+constexpr uint32_t kWrenchFrame = 120;   ///< Integer parameter wrench_frame
+constexpr uint32_t kDeflection = 200;    ///< dx dy dz rx ry rz: 200 .. 205
+constexpr uint32_t kToolPosition = 210;  ///< x_tool y_tool z_tool: 210 .. 212
+constexpr uint32_t kQCmd = 300;          ///< q_cmd<j>: kQCmd + j = 301 .. 300 + n
+constexpr uint32_t kParameters = 1000;   ///< parameter k (0-based, model order): 1000 + k
+static_assert(kQ + kMaxJoints < kWrench && kQCmd + kMaxJoints < kParameters,
+              "the joint ranges must fit below the next block");
+}  // namespace vr
 
 /// What a variable of the FMU is; the FMU binary dispatches on it.
 enum class Role : int {

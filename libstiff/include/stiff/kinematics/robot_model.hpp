@@ -32,6 +32,10 @@ using Matrix3X = Eigen::Matrix<Scalar, 3, Eigen::Dynamic>;
 template <typename Scalar>
 using Matrix6X = Eigen::Matrix<Scalar, 6, Eigen::Dynamic>;
 
+/// Most joints a robot may have, everywhere the library takes a joint count (robot files,
+/// data sets, the C ABI, the FMU).
+constexpr int kMaxJoints = 64;
+
 /// Kinematic convention the joint table was written in (kept for reporting and export).
 enum class Convention { modified_dh, standard_dh, urdf };
 
