@@ -17,6 +17,10 @@ extern "C" stiff_status stiff_fmu_export(const char* path,
     opt.fmi_version = o.fmi_version == 0 ? 2 : static_cast<int>(o.fmi_version);
     if (o.model_identifier) opt.model_identifier = o.model_identifier;
     if (o.binaries_dir) opt.binaries_dir = o.binaries_dir;
+    if (o.array_inputs > 1)
+      throw stiff::InvalidArgument("array_inputs must be 0 (scalar inputs) or 1 (arrays), not " +
+                                   std::to_string(o.array_inputs));
+    opt.array_inputs = o.array_inputs == 1;
     stiff::export_fmu(robot->model, fit->fit, path, opt);
     return STIFF_OK;
   });

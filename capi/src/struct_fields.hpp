@@ -82,7 +82,8 @@ STIFF_FIELDS(stiff_fmu_options,
              STIFF_FIELD(stiff_fmu_options, struct_size),
              STIFF_FIELD(stiff_fmu_options, fmi_version),
              STIFF_FIELD(stiff_fmu_options, model_identifier),
-             STIFF_FIELD(stiff_fmu_options, binaries_dir));
+             STIFF_FIELD(stiff_fmu_options, binaries_dir),
+             STIFF_FIELD(stiff_fmu_options, array_inputs));
 STIFF_FIELDS(stiff_plan_options,
              STIFF_FIELD(stiff_plan_options, struct_size),
              STIFF_FIELD(stiff_plan_options, count),

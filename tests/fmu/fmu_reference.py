@@ -27,6 +27,7 @@ class FmuOptions(ctypes.Structure):
         ("fmi_version", ctypes.c_uint32),
         ("model_identifier", ctypes.c_char_p),
         ("binaries_dir", ctypes.c_char_p),
+        ("array_inputs", ctypes.c_uint32),
     ]
 
 
@@ -89,7 +90,7 @@ class Exporter:
         return robot, name.value.decode(), dof.value
 
     def export(self, name, fmi_version=2, compliance=None, model_identifier=None,
-               robot_file=None):
+               robot_file=None, array_inputs=0):
         robot, robot_name = self.robot, "rokae"
         if robot_file is not None:
             robot, robot_name, dof = self.load_robot(robot_file)
@@ -100,7 +101,8 @@ class Exporter:
         fit = ctypes.c_void_p()
         if self.lib.stiff_result_read_json(ctypes.byref(fit), str(fit_path).encode()) != 0:
             raise RuntimeError(self.lib.stiff_last_error().decode())
-        opts = FmuOptions(ctypes.sizeof(FmuOptions), fmi_version, model_identifier, None)
+        opts = FmuOptions(ctypes.sizeof(FmuOptions), fmi_version, model_identifier, None,
+                          array_inputs)
         out = self.tmp / (name + ".fmu")
         status = self.lib.stiff_fmu_export(str(out).encode(), robot, fit, ctypes.byref(opts))
         self.lib.stiff_result_destroy(fit)

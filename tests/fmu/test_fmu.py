@@ -182,9 +182,10 @@ def test_static_structure(fmu):
     assert c1.unit == "rad/(N.m)" and float(c1.min) == 0.0
     outputs = [v for v in md.modelVariables if v.causality == "output"]
     assert len(md.outputs) == len(outputs) == 6 + 3 + 6
-    if md.fmiVersion == "3.0":
-        arrays = {v.name: v for v in md.modelVariables if v.dimensions}
-        assert set(arrays) == {"q", "wrench"}
+    # One set of inputs: the scalars (arrays only when asked for, test_fmi3_array_inputs).
+    assert not [v.name for v in md.modelVariables if v.dimensions]
+    inputs = [v.name for v in md.modelVariables if v.causality == "input"]
+    assert inputs == [f"q{j}" for j in range(1, 7)] + WRENCH
 
 
 # ---------------------------------------------------------------- 3: binary hygiene
@@ -298,14 +299,52 @@ def test_compensation_puts_loaded_tool_on_target(fmu):
     a.free()
 
 
-def test_fmi3_array_inputs_alias_scalars(fmu3):
-    a = Instance(fmu3).start()
+@pytest.fixture(scope="session")
+def fmu3_arrays(exporter):
+    return exporter.export("arm3_arrays", 3, array_inputs=1)
+
+
+def test_fmi3_array_inputs(fmu3_arrays):
+    """With array inputs the FMU has q[6] and wrench[6] and no scalar inputs: a master that
+    writes every input writes each value once (the arrays used to share storage with the
+    scalars, and fmpy warned "missing input" for the arrays on every run fed scalars)."""
+    assert validate_fmu(fmu3_arrays) == []
+    md = read_model_description(fmu3_arrays)
+    inputs = {v.name: v for v in md.modelVariables if v.causality == "input"}
+    assert set(inputs) == {"q", "wrench"}
+    assert [int(d.start) for d in inputs["q"].dimensions] == [6]
+    assert (inputs["q"].valueReference, inputs["wrench"].valueReference) == (110, 111)
+    a = Instance(fmu3_arrays).start()
+    # The start values are the home pose, element by element.
+    start = [float(x) for x in inputs["q"].start.split()]
+    np.testing.assert_array_equal(a.fmu.getFloat64([110], nValues=6), start)
     a.fmu.setFloat64([a.vr["q"], a.vr["wrench"]], Q + W)
-    np.testing.assert_allclose(a.get([f"q{j + 1}" for j in range(6)]), Q, rtol=0, atol=0)
+    np.testing.assert_array_equal(a.fmu.getFloat64([a.vr["q"]], nValues=6), Q)
     np.testing.assert_allclose(a.deflection(), reference(Q, W), atol=TOL, rtol=0)
     with pytest.raises(FMICallException):
         a.fmu.setFloat64([a.vr["q"]], Q[:5])  # nValues does not match
+    with pytest.raises(FMICallException):
+        a.fmu.setFloat64([1], [0.1])  # no scalar q1 in this FMU
     a.fmu.freeInstance()
+
+
+@pytest.mark.parametrize("arrays", [False, True], ids=["scalars", "arrays"])
+def test_fmi3_simulation_feeds_every_input(fmu3, fmu3_arrays, arrays, capsys):
+    """fmpy fed a table with the FMU's inputs: no "missing input" warning, and the values flow
+    into the outputs."""
+    path = fmu3_arrays if arrays else fmu3
+    if arrays:
+        dtype = [("time", np.float64), ("q", np.float64, (6,)), ("wrench", np.float64, (6,))]
+        signal = np.array([(0.0, Q, W), (1.0, Q, W)], dtype=dtype)
+    else:
+        dtype = [("time", np.float64)] + [(f"q{j + 1}", np.float64) for j in range(6)] + \
+            [(n, np.float64) for n in WRENCH]
+        signal = np.array([(0.0, *Q, *W), (1.0, *Q, *W)], dtype=dtype)
+    res = simulate_fmu(path, start_time=0, stop_time=0.2, output_interval=0.1, input=signal,
+                       output=DEFL)
+    out = capsys.readouterr()
+    assert "missing input" not in (out.out + out.err).lower()
+    np.testing.assert_allclose([res[-1][n] for n in DEFL], reference(Q, W), atol=TOL, rtol=0)
 
 
 # ---------------------------------------------------------------- 6: start values
@@ -610,6 +649,11 @@ def test_export_errors(exporter, tmp_path):
         exporter.export("bad_id", model_identifier=b"1 bad")
     with pytest.raises(RuntimeError, match="outside"):
         exporter.export("bad_c", compliance=-1 / STIFFNESS)
+    with pytest.raises(RuntimeError, match="array inputs need FMI 3"):
+        exporter.export("bad_arrays", fmi_version=2, array_inputs=1)
+    with pytest.raises(RuntimeError, match="array_inputs must be 0"):
+        exporter.export("bad_arrays3", fmi_version=3, array_inputs=2)
+    assert not list(exporter.tmp.glob("bad_*.fmu"))  # nothing written
 
 
 # ---------------------------------------------------------------- value references

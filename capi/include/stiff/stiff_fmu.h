@@ -27,8 +27,8 @@ extern "C" {
  */
 typedef struct stiff_fmu_options {
   uint32_t struct_size; /**< sizeof(stiff_fmu_options) as the caller knows it */
-  /** FMI version: 2 (FMI 2.0, binaries/linux64) or 3 (FMI 3.0, binaries/x86_64-linux, with
-   *  array inputs q[n] and wrench[6] beside the scalars); 0 means 2. */
+  /** FMI version: 2 (FMI 2.0, binaries/linux64) or 3 (FMI 3.0, binaries/x86_64-linux);
+   *  0 means 2. */
   uint32_t fmi_version;
   /** modelIdentifier (name of the library inside the FMU), a C identifier;
    *  NULL means "stiff_arm". Borrowed for the duration of the call. */
@@ -38,6 +38,10 @@ typedef struct stiff_fmu_options {
    *  fmu/binaries, else the folder "fmu" next to the loaded libstiff_c.so (as bundled in the
    *  Python package). Borrowed for the duration of the call. */
   const char* binaries_dir;
+  /** 0 (default): the inputs are the scalars q1..qn and fx, fy, fz, mx, my, mz. 1: the inputs
+   *  are the arrays q[n] and wrench[6] instead (FMI 3 only; with fmi_version 2 an
+   *  STIFF_E_INVALID_ARGUMENT). Either way an FMU has one set of inputs. @since 0.2 */
+  uint32_t array_inputs;
 } stiff_fmu_options;
 
 /**

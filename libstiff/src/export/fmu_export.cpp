@@ -103,7 +103,7 @@ std::string fmi_unit(std::string u) {
   return u;
 }
 
-std::vector<Var> build_variables(const DeflectionModel& model, int fmi) {
+std::vector<Var> build_variables(const DeflectionModel& model, int fmi, bool arrays) {
   namespace vr = fmu_format::vr;
   const int n = model.robot().dof();
   static const char* kWrench[6] = {"fx", "fy", "fz", "mx", "my", "mz"};
@@ -126,18 +126,21 @@ std::vector<Var> build_variables(const DeflectionModel& model, int fmi) {
     v.push_back(std::move(x));
   };
   if (fmi == 3) add(vr::kTime, "time", Role::time, 0, "s", "simulation time");
-  for (int j = 0; j < n; ++j)
+  // One set of inputs: scalars (FMI 2, FMI 3 by default) or arrays (FMI 3 on request).
+  for (int j = 0; j < n && !arrays; ++j)
     add(vr::kQ + static_cast<uint32_t>(j + 1), "q" + std::to_string(j + 1), Role::q, j, "rad",
         "commanded (unloaded) position of joint " + std::to_string(j + 1));
-  for (int k = 0; k < 6; ++k)
+  for (int k = 0; k < 6 && !arrays; ++k)
     add(vr::kWrench + static_cast<uint32_t>(k), kWrench[k], Role::wrench, k, k < 3 ? "N" : "N.m",
         std::string(k < 3 ? "force" : "moment") +
             " on the tool at the load point, frame selected by wrench_frame");
-  if (fmi == 3) {
+  if (arrays) {
     add(vr::kQArray, "q", Role::q_array, 0, "rad",
-        "joint positions as an array (same storage as q1..qn)", n);
+        "commanded (unloaded) joint positions q1..qn as an array", n);
     add(vr::kWrenchArray, "wrench", Role::wrench_array, 0, "",
-        "(fx fy fz [N], mx my mz [N.m]) as an array (same storage as fx..mz)", 6);
+        "(fx fy fz [N], mx my mz [N.m]) on the tool at the load point, frame selected by "
+        "wrench_frame",
+        6);
   }
   add(vr::kWrenchFrame, "wrench_frame", Role::wrench_frame, 0, "",
       "frame of the wrench inputs: 0 = robot base, 1 = tool (flange orientation)", 1, 0, 1);
@@ -556,7 +559,11 @@ void export_fmu(const RobotModel& robot,
   if (path.empty()) throw InvalidArgument("fmu export: output path is empty");
   const DeflectionModel model(robot, fit.model);
   check_fit_applies(fit, robot, model, "fmu export");
-  std::vector<Var> vars = build_variables(model, options.fmi_version);
+  if (options.array_inputs && options.fmi_version != 3)
+    throw InvalidArgument(
+        "fmu export: array inputs need FMI 3 (fmi_version = 3); FMI 2 has "
+        "scalar variables only");
+  std::vector<Var> vars = build_variables(model, options.fmi_version, options.array_inputs);
   // Joint inputs start at a home pose away from singularities: at the all-zero pose of most
   // arms (a wrist singularity) any load leaves the compensation unconverged from the first read.
   const Eigen::VectorXd home = home_pose(robot);

@@ -295,6 +295,7 @@ class FmuOptions(C.Structure):
         ("fmi_version", C.c_uint32),
         ("model_identifier", C.c_char_p),
         ("binaries_dir", C.c_char_p),
+        ("array_inputs", C.c_uint32),
     ]
 
 

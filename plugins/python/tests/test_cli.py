@@ -73,3 +73,26 @@ def test_examples_lists_and_copies_builtin_files(tmp_path):
     assert "rokae_backlash" in out and "pocket" in out
     assert (tmp_path / "ex" / "paths" / "pocket.nc").is_file()
     assert (tmp_path / "ex" / "robots" / "rokae.yaml").is_file()
+
+
+def test_fmu_export_array_inputs(tmp_path):
+    """`--array-inputs` (FMI 3) gives an FMU whose inputs are q[n] and wrench[6] only; with
+    FMI 2 it is a one-line error and nothing is written."""
+    import zipfile
+
+    fit = tmp_path / "fit.json"
+    fit.write_text(json.dumps({
+        "format": "stiff-fit", "version": 1, "robot": {"name": "rokae"}, "model": ["joint"],
+        "parameters": [{"effect": "joint", "name": f"c{j}", "value": 1e-4} for j in range(1, 7)]}))
+    out = tmp_path / "a.fmu"
+    said = run("fmu", "export", "--robot", "rokae", "--fit", fit, "--fmi", "3", "--array-inputs",
+               "-o", out).stdout
+    assert "array inputs" in said
+    with zipfile.ZipFile(out) as z:
+        xml = z.read("modelDescription.xml").decode()
+    inputs = [line for line in xml.splitlines() if 'causality="input"' in line]
+    assert [i.split('name="')[1].split('"')[0] for i in inputs] == ["q", "wrench"]
+    bad = run("fmu", "export", "--robot", "rokae", "--fit", fit, "--array-inputs",
+              "-o", tmp_path / "b.fmu", check=False)
+    assert bad.returncode == 2 and "array inputs need FMI 3" in bad.stderr
+    assert not (tmp_path / "b.fmu").exists()

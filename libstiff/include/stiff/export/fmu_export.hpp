@@ -51,6 +51,10 @@ struct FmuExportOptions {
   /// Empty: environment variable STIFF_FMU_BINARIES, else the build tree's fmu/binaries, else
   /// the folder `fmu` next to the loaded libstiff_c.so (the Python package's stiff/_lib/fmu).
   std::string binaries_dir;
+  /// FMI 3 only: the inputs are the arrays q[n] and wrench[6] instead of the scalars q1..qn,
+  /// fx..mz. One set of inputs per FMU: an importer that writes every input then writes each
+  /// value once, and none is left unset.
+  bool array_inputs = false;
 };
 
 /// Write `path` (.fmu, a zip file) with the model `fit` of `robot` baked in: parameters are the
@@ -95,8 +99,8 @@ enum class Role : int {
   time = 0,           ///< FMI 3 independent variable [s]
   q = 1,              ///< input: joint position q<index+1> [rad]
   wrench = 2,         ///< input: wrench component (fx fy fz mx my mz)[index] [N, N*m]
-  q_array = 3,        ///< FMI 3 input array q[n], same storage as the scalars q<i>
-  wrench_array = 4,   ///< FMI 3 input array wrench[6], same storage as fx..mz
+  q_array = 3,        ///< FMI 3 input array q[n] (instead of the scalars q<i>)
+  wrench_array = 4,   ///< FMI 3 input array wrench[6] (instead of fx..mz)
   wrench_frame = 5,   ///< Integer parameter: 0 = base frame, 1 = tool frame
   parameter = 6,      ///< Real parameter theta[index] of the deflection model
   deflection = 7,     ///< output (dx dy dz rx ry rz)[index] [m, rad], base frame

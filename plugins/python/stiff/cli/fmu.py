@@ -11,6 +11,7 @@ from .common import Formatter, add_robot, load_robot, robot_path
 EXAMPLE = """example:
   stiff fmu export --robot rokae --fit fit.json -o arm.fmu            # FMI 2.0 (ME + CS)
   stiff fmu export --robot rokae --fit fit.json --fmi 3 -o arm3.fmu   # FMI 3.0
+  stiff fmu export --robot rokae --fit fit.json --fmi 3 --array-inputs -o arm3a.fmu
   python -c "import fmpy; fmpy.dump('arm.fmu')"
 
 Inputs q1..qn [rad] and the wrench fx, fy, fz [N], mx, my, mz [N*m] at the tool point (base
@@ -29,6 +30,9 @@ def register(sub):
     e.add_argument("--fit", "-f", required=True, help="fit JSON from `stiff identify`")
     e.add_argument("--fmi", type=int, choices=[2, 3], default=2, help="FMI version (default 2)")
     e.add_argument("--identifier", default="stiff_arm", help="model identifier (default stiff_arm)")
+    e.add_argument("--array-inputs", action="store_true",
+                   help="FMI 3: inputs as the arrays q[n] and wrench[6] instead of the scalars "
+                        "q1..qn, fx..mz (one set of inputs per FMU)")
     e.add_argument("-o", "--output", required=True, help=".fmu file to write")
     e.set_defaults(func=run)
     p.set_defaults(func=lambda args: p.print_help() or 2)
@@ -37,8 +41,10 @@ def register(sub):
 def run(args):
     robot = load_robot(args)
     fit = api.Fit.read(args.fit)
-    path = export_fmu(robot, fit, args.output, fmi_version=args.fmi, model_identifier=args.identifier)
+    path = export_fmu(robot, fit, args.output, fmi_version=args.fmi,
+                      model_identifier=args.identifier, array_inputs=args.array_inputs)
     size = Path(written(path)).stat().st_size  # committed when the command ends
-    print(f"wrote {path} (FMI {args.fmi}.0, model '{args.identifier}', {len(fit.parameters)} "
-          f"tunable parameters, {size / 1e6:.1f} MB)")
+    inputs = "array inputs q, wrench" if args.array_inputs else "scalar inputs"
+    print(f"wrote {path} (FMI {args.fmi}.0, model '{args.identifier}', {inputs}, "
+          f"{len(fit.parameters)} tunable parameters, {size / 1e6:.1f} MB)")
     return 0
