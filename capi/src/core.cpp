@@ -288,7 +288,9 @@ stiff_status stiff_dataset_create(stiff_dataset** out,
     require(q, "q");
     require(force, "force");
     if (rows == 0) throw InvalidArgument("rows must be > 0");
-    if (dof == 0 || dof > 64) throw InvalidArgument("dof must be in 1..64");
+    if (dof == 0 || dof > static_cast<size_t>(kMaxJoints))
+      throw InvalidArgument("dof must be in 1.." + std::to_string(kMaxJoints) +
+                            " (the most joints a robot may have)");
     require_finite(q, values_of(rows, dof, "q"), "q");
     require_finite(force, values_of(rows, 3, "force"), "force");
     if (moment) require_finite(moment, rows * 3, "moment");

@@ -43,6 +43,15 @@ NOISE_NEGATIVE = "tracker_sigma_um: -10\n"
 NOISE_UNKNOWN_KEY = "tracker_sigma_um: 10\ntraker_ppm: 5\n"
 NOISE_NAN = "tracker_sigma_m: .nan\n"
 NOISE_OUTLIER_RATE = "outlier_rate: 1.5\n"
+ROBOT_YAML_65_JOINTS = ("name: big\nconvention: modified_dh\nunits: {length: m, angle: deg}\n"
+                        "joints:\n" + "  - {alpha: 90, a: 0.1, d: 0}\n" * 65)
+URDF_65_JOINTS = ("<?xml version='1.0'?>\n<robot name='snake'>\n"
+                  + "".join(f"  <link name='l{i}'/>\n" for i in range(66))
+                  + "".join(f"  <joint name='j{i}' type='revolute'><parent link='l{i}'/>"
+                            f"<child link='l{i + 1}'/><origin xyz='0.1 0 0'/><axis xyz='0 0 1'/>"
+                            "<limit lower='-1' upper='1' effort='1' velocity='1'/></joint>\n"
+                            for i in range(65))
+                  + "</robot>\n")
 URDF_BROKEN = "<robot name='x'><link name='a'/><joint name='j' type='revolute'><parent link='a'/>"
 URDF_NO_JOINTS = "<?xml version='1.0'?><robot name='x'><link name='a'/></robot>"
 URDF_BRANCHING = """<?xml version='1.0'?>
@@ -406,7 +415,24 @@ CASES = [
          files={"TREE.URDF": URDF_BRANCHING},
          args=["identify", "--robot", "{tmp}/TREE.URDF", "--data", "{data}", "-o", "{out}"],
          message="URDF chain from 'base' has several possible tip links"),
+    dict(id="cli-robot-yaml-65-joints", kind="cli", topic="wrong sizes",
+         files={"big.yaml": ROBOT_YAML_65_JOINTS},
+         args=["identify", "--robot", "{tmp}/big.yaml", "--data", "{data}", "-o", "{out}"],
+         message="the robot has 65 joints; at most 64 are supported"),
+    dict(id="cli-data-joint-column-beyond-64", kind="cli", topic="wrong sizes",
+         files={"bad.csv": HEADER6.replace("q6_deg,", "q6_deg,q65_deg,") +
+                rows(12).replace(",0,20,-25,30,", ",0,0,20,-25,30,")},
+         args=["identify", "--robot", "rokae", "--data", "{tmp}/bad.csv", "-o", "{out}"],
+         message="column 'q65_deg': joint 65, but a robot has at most 64 joints"),
+    dict(id="cli-fmu-array-inputs-fmi2", kind="cli", topic="out of range",
+         args=["fmu", "export", "--robot", "rokae", "--fit", "{fit}", "--array-inputs",
+               "-o", "{out}"],
+         message="array inputs need FMI 3"),
     # ------------------------------------------------------------------ C ABI (ctypes)
+    dict(id="capi-robot-urdf-65-joints", kind="capi", topic="wrong sizes",
+         files={"snake.urdf": URDF_65_JOINTS},
+         code="lib.stiff_robot_load(out(), b'{tmp}/snake.urdf')",
+         status=-3, message="65 moving joints; at most 64 are supported"),
     dict(id="capi-dataset-zero-rows", kind="capi", topic="too few measurements",
          code="lib.stiff_dataset_create(out(), 0, 6, dbl([0]*6), dbl([0]*3), None, None, None)",
          status=-1, message="rows must be > 0"),

@@ -935,3 +935,36 @@ def test_start_pose_is_not_singular(exporter, robot, version):
     assert np.max(np.abs(out[9:] - start)) > 1e-6  # ... and the compensation moves the joints
     a.free()
     assert [m for s, _, m in a.log.messages if s != 0] == []
+
+
+def test_most_joints_a_robot_may_have_works_everywhere(exporter, tmp_path):
+    """64 joints (stiff::kMaxJoints) load, make a data set and an FMU that runs; 65 are refused
+    by the robot reader (before, the reader took 65 and stiff_dataset_create refused them)."""
+    lib = exporter.lib
+    row = "  - {alpha: 90, a: 0.05, d: 0.01, limits: [-170, 170]}\n"
+    head = "name: snake{n}\nconvention: modified_dh\nunits: {{length: m, angle: deg}}\njoints:\n"
+    for n in (64, 65):
+        (tmp_path / f"snake{n}.yaml").write_text(head.format(n=n) + row * n)
+    with pytest.raises(RuntimeError, match="the robot has 65 joints; at most 64"):
+        exporter.load_robot(tmp_path / "snake65.yaml")
+    robot, _, dof = exporter.load_robot(tmp_path / "snake64.yaml")
+    assert dof == 64
+    ds = ctypes.c_void_p()
+    lib.stiff_dataset_create.argtypes = [ctypes.POINTER(ctypes.c_void_p), ctypes.c_size_t,
+                                         ctypes.c_size_t] + [ctypes.c_void_p] * 5
+    assert lib.stiff_dataset_create(ctypes.byref(ds), 1, 64, (ctypes.c_double * 64)(),
+                                    (ctypes.c_double * 3)(), None, None, None) == 0
+    lib.stiff_dataset_destroy.argtypes = [ctypes.c_void_p]
+    lib.stiff_dataset_destroy(ds)
+    assert lib.stiff_dataset_create(ctypes.byref(ds), 1, 65, (ctypes.c_double * 65)(),
+                                    (ctypes.c_double * 3)(), None, None, None) != 0
+    assert b"1..64" in lib.stiff_last_error()
+    lib.stiff_robot_destroy(robot)
+    path = exporter.export("snake64", 3, robot_file=tmp_path / "snake64.yaml",
+                           compliance=np.full(64, 1e-6))
+    a = Instance(path).start()
+    a.set(fx=10.0, fy=-5.0, fz=20.0)
+    out = a.get(DEFL + [f"q_cmd{j}" for j in range(1, 65)])
+    assert np.all(np.isfinite(out)) and a.vr["q_cmd64"] == 364 and a.vr["q64"] == 64
+    a.free()
+    assert a.log.errors() == []

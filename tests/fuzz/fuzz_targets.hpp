@@ -117,7 +117,7 @@ inline void robot_yaml(const uint8_t* data, size_t size) {
     RobotModel again = parse_robot_yaml(robot_to_yaml(r), "roundtrip.yaml");
     if (again.dof() != r.dof()) finding("robot_yaml", "round trip changed dof");
   });
-  if (r.dof() > 0 && r.dof() <= 64)
+  if (r.dof() > 0 && r.dof() <= stiff::kMaxJoints)
     must_succeed("robot_yaml", "kinematics", [&] {
       const Eigen::VectorXd q = Eigen::VectorXd::Zero(r.dof());
       (void)r.tool_pose(q);
@@ -129,7 +129,7 @@ inline void robot_urdf(const uint8_t* data, size_t size) {
   expect_clean("robot_urdf", [&] {
     RobotModel r = parse_robot_urdf(text_of(data, size), "fuzz.urdf");
     (void)robot_to_yaml(r);
-    if (r.dof() > 0 && r.dof() <= 64) (void)r.tool_pose(Eigen::VectorXd::Zero(r.dof()));
+    if (r.dof() > 0 && r.dof() <= stiff::kMaxJoints) (void)r.tool_pose(Eigen::VectorXd::Zero(r.dof()));
   });
 }
 

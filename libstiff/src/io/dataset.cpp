@@ -11,6 +11,7 @@
 
 #include "stiff/error.hpp"
 #include "stiff/io/text_io.hpp"
+#include "stiff/kinematics/robot_model.hpp"
 
 namespace stiff {
 namespace {
@@ -202,7 +203,12 @@ Column classify(const std::string& name, const std::string& file, int line, int 
   if (name.size() >= 2 && name[0] == 'q' && std::isdigit(static_cast<unsigned char>(name[1]))) {
     size_t k = 1;
     while (k < name.size() && std::isdigit(static_cast<unsigned char>(name[k]))) ++k;
-    const int joint = std::atoi(name.substr(1, k - 1).c_str());
+    // At most 4 digits are read: more is beyond any robot (and would overflow atoi).
+    const int joint = k - 1 > 4 ? kMaxJoints + 1 : std::atoi(name.substr(1, k - 1).c_str());
+    if (joint > kMaxJoints)
+      throw ParseError(file, line, col,
+                       "column '" + name + "': joint " + name.substr(1, k - 1) +
+                           ", but a robot has at most " + std::to_string(kMaxJoints) + " joints");
     if (joint >= 1) bases.push_back({name.substr(0, k), Kind::q, joint - 1});
   }
   for (const auto& b : bases) {
@@ -333,8 +339,8 @@ Dataset parse_measurements_csv(const std::string& text_in, const std::string& fi
         if (c.kind != Kind::q && c.kind != Kind::extra && c.kind != Kind::id &&
             c.kind != Kind::session) {
           // dx_mm beside dx_m: the same quantity in two units; which is meant is a guess.
-          const auto [it, fresh] = quantity_column.emplace(
-              std::make_pair(static_cast<int>(c.kind), c.index), f.text);
+          const auto [it, fresh] =
+              quantity_column.emplace(std::make_pair(static_cast<int>(c.kind), c.index), f.text);
           if (!fresh)
             throw ParseError(file, line_no, f.col,
                              "columns '" + it->second + "' and '" + f.text +
@@ -365,13 +371,12 @@ Dataset parse_measurements_csv(const std::string& text_in, const std::string& fi
         for (const auto& f : fields)
           if (hint.empty() && f.text.size() > 1 && f.text[0] == 'Q' &&
               std::isdigit(static_cast<unsigned char>(f.text[1])))
-            hint = " (column names are lower case: '" + f.text + "' must be written '" +
-                   [&] {
-                     std::string l = f.text;
-                     for (char& ch : l) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-                     return l;
-                   }() +
-                   "')";
+            hint = " (column names are lower case: '" + f.text + "' must be written '" + [&] {
+              std::string l = f.text;
+              for (char& ch : l)
+                ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+              return l;
+            }() + "')";
       const int n = dof > 0 ? dof : max_q;
       if (n == 0)
         throw ParseError(file, line_no, 1, "missing joint columns q1.. (e.g. q1_deg)" + hint);

@@ -138,6 +138,10 @@ RobotModel parse_robot_yaml_unguarded(const std::string& text, const std::string
   if (!joints || !joints.IsSequence() || joints.size() == 0)
     throw ParseError(file, joints ? joints.Mark().line + 1 : 1, 1,
                      "'joints' must be a non-empty list");
+  if (joints.size() > static_cast<size_t>(kMaxJoints))
+    throw ParseError(file, joints.Mark().line + 1, 1,
+                     "the robot has " + std::to_string(joints.size()) + " joints; at most " +
+                         std::to_string(kMaxJoints) + " are supported");
   int index = 0;
   for (const auto& jn : joints) {
     ++index;
@@ -463,6 +467,11 @@ RobotModel parse_robot_urdf(const std::string& text,
   if (robot.joints.empty())
     throw ParseError(file, 0, 0,
                      "URDF chain '" + base->name + "' -> '" + tip->name + "' has no moving joint");
+  if (robot.dof() > kMaxJoints)
+    throw ParseError(file, 0, 0,
+                     "URDF chain '" + base->name + "' -> '" + tip->name + "' has " +
+                         std::to_string(robot.dof()) + " moving joints; at most " +
+                         std::to_string(kMaxJoints) + " are supported");
   // Fixed transforms after the last joint define the flange: fold them into its `post`.
   auto& last = robot.joints.back();
   last.post = last.post * pending;
