@@ -477,8 +477,8 @@ std::string documentation(const std::vector<Var>& vars,
        "follow the inputs instantly. The deflection is the compliance model of the stiff "
        "library (d = J C J<sup>T</sup> W for the joint model); q_cmd are the joint targets "
        "that put the loaded tool where q puts the unloaded one (damped least-squares Newton "
-       "iteration, residual below 1e-12 m). The binary needs glibc 2.36 or newer "
-       "(Debian 12) on x86-64 Linux.</p>\n<table border=\"1\">\n"
+       "iteration, residual below 1e-12 m). The binary needs glibc 2.17 or newer "
+       "on x86-64 Linux.</p>\n<table border=\"1\">\n"
        "<tr><th>vr</th><th>name</th><th>unit</th><th>description</th></tr>\n";
   for (size_t k = 0; k < vars.size(); ++k)
     o << "<tr><td>" << vars[k].vr << "</td><td>" << xml(vars[k].name) << "</td><td>"
