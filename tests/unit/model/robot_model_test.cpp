@@ -3,7 +3,9 @@
 #include <ceres/jet.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "stiff/error.hpp"
 #include "stiff/io/robot_io.hpp"
@@ -157,6 +159,37 @@ TEST(RobotFile, YamlRoundTripKeepsKinematics) {
     for (int i = 0; i < r.dof(); ++i) q(i) = 0.1 * (i + 1);
     EXPECT_NEAR((r.tool_pose(q) - back.tool_pose(q)).norm(), 0.0, 1e-12) << name;
     EXPECT_EQ(r.has_masses(), back.has_masses());
+  }
+}
+
+}  // namespace
+}  // namespace stiff
+
+namespace stiff {
+namespace {
+
+// The FMU's start pose: inside the limits, and better conditioned for the compensation than a
+// typical pose of the range (the median of random poses), on every built-in robot; the
+// all-zero pose it replaces is singular on each of them.
+TEST(RobotModel, HomePoseIsInsideTheLimitsAndAwayFromSingularities) {
+  for (const char* name :
+       {"rokae.yaml", "puma560.yaml", "abb_irb120.yaml", "ur10.yaml", "ur5.urdf"}) {
+    const RobotModel r = load_robot(test::source_path(std::string("examples/robots/") + name));
+    const Eigen::VectorXd home = home_pose(r);
+    ASSERT_EQ(home.size(), r.dof());
+    for (int j = 0; j < r.dof(); ++j) {
+      const double mid = 0.5 * (r.joints[j].lower + r.joints[j].upper);
+      const double half = std::min(0.5 * (r.joints[j].upper - r.joints[j].lower), M_PI);
+      EXPECT_LE(std::fabs(home(j) - mid), 2.0 / 3.0 * half + 1e-12) << name << " joint " << j + 1;
+    }
+    Rng rng(11);
+    std::vector<double> typical;
+    for (int k = 0; k < 201; ++k) typical.push_back(compensation_dexterity(r, random_q(r, rng)));
+    std::nth_element(typical.begin(), typical.begin() + 100, typical.end());
+    const double at_home = compensation_dexterity(r, home);
+    EXPECT_GT(at_home, typical[100]) << name;
+    EXPECT_LT(compensation_dexterity(r, Eigen::VectorXd::Zero(r.dof())), 1e-6 * at_home) << name;
+    EXPECT_EQ(home_pose(r), home) << name;  // deterministic
   }
 }
 
