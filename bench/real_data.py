@@ -211,6 +211,26 @@ def _ci(s):
         else _f(s["mean_mm"])
 
 
+def transfer_table(w, who, r, degrees):
+    """The UR10 (a) table of `who`'s results r[model]["B (20%)"] etc."""
+    deg = " mean [deg] |" if degrees else ""
+    w(f"| model ({who}) | parameters | series | registration from | mean [mm] | max [mm] | "
+      f"RMS [mm] |{deg}")
+    w("| --- " * (8 if degrees else 7) + "|")
+    for n in ref.UR10_MODELS:
+        if n not in r:
+            continue
+        for k in ("B", "D", "A"):
+            for lab in ("20%", "15 poses"):
+                v = r[n].get(f"{k} ({lab})")
+                if v is None:
+                    continue
+                w(f"| {n} | {r[n]['C']['calibration']['parameters']} | {k} | "
+                  f"{lab.replace('%', ' %')} | {_ci(v)} | {_f(v['max_mm'])} | "
+                  f"{_f(v['rms_mm'])} |" + (f" {_f(v.get('mean_deg'))} |" if degrees else ""))
+    w("")
+
+
 def plot_ur5(res, path):
     import matplotlib
     matplotlib.use("Agg")
@@ -423,42 +443,14 @@ def write_doc(res):
         w("(a) Calibrated on all of C, then each other series with only its registration "
           "refitted, from a random 20 % of its rows (or 15 poses), evaluated on the rest:")
         w("")
-        w("| model (reference) | parameters | series | registration from | mean [mm] | "
-          "max [mm] | RMS [mm] | mean [deg] |")
-        w("| --- | --- | --- | --- | --- | --- | --- | --- |")
-        for n in ref.UR10_MODELS:
-            if n not in r:
-                continue
-            for k in ("B", "D", "A"):
-                for lab in ("20%", "15 poses"):
-                    key = f"{k} ({lab})"
-                    if key not in r[n]:
-                        continue
-                    v = r[n][key]
-                    w(f"| {n} | {r[n]['C']['calibration']['parameters']} | {k} | "
-                      f"{lab.replace('%', ' %')} | {_ci(v)} | {_f(v['max_mm'])} | "
-                      f"{_f(v['rms_mm'])} | {_f(v.get('mean_deg'))} |")
-        w("")
+        transfer_table(w, "reference", r, degrees=True)
         pr = prod.get("ur10", {})
         if all(n in pr and "B (20%)" in pr[n] for n in ref.UR10_MODELS):
             w("stiff: calibrated on all of C (`stiff identify`), then each series registered "
               "to it with `stiff identify --start C.json --refit registration` on the same "
               "rows as the reference, evaluated on the same rest (positions only):")
             w("")
-            w("| model (stiff) | parameters | series | registration from | mean [mm] | "
-              "max [mm] | RMS [mm] |")
-            w("| --- | --- | --- | --- | --- | --- | --- |")
-            for n in ref.UR10_MODELS:
-                for k in ("B", "D", "A"):
-                    for lab in ("20%", "15 poses"):
-                        key = f"{k} ({lab})"
-                        if key not in pr[n]:
-                            continue
-                        v = pr[n][key]
-                        w(f"| {n} | {pr[n]['C']['calibration']['parameters']} | {k} | "
-                          f"{lab.replace('%', ' %')} | {_ci(v)} | {_f(v['max_mm'])} | "
-                          f"{_f(v['rms_mm'])} |")
-            w("")
+            transfer_table(w, "stiff", pr, degrees=False)
         if all(n in r for n in ref.UR10_MODELS):
             hv = lambda n: r[n]["half_C"]["validation"]["mean_mm"]
             tr = lambda n: [r[n][f"{k} (20%)"]["mean_mm"] for k in "BDA" if f"{k} (20%)" in r[n]]
