@@ -129,7 +129,8 @@ inline void robot_urdf(const uint8_t* data, size_t size) {
   expect_clean("robot_urdf", [&] {
     RobotModel r = parse_robot_urdf(text_of(data, size), "fuzz.urdf");
     (void)robot_to_yaml(r);
-    if (r.dof() > 0 && r.dof() <= stiff::kMaxJoints) (void)r.tool_pose(Eigen::VectorXd::Zero(r.dof()));
+    if (r.dof() > 0 && r.dof() <= stiff::kMaxJoints)
+      (void)r.tool_pose(Eigen::VectorXd::Zero(r.dof()));
   });
 }
 

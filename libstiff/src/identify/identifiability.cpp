@@ -233,9 +233,8 @@ Identifiability check_identifiability(const DeflectionModel& model,
                         sp.unit + " (linearised at the start)"
                   : (max_relative_se != 1.0 ? num(max_relative_se) + " times " : "") +
                         "its typical magnitude " + num(typical(k)) + " " + sp.unit +
-                        " and a third of its distance " +
-                        num(std::abs((*theta)(k)-sp.null_value)) + " " + sp.unit +
-                        " from its null value";
+                        " and a third of its distance " + num(std::abs((*theta)(k)-sp.null_value)) +
+                        " " + sp.unit + " from its null value";
     out.reason[k] = "the data determine it only to +-" + num(worst_se * typical(k)) + " " +
                     sp.unit + " (standard error), more than " + limit +
                     (partner >= 0 && std::abs(corr) > 0.5
