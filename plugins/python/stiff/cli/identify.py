@@ -1,4 +1,5 @@
-"""stiff identify: fit the compliance model to measured displacements."""
+"""stiff identify: fit the model (compliance, geometry, other effects) to measured displacements
+or absolute positions."""
 from __future__ import annotations
 
 import json
