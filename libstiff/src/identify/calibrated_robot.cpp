@@ -52,32 +52,26 @@ RobotModel calibrated_robot(const RobotModel& robot,
                             const FitResult& fit,
                             std::vector<std::string>* left_out) {
   const int n = robot.dof();
-  // Absolute rows at nominal positions for every session of the fit, so that the model has the
-  // fit's parameters (a registration needs poses spread in space to start from); the first two
-  // tell an effect that depends on the pose from one that does not.
+  // The fit's model (its sessions named, as for prediction), and two poses to tell an effect
+  // that depends on the pose from one that does not.
+  const DeflectionModel model(robot, fit.model, nullptr, fit.sessions);
   Dataset data;
   data.dof = n;
   data.has_id = data.has_position = true;
   data.has_session = !fit.sessions.empty();
-  const std::vector<std::string> sessions =
-      fit.sessions.empty() ? std::vector<std::string>{""} : fit.sessions;
-  constexpr int kPoses = 6;
-  for (size_t k = 0; k < sessions.size(); ++k)
-    for (int pose = 0; pose < kPoses; ++pose) {
-      Measurement m;
-      m.id = "pose" + std::to_string(kPoses * k + pose);
-      m.session = sessions[k];
-      m.absolute = true;
-      m.q = Eigen::VectorXd::Zero(n);
-      for (int j = 0; j < n; ++j) {
-        const double lo = std::max(robot.joints[j].lower, -3.0);
-        const double hi = std::min(robot.joints[j].upper, 3.0);
-        m.q(j) = lo + (0.2 + 0.06 * ((3 * pose + 7 * j) % 11)) * (hi - lo);
-      }
-      m.position = robot.tool_pose(m.q).topRightCorner<3, 1>();
-      data.rows.push_back(m);
+  for (int pose = 0; pose < 2; ++pose) {
+    Measurement m;
+    m.id = "pose" + std::to_string(pose);
+    m.session = fit.sessions.empty() ? "" : fit.sessions.front();
+    m.absolute = true;
+    m.q = Eigen::VectorXd::Zero(n);
+    for (int j = 0; j < n; ++j) {
+      const double lo = std::max(robot.joints[j].lower, -3.0);
+      const double hi = std::min(robot.joints[j].upper, 3.0);
+      m.q(j) = lo + (pose ? 0.3 : 0.7) * (hi - lo);
     }
-  const DeflectionModel model(robot, fit.model, &data);
+    data.rows.push_back(m);
+  }
   check_fit_applies(fit, robot, model, "calibrated robot");
   const Eigen::VectorXd theta = fit.theta();
   const auto ctx = model.contexts(data);
