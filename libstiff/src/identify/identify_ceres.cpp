@@ -831,7 +831,6 @@ FitResult identify(const RobotModel& robot,
       given[k] = true;
     }
   }
-  const bool any_given = std::find(given.begin(), given.end(), true) != given.end();
 
   FitResult f;
   Setup s;
@@ -912,29 +911,40 @@ FitResult identify(const RobotModel& robot,
   double residual_sigma = 0.0;  // 0: the structural test only (the passes)
   // The statistical test judges only values a solve fitted (`free`): a value held at its
   // null so far is not evidence either way.
-  // Given parameters are known: their columns take no part in the decision about the others.
-  auto without_given = [&](const Eigen::MatrixXd& jac) {
-    Eigen::MatrixXd out = jac;
+  // Parameters decided already (given by the start fit; on absolute data, those held at the
+  // start): their columns take no part in the decision `run` makes about the others, and they
+  // keep their own decision.
+  Identifiability given_idf;
+  given_idf.fixed = given;
+  given_idf.statistical.assign(p, false);
+  given_idf.reason.assign(p, "");
+  for (int k = 0; k < p; ++k)
+    if (given[k]) given_idf.reason[k] = "given by the start fit";
+  auto apart = [&](const Eigen::MatrixXd& jac, const Identifiability& decided, auto&& run) {
+    const bool any =
+        std::find(decided.fixed.begin(), decided.fixed.end(), true) != decided.fixed.end();
+    Eigen::MatrixXd rest;
+    if (any) {
+      rest = jac;
+      for (int k = 0; k < p; ++k)
+        if (decided.fixed[k]) rest.col(k).setZero();
+    }
+    Identifiability out = run(any ? rest : jac);
     for (int k = 0; k < p; ++k)
-      if (given[k]) out.col(k).setZero();
-    return out;
-  };
-  auto hold_given = [&](Identifiability& idf_given) {
-    for (int k = 0; k < p; ++k)
-      if (given[k]) {
-        idf_given.fixed[k] = true;
-        idf_given.statistical[k] = false;
-        idf_given.reason[k] = "given by the start fit";
+      if (decided.fixed[k]) {
+        out.fixed[k] = true;
+        out.statistical[k] = decided.statistical[k];
+        out.reason[k] = decided.reason[k];
       }
+    return out;
   };
   auto check = [&](const Eigen::MatrixXd& jac, const Eigen::VectorXd& at) {
     std::vector<bool> fitted(p, false);
     for (int k : free) fitted[k] = true;
-    Identifiability out = check_identifiability(model, any_given ? without_given(jac) : jac,
-                                                s.typical, opt.rank_tolerance, residual_sigma,
-                                                opt.max_relative_se, &at, &fitted);
-    hold_given(out);
-    return out;
+    return apart(jac, given_idf, [&](const Eigen::MatrixXd& j) {
+      return check_identifiability(model, j, s.typical, opt.rank_tolerance, residual_sigma,
+                                   opt.max_relative_se, &at, &fitted);
+    });
   };
   // Residual standard deviation of the weighted fit at theta, as the statistics below: rows
   // down-weighted by the robust loss count that much.
@@ -963,12 +973,13 @@ FitResult identify(const RobotModel& robot,
   // max_relative_se of the solution's test, because this one cannot weigh a fitted value.
   constexpr double kStartRelativeSe = 10.0;
   auto prescreen = [&](const Eigen::MatrixXd& jac) {
-    std::vector<bool> fitted(p, true);
+    const std::vector<bool> fitted(p, true);
     const Eigen::VectorXd e = weighted_residuals(s, theta);
-    Identifiability stat = check_identifiability(
-        model, any_given ? without_given(jac) : jac, s.typical, opt.rank_tolerance, 0.0,
-        std::min(kStartRelativeSe, opt.max_relative_se), &theta, &fitted, &e);
-    hold_given(stat);
+    const Identifiability stat = apart(jac, given_idf, [&](const Eigen::MatrixXd& j) {
+      return check_identifiability(model, j, s.typical, opt.rank_tolerance, 0.0,
+                                   std::min(kStartRelativeSe, opt.max_relative_se), &theta, &fitted,
+                                   &e);
+    });
     if (std::find(stat.statistical.begin(), stat.statistical.end(), true) != stat.statistical.end())
       idf = stat;
   };
@@ -1030,23 +1041,13 @@ FitResult identify(const RobotModel& robot,
     // The statistical test, once, at the solution of the structurally identifiable model;
     // what it holds goes back to its null value and the rest is solved once more.
     residual_sigma = robust_residual_sigma();
-    Identifiability stat;
-    if (absolute) {
-      // The set decided at the start stays: a held column judged again at the solution, where
-      // the curvature breaks its exact dependencies by a hair, would only blur its partners.
-      Eigen::MatrixXd jac = last_jacobian;
-      for (int k = 0; k < p; ++k)
-        if (idf.fixed[k]) jac.col(k).setZero();
-      stat = check(jac, theta);
-      for (int k = 0; k < p; ++k)
-        if (idf.fixed[k]) {
-          stat.fixed[k] = true;
-          stat.reason[k] = idf.reason[k];
-          stat.statistical[k] = idf.statistical[k];
-        }
-    } else {
-      stat = check(last_jacobian, theta);
-    }
+    // On absolute data the set decided at the start stays: a held column judged again at the
+    // solution, where the curvature breaks its exact dependencies by a hair, would only blur
+    // its partners.
+    const Identifiability stat =
+        absolute
+            ? apart(last_jacobian, idf, [&](const Eigen::MatrixXd& j) { return check(j, theta); })
+            : check(last_jacobian, theta);
     residual_sigma = 0.0;
     if (absolute ? stat == idf
                  : std::find(stat.statistical.begin(), stat.statistical.end(), true) ==
