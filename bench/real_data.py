@@ -92,6 +92,18 @@ def library_seconds(robot, train, model):
     return best
 
 
+def predicted_errors(robot, fit, test, pred):
+    """`stiff predict` of the absolute file `test` with `fit` (into `pred`): the per-pose
+    distances [mm] between the predicted and the measured positions."""
+    _run([stiff_exe(), "predict", "--robot", robot, "--fit", fit, "--data", str(test),
+          "-o", pred])
+    with open(pred) as f:
+        P = {r["id"]: np.array([float(r["x_m"]), float(r["y_m"]), float(r["z_m"])])
+             for r in csv.DictReader(f)}
+    d = ref.read_absolute(test)
+    return np.array([np.linalg.norm(P[i] - p) for i, p in zip(d["ids"], d["p"])]) * 1e3
+
+
 def product_errors(robot, train, test, model, tmp):
     """Calibrate with stiff on `train`, predict `test`: per-pose position errors [mm],
     the number of identified parameters, calibration RMS [mm] and the identify time [s]."""
@@ -103,14 +115,8 @@ def product_errors(robot, train, test, model, tmp):
           "-o", fit])
     seconds = time.perf_counter() - t
     library = library_seconds(robot, train, model)
-    _run([exe, "predict", "--robot", robot, "--fit", fit, "--data", str(test), "-o", pred])
-    js = json.loads(Path(fit).read_text())
-    with open(pred) as f:
-        P = {r["id"]: np.array([float(r["x_m"]), float(r["y_m"]), float(r["z_m"])])
-             for r in csv.DictReader(f)}
-    d = ref.read_absolute(test)
-    e = np.array([np.linalg.norm(P[i] - p) for i, p in zip(d["ids"], d["p"])]) * 1e3
-    fitstats = js.get("fit", {})
+    e = predicted_errors(robot, fit, test, pred)
+    fitstats = json.loads(Path(fit).read_text()).get("fit", {})
     return e, {"parameters": fitstats.get("rank"),
                "rms_mm": (fitstats.get("rms_m") or float("nan")) * 1e3 * math.sqrt(3),
                "seconds": seconds, "library_seconds": library}
@@ -189,13 +195,7 @@ def product_transfer(C, model, seed, tmp):
             fit, pred = os.path.join(tmp, "reg.json"), os.path.join(tmp, "ev_pred.csv")
             _run([exe, "identify", "--robot", "ur10", "--data", rp, "--start", cfit,
                   "--refit", "registration", "-o", fit])
-            _run([exe, "predict", "--robot", "ur10", "--fit", fit, "--data", ep, "-o", pred])
-            with open(pred) as f:
-                P = {x["id"]: np.array([float(x["x_m"]), float(x["y_m"]), float(x["z_m"])])
-                     for x in csv.DictReader(f)}
-            d = ref.read_absolute(ep)
-            e = np.array([np.linalg.norm(P[i] - q) for i, q in zip(d["ids"], d["p"])]) * 1e3
-            out[f"{k} ({label})"] = summary(e)
+            out[f"{k} ({label})"] = summary(predicted_errors("ur10", fit, ep, pred))
             out[f"{k} ({label})"].pop("per_pose_mm")  # thousands of poses: the summary only
     return out
 
