@@ -32,12 +32,8 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-# $STIFF_DIAGNOSIS_DATA, else ../shared/data/diagnosis-dev beside the checkout (or one level up,
-# for a worktree in a folder of worktrees).
-DEFAULT_DATA = os.environ.get("STIFF_DIAGNOSIS_DATA") or next(
-    (p for p in (os.path.join(ROOT, "..", "shared", "data", "diagnosis-dev"),
-                 os.path.join(ROOT, "..", "..", "shared", "data", "diagnosis-dev"))
-     if os.path.isdir(p)), os.path.join(ROOT, "..", "shared", "data", "diagnosis-dev"))
+# The scenario directory: --data, else $STIFF_DIAGNOSIS_DATA.
+DEFAULT_DATA = os.environ.get("STIFF_DIAGNOSIS_DATA", "")
 STIFF = os.path.join(ROOT, ".venv", "bin", "stiff")
 ROBOT = os.path.join(ROOT, "examples", "robots", "rokae.yaml")
 NOISE_META = ("force_relative", "force_absolute_n", "tracker_sigma_m")
@@ -143,7 +139,9 @@ def classify(truth, d):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--data", default=DEFAULT_DATA)
+    ap.add_argument("--data", default=DEFAULT_DATA,
+                    help="scenario directory (index.json and its folders); default "
+                         "$STIFF_DIAGNOSIS_DATA")
     ap.add_argument("--sets", default="base,sigma,ool,oolsig",
                     help="comma-separated sets (folders of the data directory)")
     ap.add_argument("--types", default="", help="comma-separated types (default all)")
@@ -156,7 +154,8 @@ def main():
     ap.add_argument("--verbose", "-v", action="store_true")
     a = ap.parse_args()
     if not os.path.isdir(a.data) or not os.path.exists(os.path.join(a.data, "index.json")):
-        print(f"diagnosis_score: no scenario data at {a.data}: skipped")
+        where = a.data or "(none given: --data DIR or $STIFF_DIAGNOSIS_DATA)"
+        print(f"diagnosis_score: no scenario data at {where}: skipped")
         return 0
     with open(os.path.join(a.data, "index.json")) as f:
         index = json.load(f)
