@@ -1,5 +1,7 @@
 // Version, errors, robots, datasets.
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <thread>
 
 #include "boundary.hpp"
@@ -489,6 +491,76 @@ stiff_status stiff_design_random(stiff_dataset** out,
     auto d = std::make_unique<stiff_dataset>();
     d->data = random_design(robot->model, o);
     *out = d.release();
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_design_random_options_init(stiff_design_random_options* options,
+                                              size_t struct_size) {
+  return guarded(__func__, [&] {
+    require(options, "options");
+    if (struct_size < sizeof(uint32_t) ||
+        (struct_size < sizeof(stiff_design_random_options) &&
+         !is_version_size<stiff_design_random_options>(struct_size)))
+      throw InvalidArgument("struct_size " + std::to_string(struct_size) +
+                            " is no version of stiff_design_random_options");
+    const size_t n = std::min(struct_size, sizeof(stiff_design_random_options));
+    const RandomDesignOptions d;  // the defaults are the core's, nothing restated here
+    stiff_design_random_options o{};
+    o.struct_size = static_cast<uint32_t>(n);
+    o.count = static_cast<uint32_t>(d.count);
+    o.seed = d.seed;
+    o.range_fraction = d.range_fraction;
+    o.load_min_N = d.load_min_N;
+    o.load_max_N = d.load_max_N;
+    o.load_step_N = d.load_step_N;
+    o.min_sigma_m = d.min_sigma;
+    for (int k = 0; k < 3; ++k) {
+      o.box_min_m[k] = d.box_min_m(k);
+      o.box_max_m[k] = d.box_max_m(k);
+    }
+    std::memcpy(options, &o, n);
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_design_random_with_options(stiff_dataset** out,
+                                              const stiff_robot* robot,
+                                              const stiff_design_random_options* options) {
+  if (out) *out = nullptr;
+  return guarded(__func__, [&] {
+    require(out, "out");
+    require(robot, "robot");
+    const stiff_design_random_options o = read_options(options);
+    const double nums[] = {o.range_fraction, o.load_min_N, o.load_max_N, o.load_step_N,
+                           o.min_sigma_m};
+    require_finite(nums, sizeof nums / sizeof nums[0], "options");
+    RandomDesignOptions d;
+    if (o.count > 1000000) throw InvalidArgument("count must be in 1..1e6");
+    if (o.count) d.count = static_cast<int>(o.count);
+    if (o.seed) d.seed = o.seed;
+    if (o.range_fraction != 0) d.range_fraction = o.range_fraction;
+    if (o.load_min_N != 0) d.load_min_N = o.load_min_N;
+    if (o.load_max_N != 0) d.load_max_N = o.load_max_N;
+    if (o.load_step_N != 0) d.load_step_N = o.load_step_N;
+    if (o.min_sigma_m != 0) d.min_sigma = o.min_sigma_m;
+    if (o.q_fixed) {
+      if (o.q_fixed_count != static_cast<size_t>(robot->model.dof()))
+        throw InvalidArgument("q_fixed has " + std::to_string(o.q_fixed_count) +
+                              " values, the robot has " + std::to_string(robot->model.dof()) +
+                              " joints");
+      d.q_fixed.assign(o.q_fixed, o.q_fixed + o.q_fixed_count);
+    }
+    if (o.use_workspace_box) {
+      require_finite(o.box_min_m, 3, "box_min_m");
+      require_finite(o.box_max_m, 3, "box_max_m");
+      d.use_workspace_box = true;
+      d.box_min_m = Eigen::Vector3d(o.box_min_m);
+      d.box_max_m = Eigen::Vector3d(o.box_max_m);
+    }
+    auto h = std::make_unique<stiff_dataset>();
+    h->data = random_design(robot->model, d);  // validated once, in the core
+    *out = h.release();
     return STIFF_OK;
   });
 }

@@ -134,6 +134,29 @@ TEST(CApiMisuse, EveryFunctionReturnsItsStatusAndNamesItself) {
        }},
       {"stiff_design_random", STIFF_E_INVALID_ARGUMENT,
        [&] { return stiff_design_random(&d, f.robot, 0, 1); }},
+      {"stiff_design_random_options_init", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         return stiff_design_random_options_init(nullptr, sizeof(stiff_design_random_options));
+       }},
+      {"stiff_design_random_options_init", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         auto o = zeroed<stiff_design_random_options>();
+         return stiff_design_random_options_init(&o, 6);  // ends inside `count`
+       }},
+      {"stiff_design_random_with_options", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         auto o = zeroed<stiff_design_random_options>();
+         o.use_workspace_box = 1;  // min = max = 0: an empty box
+         return stiff_design_random_with_options(&d, f.robot, &o);
+       }},
+      {"stiff_design_random_with_options", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         auto o = zeroed<stiff_design_random_options>();
+         const double q[2] = {0, 0};
+         o.q_fixed = q;
+         o.q_fixed_count = 2;
+         return stiff_design_random_with_options(&d, f.robot, &o);
+       }},
       {"stiff_simulate", STIFF_E_INVALID_ARGUMENT,
        [&] { return stiff_simulate(&d, f.robot, f.design, nullptr, w_inf, 6, nullptr); }},
       {"stiff_simulate", STIFF_E_INVALID_ARGUMENT,
@@ -395,8 +418,8 @@ TEST(CApiMisuse, StructSizeEndingInsideAFieldIsRefused) {
   EXPECT_EQ(stiff_noise_read(&noise, path.c_str()), STIFF_E_INVALID_ARGUMENT);
   unsigned char expected[sizeof noise];
   std::memset(expected, 0xab, sizeof expected);
-  EXPECT_EQ(std::memcmp(reinterpret_cast<unsigned char*>(&noise) + 4, expected + 4, sizeof noise - 4),
-            0);
+  EXPECT_EQ(
+      std::memcmp(reinterpret_cast<unsigned char*>(&noise) + 4, expected + 4, sizeof noise - 4), 0);
   stiff_fit_statistics st;
   std::memset(&st, 0, sizeof st);
   st.struct_size = 6;

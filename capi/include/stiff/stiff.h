@@ -257,6 +257,39 @@ STIFF_API stiff_status stiff_design_random(stiff_dataset** out,
                                            const stiff_robot* robot,
                                            size_t count,
                                            uint64_t seed);
+/** Options of stiff_design_random_with_options. Fill with stiff_design_random_options_init
+ *  and change what you need; zero fields take the defaults in brackets. Pointers are borrowed
+ *  for the duration of the call. @since 0.3 */
+typedef struct stiff_design_random_options {
+  uint32_t struct_size;
+  uint32_t count;        /**< poses [20] */
+  uint64_t seed;         /**< random seed; same seed, same design [1] */
+  double range_fraction; /**< poses uniform in this centred fraction of each joint range [0.95] */
+  double load_min_N;     /**< per-axis load magnitude, lower bound [15] */
+  double load_max_N;     /**< per-axis load magnitude, upper bound [35] */
+  double load_step_N;    /**< grid step of the magnitudes; 0 = continuous [0] */
+  double min_sigma_m;    /**< reject poses whose translational Jacobian has a smallest
+                              singular value below this [0.05 m] */
+  const double* q_fixed; /**< per joint a value [rad] to hold it at, NaN = free; NULL: all
+                              free */
+  size_t q_fixed_count;  /**< number of values in q_fixed (the robot's dof) */
+  uint32_t use_workspace_box; /**< non-zero: keep only poses whose measured point lies in the
+                                   box below */
+  double box_min_m[3];        /**< workspace box, base frame [m] */
+  double box_max_m[3];
+} stiff_design_random_options;
+
+/** Fill *options with the library's defaults (libgit2's options_init convention); struct_size
+ *  is sizeof the caller's struct. @since 0.3 */
+STIFF_API stiff_status stiff_design_random_options_init(stiff_design_random_options* options,
+                                                        size_t struct_size);
+/** Random design with options (the sampler of the planner's candidate pool: same range,
+ *  fixed joints, load grid, workspace box and singularity rejection). NULL options: as
+ *  stiff_design_random with count 20, seed 1. Errors: INVALID_ARGUMENT naming the field,
+ *  NUMERICAL when almost every pose is rejected. @since 0.3 */
+STIFF_API stiff_status stiff_design_random_with_options(stiff_dataset** out,
+                                                        const stiff_robot* robot,
+                                                        const stiff_design_random_options* options);
 /** Simulate measurements of design (poses and loads; NULL: 20 random poses) on a virtual
  *  robot whose truth is read from truth_path (YAML, docs/formats.md), or, when truth_path is
  *  NULL, is the joint stiffness `stiffness` (n = dof values, N*m/rad). @since 0.1 */

@@ -8,6 +8,7 @@
 #include "plan_internal.hpp"
 #include "stiff/error.hpp"
 #include "stiff/kinematics/joint_torque.hpp"
+#include "stiff/kinematics/sampling.hpp"
 #include "stiff/random.hpp"
 
 #if defined(__linux__)
@@ -60,16 +61,6 @@ bool in_box(const PoolOptions& o, const Eigen::Vector3d& x) {
   return (x.array() >= o.box_min_m.array()).all() && (x.array() <= o.box_max_m.array()).all();
 }
 
-// Per-axis magnitudes of the load grid (step > 0).
-std::vector<double> grid_magnitudes(const PoolOptions& o) {
-  std::vector<double> v;
-  const double step = o.load_step_N;
-  const long first = static_cast<long>(std::ceil(o.load_min_N / step - 1e-9));
-  const long last = static_cast<long>(std::floor(o.load_max_N / step + 1e-9));
-  for (long k = first; k <= last; ++k) v.push_back(static_cast<double>(k) * step);
-  return v;
-}
-
 std::vector<Eigen::Vector3d> make_loads(const PoolOptions& o, Rng& rng) {
   std::vector<Eigen::Vector3d> loads;
   const double max_mag = o.load_max_magnitude_N;
@@ -98,14 +89,10 @@ std::vector<Eigen::Vector3d> make_loads(const PoolOptions& o, Rng& rng) {
   if (o.load_count < 0) throw InvalidArgument("plan pool: load_count must be >= 0");
   std::vector<double> axis;  // signed per-axis values of the grid
   if (o.load_step_N > 0) {
-    for (double v : grid_magnitudes(o)) {
-      axis.push_back(v);
-      if (v != 0) axis.push_back(-v);
-    }
+    axis = signed_load_grid(o.load_min_N, o.load_max_N, o.load_step_N);
     if (axis.empty())
       throw InvalidArgument("plan pool: empty load range: no multiple of " + num(o.load_step_N) +
                             " N in [" + num(o.load_min_N) + ", " + num(o.load_max_N) + "] N");
-    std::sort(axis.begin(), axis.end());
   }
   auto ok = [&](const Eigen::Vector3d& f) {
     return f.norm() > 0 && f.norm() <= max_mag * (1 + 1e-12);
@@ -125,12 +112,8 @@ std::vector<Eigen::Vector3d> make_loads(const PoolOptions& o, Rng& rng) {
     const long max_tries = 200L * o.load_count + 1000;
     for (long t = 0; t < max_tries && static_cast<int>(loads.size()) < o.load_count; ++t) {
       Eigen::Vector3d f;
-      for (int k = 0; k < 3; ++k) {
-        if (!axis.empty())
-          f(k) = axis[rng.index(axis.size())];
-        else
-          f(k) = rng.uniform(o.load_min_N, o.load_max_N) * (rng.uniform() < 0.5 ? -1.0 : 1.0);
-      }
+      for (int k = 0; k < 3; ++k)
+        f(k) = random_load_component(o.load_min_N, o.load_max_N, axis, rng);
       if (!ok(f)) continue;
       if (!axis.empty() && !seen.insert({f(0), f(1), f(2)}).second) continue;
       loads.push_back(f);
@@ -211,14 +194,7 @@ CandidatePool build_pool(const RobotModel& robot, const PoolOptions& o) {
     if (o.pose_count <= 0) throw InvalidArgument("plan pool: pose_count must be > 0");
     const long max_tries = 1000L * o.pose_count;
     while (static_cast<int>(p.poses.size()) < o.pose_count && p.poses_drawn < max_tries) {
-      Eigen::VectorXd q(n);
-      for (int j = 0; j < n; ++j) {
-        const auto& jt = robot.joints[j];
-        const double mid = 0.5 * (jt.lower + jt.upper);
-        const double half = 0.5 * (jt.upper - jt.lower) * o.range_fraction;
-        const double fixed = o.q_fixed.empty() ? NAN : o.q_fixed[j];
-        q(j) = std::isnan(fixed) ? rng.uniform(mid - half, mid + half) : fixed;
-      }
+      const Eigen::VectorXd q = random_joint_pose(robot, o.range_fraction, o.q_fixed, rng);
       ++p.poses_drawn;
       const PoseData d = pose_data(robot, q);
       if (accept(d)) add_pose(p, q, d, sigma_at(d.tool));

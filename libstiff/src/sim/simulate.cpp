@@ -7,10 +7,11 @@
 #include <set>
 #include <sstream>
 
+#include "../io/yaml_load.hpp"
 #include "stiff/error.hpp"
 #include "stiff/io/text_io.hpp"
+#include "stiff/kinematics/sampling.hpp"
 #include "stiff/random.hpp"
-#include "../io/yaml_load.hpp"
 
 namespace stiff {
 namespace {
@@ -216,29 +217,43 @@ Dataset random_design(const RobotModel& robot, const RandomDesignOptions& o) {
   if (o.count <= 0) throw InvalidArgument("random design: count must be > 0");
   if (!(o.range_fraction > 0 && o.range_fraction <= 1))
     throw InvalidArgument("random design: range fraction must be in (0, 1]");
-  if (!(o.load_min_N >= 0 && o.load_max_N >= o.load_min_N && o.load_max_N > 0))
+  if (!(o.load_min_N >= 0 && o.load_max_N >= o.load_min_N && o.load_max_N > 0) ||
+      !std::isfinite(o.load_max_N))
     throw InvalidArgument("random design: empty load range");
+  if (!(o.load_step_N >= 0) || !std::isfinite(o.load_step_N))
+    throw InvalidArgument("random design: load step must be a finite value >= 0 N");
   if (!o.q_fixed.empty() && static_cast<int>(o.q_fixed.size()) != n)
     throw InvalidArgument("random design: q_fixed needs one value per joint");
+  for (size_t j = 0; j < o.q_fixed.size(); ++j)
+    if (std::isinf(o.q_fixed[j]))
+      throw InvalidArgument("random design: q_fixed[" + std::to_string(j) + "] is infinite");
+  if (!(o.min_sigma >= 0)) throw InvalidArgument("random design: min_sigma must be >= 0 m");
+  if (o.use_workspace_box && !(o.box_min_m.allFinite() && o.box_max_m.allFinite() &&
+                               (o.box_min_m.array() < o.box_max_m.array()).all()))
+    throw InvalidArgument("random design: the workspace box needs finite min < max on every axis");
+  const std::vector<double> grid = o.load_step_N > 0
+                                       ? signed_load_grid(o.load_min_N, o.load_max_N, o.load_step_N)
+                                       : std::vector<double>{};
+  if (o.load_step_N > 0 && grid.empty())
+    throw InvalidArgument("random design: no multiple of the load step in the load range");
   Rng rng(o.seed);
   Dataset d;
   d.dof = n;
   d.has_id = true;
-  int tries = 0;
+  long tries = 0;
   while (static_cast<int>(d.rows.size()) < o.count) {
-    if (++tries > 1000 * o.count)
-      throw NumericalError("random design: almost every pose is near-singular");
+    if (++tries > 1000L * o.count)
+      throw NumericalError(
+          "random design: almost every pose is near-singular or outside the workspace box");
     Measurement m;
-    m.q.resize(n);
-    for (int j = 0; j < n; ++j) {
-      const auto& jt = robot.joints[j];
-      const double mid = 0.5 * (jt.lower + jt.upper),
-                   half = 0.5 * (jt.upper - jt.lower) * o.range_fraction;
-      const double fixed = o.q_fixed.empty() ? NAN : o.q_fixed[j];
-      m.q(j) = std::isnan(fixed) ? rng.uniform(mid - half, mid + half) : fixed;
-    }
+    m.q = random_joint_pose(robot, o.range_fraction, o.q_fixed, rng);
     for (int k = 0; k < 3; ++k)
-      m.force(k) = rng.uniform(o.load_min_N, o.load_max_N) * (rng.uniform() < 0.5 ? -1.0 : 1.0);
+      m.force(k) = random_load_component(o.load_min_N, o.load_max_N, grid, rng);
+    if (o.use_workspace_box) {
+      const Eigen::Vector3d p = robot.point_position(robot.chain(m.q), robot.measured_point);
+      if ((p.array() < o.box_min_m.array()).any() || (p.array() > o.box_max_m.array()).any())
+        continue;
+    }
     if (translational_conditioning(robot, m.q).sigma_min < o.min_sigma) continue;
     char id[32];
     std::snprintf(id, sizeof id, "r%03d", static_cast<int>(d.rows.size()) + 1);

@@ -140,6 +140,28 @@ _proto("stiff_dataset_set_displacement", S, H, c_double_p, C.c_size_t)
 _proto("stiff_dataset_id", S, C.c_char_p, C.c_size_t, c_size_p, H, C.c_size_t)
 _proto("stiff_noise_read", S, C.POINTER(NoiseOptions), C.c_char_p)
 _proto("stiff_design_random", S, HP, H, C.c_size_t, C.c_uint64)
+
+
+class DesignRandomOptions(C.Structure):
+    _fields_ = [
+        ("struct_size", C.c_uint32),
+        ("count", C.c_uint32),
+        ("seed", C.c_uint64),
+        ("range_fraction", C.c_double),
+        ("load_min_N", C.c_double),
+        ("load_max_N", C.c_double),
+        ("load_step_N", C.c_double),
+        ("min_sigma_m", C.c_double),
+        ("q_fixed", c_double_p),
+        ("q_fixed_count", C.c_size_t),
+        ("use_workspace_box", C.c_uint32),
+        ("box_min_m", C.c_double * 3),
+        ("box_max_m", C.c_double * 3),
+    ]
+
+
+_proto("stiff_design_random_options_init", S, C.POINTER(DesignRandomOptions), C.c_size_t)
+_proto("stiff_design_random_with_options", S, HP, H, C.POINTER(DesignRandomOptions))
 _proto("stiff_simulate", S, HP, H, H, C.c_char_p, c_double_p, C.c_size_t, C.POINTER(NoiseOptions))
 _proto("stiff_identify", S, HP, H, H, C.POINTER(IdentifyOptions))
 _proto("stiff_result_destroy", None, H)

@@ -15,6 +15,7 @@ import numpy as np
 from . import _capi as _c
 from . import _outputs
 from ._capi import check, lib
+from .errors import InvalidArgumentError
 
 __all__ = ["Robot", "Dataset", "Fit", "Model", "identify", "simulate", "random_design",
            "predict", "effects", "describe_effect", "library_version"]
@@ -553,11 +554,42 @@ def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "non
     return Fit(h)
 
 
-def random_design(robot: Robot, count: int = 20, seed: int = 1) -> Dataset:
-    """Random poses in 95% of the joint ranges with loads of 15-35 N per axis."""
-    count = _c.require_count("count", count, 1000000)
+def random_design(robot: Robot, count: int = 20, seed: int = 1, *,
+                  range_fraction: Optional[float] = None, load_range_N=None,
+                  load_step_N: Optional[float] = None, min_sigma_m: Optional[float] = None,
+                  q_fixed=None, workspace_box_m=None) -> Dataset:
+    """Random poses and loads: by default uniform in 95% of the joint ranges with loads of
+    15-35 N per axis and random signs. The keywords are those of `plan` (the same sampler as
+    the planner's candidate pool): `q_fixed` holds joints at values [rad] (NaN = free),
+    `load_step_N` puts the per-axis magnitudes on a grid (0 or None: continuous),
+    `workspace_box_m` = (min, max) keeps poses whose measured point lies in the box. An
+    argument left at None takes the library's default; the library checks every value."""
+    o = _c.DesignRandomOptions()
+    check(lib.stiff_design_random_options_init(C.byref(o), C.sizeof(o)))
+    o.count = _c.require_count("count", count, 1000000)
+    o.seed = seed
+    if range_fraction is not None:
+        if not range_fraction > 0:  # 0 would read as "default" in C; the library checks the rest
+            raise InvalidArgumentError(
+                f"random design: range fraction must be in (0, 1] (got {range_fraction})")
+        o.range_fraction = range_fraction
+    if load_range_N is not None:
+        o.load_min_N, o.load_max_N = float(load_range_N[0]), float(load_range_N[1])
+    if load_step_N is not None:
+        o.load_step_N = float(load_step_N)
+    if min_sigma_m is not None:
+        o.min_sigma_m = float(min_sigma_m)
+    keep = None
+    if q_fixed is not None:
+        keep = _c.as_array(q_fixed).ravel()
+        o.q_fixed, o.q_fixed_count = _c.ptr(keep), keep.size
+    if workspace_box_m is not None:
+        lo, hi = (list(map(float, v)) for v in workspace_box_m)
+        o.use_workspace_box = 1
+        o.box_min_m[:], o.box_max_m[:] = lo, hi
     h = C.c_void_p()
-    check(lib.stiff_design_random(C.byref(h), robot, count, seed))
+    check(lib.stiff_design_random_with_options(C.byref(h), robot, C.byref(o)))
+    del keep
     return Dataset(h)
 
 

@@ -16,7 +16,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .api import Dataset, Model, Robot, identify, simulate
+from .api import Dataset, Model, Robot, identify, random_design, simulate
 from .plan import evaluate_criteria, plan
 
 # Joint stiffness of the virtual ROKAE [N*m/rad]: the paper's kappa_F^-1(A) result (Jiang & Fang 2023);
@@ -168,34 +168,17 @@ def reduction_ci(a, b, level: float = 0.95, n_boot: int = 2000, seed: int = 0):
 
 
 # ------------------------------------------------------------------------------ designs
-def _safe_range(robot: Robot, fraction: float = 0.95):
-    lo, hi = robot.limits
-    mid, half = (lo + hi) / 2, (hi - lo) / 2 * fraction
-    return mid - half, mid + half
-
-
 def random_loaded_poses(robot: Robot, rng: np.random.Generator, count: int,
-                        box=None, min_sigma_m: float = 0.05, max_tries: int = 100000):
+                        box=None, min_sigma_m: float = 0.05) -> Dataset:
     """`count` poses uniform in 95% of the joint ranges with q6 = 0 (optionally with the
-    flange centre in `box`), each with a load of 15..35 N per axis in 5 N steps, random signs,
-    rejecting poses whose translational Jacobian has sigma_min < min_sigma_m (as the pool)."""
-    lo, hi = _safe_range(robot)
-    qs, fs = [], []
-    for _ in range(max_tries):
-        q = lo + (hi - lo) * rng.random(lo.size)
-        q[5] = 0.0
-        if box is not None:
-            p = robot.tool_pose(q)[:3, 3]
-            if np.any(p < box[0]) or np.any(p > box[1]):
-                continue
-        s = np.linalg.svd(robot.jacobian(q)[:3, :M_ID], compute_uv=False)
-        if s[-1] < min_sigma_m:
-            continue
-        qs.append(q)
-        fs.append(rng.choice(LOAD_GRID, 3) * rng.choice([-1.0, 1.0], 3))
-        if len(qs) == count:
-            return np.array(qs), np.array(fs)
-    raise RuntimeError("could not draw the requested poses (box too small?)")
+    measured point in `box`), each with a load of 15..35 N per axis in 5 N steps, random signs,
+    rejecting poses whose translational Jacobian has sigma_min < min_sigma_m: the library's
+    random design, the sampler of the planner's candidate pool, seeded from `rng`."""
+    q_fixed = [math.nan] * (robot.dof - 1) + [0.0]
+    return random_design(robot, count, int(rng.integers(1, 2 ** 63 - 1)), q_fixed=q_fixed,
+                         load_range_N=(LOAD_GRID[0], LOAD_GRID[-1]),
+                         load_step_N=LOAD_GRID[1] - LOAD_GRID[0], min_sigma_m=min_sigma_m,
+                         workspace_box_m=box)
 
 
 # ------------------------------------------------------------------------------ one trial
@@ -239,9 +222,9 @@ def run_trial(index: int) -> dict:
     rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, index]))
     seeds = rng.integers(1, 2 ** 31 - 1, size=64)
     plan_seed = int(seeds[0])
-    task_set = Dataset.from_arrays(*random_loaded_poses(robot, rng, 20, MACHINING_BOX))
-    valid = Dataset.from_arrays(*random_loaded_poses(robot, rng, cfg.validation))
-    task_valid = Dataset.from_arrays(*random_loaded_poses(robot, rng, cfg.validation, MACHINING_BOX))
+    task_set = random_loaded_poses(robot, rng, 20, MACHINING_BOX)
+    valid = random_loaded_poses(robot, rng, cfg.validation)
+    task_valid = random_loaded_poses(robot, rng, cfg.validation, MACHINING_BOX)
     exact = dict(stiffness=TRUE_STIFFNESS, tracker_sigma_m=0.0)
     valid_true = simulate(robot, valid, **exact).displacement
     task_true = simulate(robot, task_valid, **exact).displacement
@@ -259,7 +242,7 @@ def run_trial(index: int) -> dict:
         elif spec.printed:
             design = _W["printed"][spec.key]
         else:
-            design = Dataset.from_arrays(*random_loaded_poses(robot, rng, cfg.count))
+            design = random_loaded_poses(robot, rng, cfg.count)
         plan_s = time.perf_counter() - t0
         # The library's criteria, the task criterion sqrt(tr(M^-1 S)/3) [m] included.
         crit = evaluate_criteria(robot, design, task=task_set)

@@ -133,3 +133,46 @@ def test_dataframes_without_pandas_say_what_to_do(rokae_path, design_a, monkeypa
         fit.to_dataframe()
     with pytest.raises(ImportError, match="needs pandas"):
         data.to_dataframe()
+
+
+def test_random_design_options_are_the_pools(rokae_path):
+    # Every option is checked here against the robot's own forward kinematics and SVD, not
+    # against the sampler: q6 held, loads on the 5 N grid, the measured point in the box,
+    # no pose with sigma_min of the translational Jacobian below the bound.
+    robot = stiff.Robot(rokae_path)
+    box = (np.array([0.3, -0.4, -0.8]), np.array([0.9, 0.4, 0.2]))
+    q_fixed = [np.nan] * 5 + [0.25]
+    d = stiff.random_design(robot, 40, seed=7, q_fixed=q_fixed, load_range_N=(10, 30),
+                            load_step_N=5, min_sigma_m=0.08, workspace_box_m=box)
+    q, f = d.q, d.force
+    assert q.shape == (40, 6) and f.shape == (40, 3)
+    lo, hi = robot.limits
+    mid, half = (lo + hi) / 2, (hi - lo) / 2 * 0.95
+    assert np.all(q[:, :5] >= (mid - half)[:5]) and np.all(q[:, :5] <= (mid + half)[:5])
+    np.testing.assert_array_equal(q[:, 5], 0.25)
+    mags = np.abs(f)
+    assert np.all(np.isin(mags, [10.0, 15.0, 20.0, 25.0, 30.0]))
+    assert np.any(f < 0) and np.any(f > 0)
+    p = robot.tool_pose(q)[:, :3, 3]
+    assert np.all(p >= box[0]) and np.all(p <= box[1])
+    s = np.array([np.linalg.svd(j[:3], compute_uv=False)[-1] for j in robot.jacobian(q)])
+    assert s.min() >= 0.08
+    # Same seed and options, same design; a continuous load range otherwise.
+    again = stiff.random_design(robot, 40, seed=7, q_fixed=q_fixed, load_range_N=(10, 30),
+                                load_step_N=5, min_sigma_m=0.08, workspace_box_m=box)
+    np.testing.assert_array_equal(again.q, q)
+    plain = stiff.random_design(robot, 200, seed=7).force
+    assert np.all((np.abs(plain) >= 15) & (np.abs(plain) <= 35))
+    assert len(np.unique(np.abs(plain))) > 100
+
+
+def test_random_design_bad_options_name_the_field(rokae_path):
+    robot = stiff.Robot(rokae_path)
+    with pytest.raises(stiff.InvalidArgumentError, match="workspace box"):
+        stiff.random_design(robot, 5, workspace_box_m=([0, 0, 0], [1, -1, 1]))
+    with pytest.raises(stiff.InvalidArgumentError, match="q_fixed has 2 values"):
+        stiff.random_design(robot, 5, q_fixed=[0, 0])
+    with pytest.raises(stiff.InvalidArgumentError, match="load step"):
+        stiff.random_design(robot, 5, load_range_N=(16, 19), load_step_N=5)
+    with pytest.raises(stiff.InvalidArgumentError, match="range fraction"):
+        stiff.random_design(robot, 5, range_fraction=1.5)

@@ -50,16 +50,22 @@ NoiseModel parse_noise_yaml(const std::string& text, const std::string& name_for
 NoiseModel read_noise(const std::string& path);
 
 /// Design of an experiment: poses and loads (a plan file without displacements).
-/// Random valid poses uniform in `range_fraction` of each joint's range, loads with per-axis
-/// magnitude uniform in [load_min_N, load_max_N] and random sign; q_fixed (NaN: free) holds
-/// joints at a value (the paper holds q6 = 0).
+/// Random valid poses uniform in `range_fraction` of each joint's range (the sampler of
+/// kinematics/sampling.hpp, shared with the planner's candidate pool), loads with per-axis
+/// magnitude uniform in [load_min_N, load_max_N] (or on a grid of load_step_N) and random sign;
+/// q_fixed (NaN: free) holds joints at a value (the paper holds q6 = 0).
 struct RandomDesignOptions {
   int count = 20;
   double range_fraction = 0.95;
   double load_min_N = 15.0;
   double load_max_N = 35.0;
+  double load_step_N = 0.0;     ///< per-axis grid step [N]; 0 = continuous magnitudes
   std::vector<double> q_fixed;  ///< per joint, NaN = free; empty = all free
   double min_sigma = 0.05;      ///< reject poses with translational sigma_min(J) below [m]
+  /// Keep only poses whose measured point lies in the box (base frame) [m].
+  bool use_workspace_box = false;
+  Eigen::Vector3d box_min_m = Eigen::Vector3d::Constant(-1e9);
+  Eigen::Vector3d box_max_m = Eigen::Vector3d::Constant(1e9);
   uint64_t seed = 1;
 };
 Dataset random_design(const RobotModel& robot, const RandomDesignOptions& options);
