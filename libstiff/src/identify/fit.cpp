@@ -186,8 +186,8 @@ FitResult fit_from_json(const std::string& text, const std::string& file) {
           const double a = f.covariance(r, c), b = f.covariance(c, r);
           if ((std::isnan(a) != std::isnan(b)) ||
               (!std::isnan(a) && std::abs(a - b) > 1e-9 * std::max(std::abs(a), std::abs(b))))
-            bad("it is not symmetric at (" + std::to_string(r + 1) + ", " +
-                std::to_string(c + 1) + ")");
+            bad("it is not symmetric at (" + std::to_string(r + 1) + ", " + std::to_string(c + 1) +
+                ")");
         }
       }
     }
@@ -234,8 +234,8 @@ void check_fit_applies(const FitResult& fit,
                             "' (kinematics " + fit.robot_digest + "), robot '" + robot.name +
                             "' has other kinematics (" + mine + "); identify it on this robot");
   } else if (!fit.robot_name.empty() && fit.robot_name != robot.name) {
-    throw InvalidArgument(w + "the fit was identified on robot '" + fit.robot_name +
-                          "', not '" + robot.name + "'");
+    throw InvalidArgument(w + "the fit was identified on robot '" + fit.robot_name + "', not '" +
+                          robot.name + "'");
   }
   if (model.parameter_count() != static_cast<int>(fit.parameters.size()))
     throw InvalidArgument(w + "the fit has " + std::to_string(fit.parameters.size()) +
@@ -246,8 +246,8 @@ void check_fit_applies(const FitResult& fit,
     const ParameterSpec& sp = model.spec(k);
     const std::string expected = model.owner(k).name() + "." + sp.name;
     if (p.effect != model.owner(k).name() || p.name != sp.name)
-      throw InvalidArgument(w + "fit parameter " + std::to_string(k + 1) + " is " + p.effect +
-                            "." + p.name + ", the model expects " + expected +
+      throw InvalidArgument(w + "fit parameter " + std::to_string(k + 1) + " is " + p.effect + "." +
+                            p.name + ", the model expects " + expected +
                             " (parameters are matched by name and order)");
     if (!std::isfinite(p.value) || p.value < sp.lower || p.value > sp.upper) {
       char range[96];
