@@ -1,8 +1,35 @@
 // C ABI of the FMU export (stiff_fmu.h).
+#include <dlfcn.h>
+#include <sys/stat.h>
+
+#include <cstdlib>
+#include <string>
+
 #include "boundary.hpp"
 #include "handles.hpp"
 #include "stiff/export/fmu_export.hpp"
 #include "stiff/stiff_fmu.h"
+
+namespace {
+
+bool is_dir(const std::string& p) {
+  struct stat st;
+  return !p.empty() && ::stat(p.c_str(), &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+/// Where an installed package keeps the generic FMU binaries: the folder `fmu` next to the
+/// loaded libstiff_c.so (the Python package's stiff/_lib/fmu). Empty when there is none. The
+/// core knows only an explicit folder, $STIFF_FMU_BINARIES and the build tree's.
+std::string packaged_binaries_dir() {
+  Dl_info info;
+  if (!dladdr(reinterpret_cast<void*>(&packaged_binaries_dir), &info) || !info.dli_fname) return "";
+  const std::string lib = info.dli_fname;
+  const size_t slash = lib.rfind('/');
+  const std::string dir = (slash == std::string::npos ? "." : lib.substr(0, slash)) + "/fmu";
+  return is_dir(dir) ? dir : "";
+}
+
+}  // namespace
 
 extern "C" stiff_status stiff_fmu_export(const char* path,
                                          const stiff_robot* robot,
@@ -17,6 +44,8 @@ extern "C" stiff_status stiff_fmu_export(const char* path,
     opt.fmi_version = o.fmi_version == 0 ? 2 : static_cast<int>(o.fmi_version);
     if (o.model_identifier) opt.model_identifier = o.model_identifier;
     if (o.binaries_dir) opt.binaries_dir = o.binaries_dir;
+    if (opt.binaries_dir.empty() && !is_dir(stiff::fmu_binaries_dir(opt)))
+      opt.binaries_dir = packaged_binaries_dir();
     if (o.array_inputs > 1)
       throw stiff::InvalidArgument("array_inputs must be 0 (scalar inputs) or 1 (arrays), not " +
                                    std::to_string(o.array_inputs));

@@ -2,7 +2,6 @@
 // and written twice, as modelDescription.xml and as resources/model.txt for the generic binary.
 #include "stiff/export/fmu_export.hpp"
 
-#include <dlfcn.h>
 #include <sys/stat.h>
 
 #include <cctype>
@@ -14,6 +13,7 @@
 #include <set>
 #include <sstream>
 
+#include "io/zip.hpp"
 #include "stiff/error.hpp"
 #include "stiff/io/robot_io.hpp"
 #include "stiff/io/text_io.hpp"
@@ -387,76 +387,6 @@ void replace_all(std::string* s, const std::string& from, const std::string& to)
     s->replace(p, from.size(), to);
 }
 
-// Minimal zip writer (stored entries, CRC-32, no zip64), APPNOTE 6.3.
-uint32_t crc32(const std::string& data) {
-  static uint32_t table[256];
-  static bool init = false;
-  if (!init) {
-    for (uint32_t i = 0; i < 256; ++i) {
-      uint32_t c = i;
-      for (int k = 0; k < 8; ++k) c = c & 1 ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-      table[i] = c;
-    }
-    init = true;
-  }
-  uint32_t c = 0xFFFFFFFFu;
-  for (unsigned char b : data) c = table[(c ^ b) & 0xFF] ^ (c >> 8);
-  return c ^ 0xFFFFFFFFu;
-}
-
-struct ZipEntry {
-  std::string name;
-  std::string data;
-  bool executable = false;
-};
-
-std::string zip(const std::vector<ZipEntry>& entries) {
-  std::string out, central;
-  auto u16 = [](std::string* s, unsigned v) {
-    s->push_back(static_cast<char>(v & 0xff));
-    s->push_back(static_cast<char>((v >> 8) & 0xff));
-  };
-  auto u32 = [](std::string* s, uint32_t v) {
-    for (int i = 0; i < 4; ++i) s->push_back(static_cast<char>((v >> (8 * i)) & 0xff));
-  };
-  const unsigned dos_time = 0, dos_date = (0 << 9) | (1 << 5) | 1;  // 1980-01-01 (reproducible)
-  for (const auto& e : entries) {
-    if (e.data.size() >= 0xFFFFFFFFull || out.size() >= 0xFFFFFFFFull)
-      throw InvalidArgument("fmu export: file too large for a zip without zip64");
-    const uint32_t crc = crc32(e.data), size = static_cast<uint32_t>(e.data.size());
-    const uint32_t offset = static_cast<uint32_t>(out.size());
-    u32(&out, 0x04034b50);
-    u16(&out, 20), u16(&out, 0), u16(&out, 0), u16(&out, dos_time), u16(&out, dos_date);
-    u32(&out, crc), u32(&out, size), u32(&out, size);
-    u16(&out, static_cast<unsigned>(e.name.size())), u16(&out, 0);
-    out += e.name;
-    out += e.data;
-    u32(&central, 0x02014b50);
-    u16(&central, 0x031E), u16(&central, 20), u16(&central, 0), u16(&central, 0);
-    u16(&central, dos_time), u16(&central, dos_date);
-    u32(&central, crc), u32(&central, size), u32(&central, size);
-    u16(&central, static_cast<unsigned>(e.name.size())), u16(&central, 0), u16(&central, 0);
-    u16(&central, 0), u16(&central, 0);
-    u32(&central, (e.executable ? 0100755u : 0100644u) << 16);
-    u32(&central, offset);
-    central += e.name;
-  }
-  const uint32_t cd_offset = static_cast<uint32_t>(out.size());
-  out += central;
-  u32(&out, 0x06054b50);
-  u16(&out, 0), u16(&out, 0);
-  u16(&out, static_cast<unsigned>(entries.size())),
-      u16(&out, static_cast<unsigned>(entries.size()));
-  u32(&out, static_cast<uint32_t>(central.size())), u32(&out, cd_offset);
-  u16(&out, 0);
-  return out;
-}
-
-bool is_dir(const std::string& p) {
-  struct stat st;
-  return !p.empty() && ::stat(p.c_str(), &st) == 0 && S_ISDIR(st.st_mode);
-}
-
 std::string read_binary(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw IoError("fmu export: cannot read '" + path + "'");
@@ -528,15 +458,6 @@ const char* kEigenLicense =
 std::string fmu_binaries_dir(const FmuExportOptions& options) {
   if (!options.binaries_dir.empty()) return options.binaries_dir;
   if (const char* env = std::getenv("STIFF_FMU_BINARIES"); env && *env) return env;
-  if (is_dir(STIFF_FMU_DEFAULT_BINARIES)) return STIFF_FMU_DEFAULT_BINARIES;
-  // The Python package ships the binaries as stiff/_lib/fmu next to libstiff_c.so.
-  Dl_info info;
-  if (dladdr(reinterpret_cast<void*>(&fmu_binaries_dir), &info) && info.dli_fname) {
-    std::string lib = info.dli_fname;
-    const size_t slash = lib.rfind('/');
-    const std::string dir = (slash == std::string::npos ? "." : lib.substr(0, slash)) + "/fmu";
-    if (is_dir(dir)) return dir;
-  }
   return STIFF_FMU_DEFAULT_BINARIES;
 }
 
@@ -592,7 +513,7 @@ void export_fmu(const RobotModel& robot,
   replace_all(&description, placeholder, guid);
   replace_all(&model_txt, placeholder, guid);
 
-  std::vector<ZipEntry> entries;
+  std::vector<detail::ZipEntry> entries;
   entries.push_back({"modelDescription.xml", description, false});
   entries.push_back(
       {"binaries/" + platform + "/" + options.model_identifier + ".so", read_binary(bin), true});
@@ -603,7 +524,7 @@ void export_fmu(const RobotModel& robot,
                      false});
   entries.push_back({"documentation/licenses/FMI-headers-BSD-2-Clause.txt", kFmiLicense, false});
   entries.push_back({"documentation/licenses/Eigen-MPL-2.0.txt", kEigenLicense, false});
-  write_text_file_atomic(path, zip(entries));
+  write_text_file_atomic(path, detail::zip_stored(entries));
 }
 
 }  // namespace stiff

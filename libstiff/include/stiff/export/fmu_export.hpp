@@ -48,8 +48,8 @@ struct FmuExportOptions {
   /// modelIdentifier: name of the shared library inside the FMU; [A-Za-z_][A-Za-z0-9_]*.
   std::string model_identifier = "stiff_arm";
   /// Folder holding linux64/ and x86_64-linux/ with the generic FMU libraries (stiff_arm.so).
-  /// Empty: environment variable STIFF_FMU_BINARIES, else the build tree's fmu/binaries, else
-  /// the folder `fmu` next to the loaded libstiff_c.so (the Python package's stiff/_lib/fmu).
+  /// Empty: environment variable STIFF_FMU_BINARIES, else the build tree's fmu/binaries. (The C
+  /// ABI adds an installed package's folder: `fmu` next to the loaded libstiff_c.so.)
   std::string binaries_dir;
   /// FMI 3 only: the inputs are the arrays q[n] and wrench[6] instead of the scalars q1..qn,
   /// fx..mz. One set of inputs per FMU: an importer that writes every input then writes each
