@@ -134,138 +134,195 @@ struct PackedKernel {
   }
 };
 
+// The paper's simulated annealing over sets of N pool elements, on the packed information
+// matrix X: k-element swap proposals, Metropolis acceptance, a linear cooling schedule and a
+// swap count k(t) that falls from k0 to 1.
 template <int MC, Crit C>
-struct Anneal {
-  static constexpr bool kClosed = uses_closed_form<MC, C>();
-
+class Anneal {
+ public:
   static SetSearchResult run(const CandidatePool& pool, const PlanOptions& o, const Context& ctx) {
     const auto t0 = Clock::now();
-    using K_t = PackedKernel<MC>;
-    const K_t K(pool, ctx);
-    const int N = o.count, P = pool.size(), T = K.size(), m = ctx.m;
-    const AnnealingOptions& ao = o.annealing;
-    Xoshiro256pp rng(o.seed);
-    std::vector<uint8_t> in(P, 0);
-    std::vector<int> set = random_subset(rng, P, N, in);
-    // Per position of the set, its element's packed matrix (the "out" side of a swap).
-    std::vector<double> gset(static_cast<size_t>(N) * T);
-    for (int i = 0; i < N; ++i) K.copy_element(set[i], gset.data() + static_cast<size_t>(i) * T);
-    double X[K_t::kT], Xn[K_t::kT];
-    K.rebuild(gset, N, X);
-    // cost of a packed matrix: the closed form when it applies, else the Cholesky path.
-    auto cost_of_matrix = [&](const double* Y) {
-      if constexpr (kClosed) {
-        double p, q;
-        if (raw_fraction<MC, C>(Y, p, q)) return cost_from_raw<C>(p / q, m);
-      }
-      return cost_of(C, score_packed<MC, C>(ctx, Y));
-    };
-    double cost = cost_of_matrix(X);
-    SetSearchResult r;
-    r.trace.optimizer = "annealing";
-    r.trace.start_score = score_of(C, cost);
-    std::vector<int> best = set;
-    double best_cost = cost;
+    Anneal a(pool, o, ctx);
+    SetSearchResult r = a.search();
+    r.trace.seconds = seconds_since(t0);
+    return r;
+  }
 
-    int k0 = ao.initial_swap_count > 0 ? ao.initial_swap_count : std::max(1, N / 3);
+ private:
+  static constexpr bool kClosed = uses_closed_form<MC, C>();
+  using K_t = PackedKernel<MC>;
+  // Candidate elements are drawn kAhead draws before they are used and their table rows
+  // prefetched meanwhile: on pools whose table exceeds the cache (1e5 elements: 13 MB for
+  // m = 5) the row arrives while earlier steps run. A candidate is uniform over the pool and
+  // independent of the state, and one already in the set is skipped when used, so the
+  // proposals are distributed exactly as with drawing at the time of use. They come from a
+  // stream of their own, so that the look-ahead distance does not change which draws become
+  // candidates (the result is the same for any kAhead).
+  static constexpr int kAhead = 8;  // a power of two
+
+  Anneal(const CandidatePool& pool, const PlanOptions& o, const Context& ctx)
+      : o_(o),
+        ctx_(ctx),
+        K(pool, ctx),
+        N(o.count),
+        P(pool.size()),
+        T(K.size()),
+        m(ctx.m),
+        rng(o.seed),
+        in(P, 0),
+        set(random_subset(rng, P, N, in)),
+        gset(static_cast<size_t>(N) * T),
+        TB(kClosed ? packed_bound_size(MC) : T),
+        last_bound((TB - 1) / kCacheLineDoubles * kCacheLineBytes),
+        last_row((T - 1) / kCacheLineDoubles * kCacheLineBytes),
+        last(last_bound) {
+    // Per position of the set, its element's packed matrix (the "out" side of a swap).
+    for (int i = 0; i < N; ++i) K.copy_element(set[i], gset.data() + static_cast<size_t>(i) * T);
+    K.rebuild(gset, N, X);
+    cost = cost_of_matrix(X);
+    const AnnealingOptions& ao = o.annealing;
+    k0 = ao.initial_swap_count > 0 ? ao.initial_swap_count : std::max(1, N / 3);
     k0 = std::min({k0, N, P - N});
     const int kmax = std::max(k0, 1);
-    std::vector<int> pos(N), new_e(kmax);
-    std::vector<const double*> gin(kmax);
-    std::vector<double> scratch(static_cast<size_t>(kmax) * T);
+    pos.resize(N);
+    new_e.resize(kmax);
+    gin.resize(kmax);
+    gout.resize(kmax);
+    scratch.resize(static_cast<size_t>(kmax) * T);
     for (int i = 0; i < N; ++i) pos[i] = i;
-
-    // Candidate elements are drawn kAhead draws before they are used and their table rows
-    // prefetched meanwhile: on pools whose table exceeds the cache (1e5 elements: 13 MB for
-    // m = 5) the row arrives while earlier steps run. A candidate is uniform over the pool and
-    // independent of the state, and one already in the set is skipped when used, so the
-    // proposals are distributed exactly as with drawing at the time of use.
-    // They come from a stream of their own, so that the look-ahead distance does not change
-    // which draws become candidates (the result is the same for any kAhead).
-    constexpr int kAhead = 8;  // a power of two
-    Xoshiro256pp candidate_rng = rng;
+    candidate_rng = rng;
     candidate_rng.jump();
-    uint32_t ahead[kAhead];
-    int ahead_at = 0;
-    // A proposal reads the first TB entries of a candidate's row, and the rest only when the
-    // bound cannot reject it (see complete below): for m = 5 one cache line, not two. Only
-    // those are prefetched while the bound rejects most proposals (a cool chain, the default
-    // T0); a hot chain, where most proposals reach the closed form, prefetches whole rows.
-    // `last` (the byte offset of the last line to prefetch) follows the share of completed
-    // proposals over windows of 1024 steps.
-    const int TB = kClosed ? packed_bound_size(MC) : T;
-    const int last_bound = (TB - 1) / kCacheLineDoubles * kCacheLineBytes,
-              last_row = (T - 1) / kCacheLineDoubles * kCacheLineBytes;
-    int last = last_bound, completed = 0;
-    auto draw_ahead = [&](uint32_t& slot) {
-      slot = fast_index(candidate_rng, static_cast<uint32_t>(P));
-      K.prefetch(static_cast<int>(slot), last);
-    };
     for (uint32_t& a : ahead) draw_ahead(a);
-    auto next_candidate = [&]() {
-      const int e = static_cast<int>(ahead[ahead_at]);
-      draw_ahead(ahead[ahead_at]);
-      ahead_at = (ahead_at + 1) & (kAhead - 1);
-      return e;
-    };
+  }
 
-    // One k-element swap proposal: Xn = X + sum (G_in - G_out), no rebuild of A; only the
-    // first TB entries of Xn, those the bound reads (packed_bound_size).
-    std::vector<const double*> gout(kmax);
-    auto propose = [&](int k) {
-      for (int s = 0; s < k; ++s) {
-        const int j = s + static_cast<int>(fast_index(rng, static_cast<uint32_t>(N - s)));
-        std::swap(pos[s], pos[j]);
-        int e;
-        do e = next_candidate();
-        while (in[e]);
-        in[e] = 2;
-        new_e[s] = e;
-        const double* gi = K.element(e, scratch.data() + static_cast<size_t>(s) * T);
-        const double* go = gset.data() + static_cast<size_t>(pos[s]) * T;
-        gin[s] = gi;
-        gout[s] = go;
-        const double* from = s == 0 ? X : Xn;
-        for (int q = 0; q < TB; ++q) Xn[q] = (from[q] + gi[q]) - go[q];
-      }
-    };
-    // The other entries of Xn, each summed in the same order as in propose.
-    auto complete = [&](int k) {
-      for (int s = 0; s < k; ++s) {
-        const double* from = s == 0 ? X : Xn;
-        for (int q = TB; q < T; ++q) Xn[q] = (from[q] + gin[s][q]) - gout[s][q];
-      }
-    };
-    auto reject = [&](int k) {
-      for (int s = 0; s < k; ++s) in[new_e[s]] = 0;
-    };
+  // Cost of a packed matrix: the closed form when it applies, else the Cholesky path.
+  double cost_of_matrix(const double* Y) const {
+    if constexpr (kClosed) {
+      double p, q;
+      if (raw_fraction<MC, C>(Y, p, q)) return cost_from_raw<C>(p / q, m);
+    }
+    return cost_of(C, score_packed<MC, C>(ctx_, Y));
+  }
 
-    double T0 = ao.initial_temperature;
+  void draw_ahead(uint32_t& slot) {
+    slot = fast_index(candidate_rng, static_cast<uint32_t>(P));
+    K.prefetch(static_cast<int>(slot), last);
+  }
+  int next_candidate() {
+    const int e = static_cast<int>(ahead[ahead_at]);
+    draw_ahead(ahead[ahead_at]);
+    ahead_at = (ahead_at + 1) & (kAhead - 1);
+    return e;
+  }
+
+  // One k-element swap proposal: Xn = X + sum (G_in - G_out), no rebuild of A; only the first
+  // TB entries of Xn, those the bound reads (packed_bound_size).
+  void propose(int k) {
+    for (int s = 0; s < k; ++s) {
+      const int j = s + static_cast<int>(fast_index(rng, static_cast<uint32_t>(N - s)));
+      std::swap(pos[s], pos[j]);
+      int e;
+      do e = next_candidate();
+      while (in[e]);
+      in[e] = 2;
+      new_e[s] = e;
+      const double* gi = K.element(e, scratch.data() + static_cast<size_t>(s) * T);
+      const double* go = gset.data() + static_cast<size_t>(pos[s]) * T;
+      gin[s] = gi;
+      gout[s] = go;
+      const double* from = s == 0 ? X : Xn;
+      for (int q = 0; q < TB; ++q) Xn[q] = (from[q] + gi[q]) - go[q];
+    }
+  }
+  // The other entries of Xn, each summed in the same order as in propose.
+  void complete(int k) {
+    for (int s = 0; s < k; ++s) {
+      const double* from = s == 0 ? X : Xn;
+      for (int q = TB; q < T; ++q) Xn[q] = (from[q] + gin[s][q]) - gout[s][q];
+    }
+  }
+  void reject(int k) {
+    for (int s = 0; s < k; ++s) in[new_e[s]] = 0;
+  }
+  // The proposal becomes the set, at cost cn.
+  void accept(int k, double cn) {
+    for (int s = 0; s < k; ++s) {
+      in[set[pos[s]]] = 0;
+      set[pos[s]] = new_e[s];
+      in[new_e[s]] = 1;
+      double* out = gset.data() + static_cast<size_t>(pos[s]) * T;
+      for (int q = 0; q < T; ++q) out[q] = gin[s][q];  // fixed size: no memmove call
+    }
+    for (int q = 0; q < T; ++q) X[q] = Xn[q];
+    cost = cn;
+  }
+
+  // T0: the user's, or a fraction of the mean uphill cost change of random k0-swaps from the
+  // start set. A random set's cost changes are far larger than those that decide near good sets
+  // (docs/planning.md, "Initial temperature"), hence the fraction.
+  double initial_temperature() {
+    const AnnealingOptions& ao = o_.annealing;
     if (ao.initial_temperature < 0 || !std::isfinite(ao.initial_temperature))
       throw InvalidArgument("plan: initial temperature must be finite and >= 0");
     if (ao.iterations < 0) throw InvalidArgument("plan: iterations must be >= 0");
     if (!(ao.automatic_temperature_fraction > 0) ||
         !std::isfinite(ao.automatic_temperature_fraction))
       throw InvalidArgument("plan: automatic_temperature_fraction must be finite and > 0");
-    if (k0 > 0 && T0 == 0) {
-      // Automatic T0: a fraction of the mean uphill cost change of random k0-swaps from the
-      // start set. A random set's cost changes are far larger than those that decide near good
-      // sets (docs/planning.md, "Initial temperature"), hence the fraction.
-      double sum = 0;
-      int cnt = 0;
-      for (int t = 0; t < 200; ++t) {
-        propose(k0);
-        complete(k0);
-        const double c = cost_of_matrix(Xn);
-        reject(k0);
-        if (std::isfinite(c) && std::isfinite(cost) && c > cost) {
-          sum += c - cost;
-          ++cnt;
+    if (k0 == 0 || ao.initial_temperature != 0) return ao.initial_temperature;
+    double sum = 0;
+    int cnt = 0;
+    for (int t = 0; t < 200; ++t) {
+      propose(k0);
+      complete(k0);
+      const double c = cost_of_matrix(Xn);
+      reject(k0);
+      if (std::isfinite(c) && std::isfinite(cost) && c > cost) {
+        sum += c - cost;
+        ++cnt;
+      }
+    }
+    return cnt > 0 ? ao.automatic_temperature_fraction * (sum / cnt)
+                   : (std::isfinite(cost) ? 1e-3 * std::abs(cost) + 1e-300 : 1.0);
+  }
+
+  // Metropolis on the proposal of k swaps: accept when Delta <= dmax (`down`: the raw value of
+  // the current cost, for the closed form's bound). Sets *cn to the proposal's cost when
+  // accepted.
+  bool metropolis(int k, double dmax, double down, double* cn) {
+    bool decided = false, ok = false;
+    *cn = kInf;
+    if constexpr (kClosed) {
+      const double threshold = dmax > 0 ? raw_threshold<C>(cost + dmax, m) : down;
+      double p, q;
+      if (bound_rejects<MC, C>(Xn, threshold)) {
+        decided = true;
+      } else {
+        complete(k);
+        ++completed;
+        if (raw_fraction<MC, C>(Xn, p, q)) {
+          decided = true;
+          ok = within<C>(p, q, threshold);
+          if (ok) *cn = cost_from_raw<C>(p / q, m);
         }
       }
-      T0 = cnt > 0 ? ao.automatic_temperature_fraction * (sum / cnt)
-                   : (std::isfinite(cost) ? 1e-3 * std::abs(cost) + 1e-300 : 1.0);
+    } else {
+      complete(k);
     }
+    if (!decided) {
+      *cn = cost_of(C, score_packed<MC, C>(ctx_, Xn));
+      ok = *cn < kInf && *cn - cost <= dmax;
+    }
+    return ok;
+  }
+
+  SetSearchResult search() {
+    const AnnealingOptions& ao = o_.annealing;
+    SetSearchResult r;
+    r.trace.optimizer = "annealing";
+    r.trace.start_score = score_of(C, cost);
+    std::vector<int> best = set;
+    double best_cost = cost;
+    const double T0 = initial_temperature();
     r.trace.initial_temperature = T0;
     r.trace.initial_swap_count = k0;
 
@@ -275,7 +332,7 @@ struct Anneal {
     PlanProgress pr;
     pr.optimizer = "annealing";
     pr.total = iters;
-    const bool progress = static_cast<bool>(o.progress);
+    const bool progress = static_cast<bool>(o_.progress);
     // k(t) = max(1, ceil(k0 (1 - t / iterations))) is a step function: evaluated where it steps.
     auto k_at = [&](long it) {
       return std::max(1, static_cast<int>(std::ceil(
@@ -297,44 +354,13 @@ struct Anneal {
       }
       const double temp = T0 * (1.0 - static_cast<double>(it) * inv_iters);
       propose(k);
-      // Metropolis: accept when Delta <= dmax = T E with E ~ Exp(1) (E = -ln u, u uniform in
-      // (0, 1]): downhill always, uphill with probability exp(-Delta / T). E is drawn before the
+      // Accept when Delta <= dmax = T E with E ~ Exp(1) (E = -ln u, u uniform in (0, 1]):
+      // downhill always, uphill with probability exp(-Delta / T). E is drawn before the
       // evaluation so that one comparison decides (one unpredictable branch per step, not two).
       const double dmax = temp > 0 ? temp * standard_exponential(rng) : 0.0;
-      bool accept = false;
-      double cn = kInf;
-      bool decided = false;
-      if constexpr (kClosed) {
-        const double threshold = dmax > 0 ? raw_threshold<C>(cost + dmax, m) : down;
-        double p, q;
-        if (bound_rejects<MC, C>(Xn, threshold)) {
-          decided = true;
-        } else {
-          complete(k);
-          ++completed;
-          if (raw_fraction<MC, C>(Xn, p, q)) {
-            decided = true;
-            accept = within<C>(p, q, threshold);
-            if (accept) cn = cost_from_raw<C>(p / q, m);
-          }
-        }
-      } else {
-        complete(k);
-      }
-      if (!decided) {
-        cn = cost_of(C, score_packed<MC, C>(ctx, Xn));
-        accept = cn < kInf && cn - cost <= dmax;
-      }
-      if (accept) {
-        for (int s = 0; s < k; ++s) {
-          in[set[pos[s]]] = 0;
-          set[pos[s]] = new_e[s];
-          in[new_e[s]] = 1;
-          double* out = gset.data() + static_cast<size_t>(pos[s]) * T;
-          for (int q = 0; q < T; ++q) out[q] = gin[s][q];  // fixed size: no memmove call
-        }
-        for (int q = 0; q < T; ++q) X[q] = Xn[q];
-        cost = cn;
+      double cn;
+      if (metropolis(k, dmax, down, &cn)) {
+        accept(k, cn);
         ++accepted;
         if (++since_refresh >= refresh) {
           // Bound the round-off of the rank-3 updates.
@@ -350,32 +376,55 @@ struct Anneal {
       } else {
         reject(k);
       }
+      // A proposal reads the first TB entries of a candidate's row, and the rest only when the
+      // bound cannot reject it: only those are prefetched while the bound rejects most
+      // proposals (a cool chain, the default T0); a hot chain, where most proposals reach the
+      // closed form, prefetches whole rows. `last` follows the share of completed proposals
+      // over windows of 1024 steps.
       if ((it & 1023) == 1023) {
         last = completed > 512 ? last_row : last_bound;
         completed = 0;
       }
-      if (progress && (it + 1) % o.progress_interval == 0) {
+      if (progress && (it + 1) % o_.progress_interval == 0) {
         pr.iteration = it + 1;
         pr.best_score = score_of(C, best_cost);
         pr.current_score = score_of(C, cost);
         pr.temperature = temp;
-        report(o, pr);
+        report(o_, pr);
       }
     }
     // The reported score of the best set: summed afresh and through the Cholesky path, as
     // set_score() computes it.
     for (int i = 0; i < N; ++i) K.copy_element(best[i], gset.data() + static_cast<size_t>(i) * T);
     K.rebuild(gset, N, X);
-    const double best_score = score_packed<MC, C>(ctx, X);
+    const double best_score = score_packed<MC, C>(ctx_, X);
     r.elements = best;
     r.score = best_score;
     r.trace.best_score = best_score;
     r.trace.iterations = iters;
     r.trace.evaluations = iters;
     r.trace.accepted = accepted;
-    r.trace.seconds = seconds_since(t0);
     return r;
   }
+
+  const PlanOptions& o_;
+  const Context& ctx_;
+  const K_t K;
+  const int N, P, T, m;
+  Xoshiro256pp rng, candidate_rng{0};
+  std::vector<uint8_t> in;
+  std::vector<int> set;
+  std::vector<double> gset;  ///< per position of the set, its element's packed matrix
+  double X[K_t::kT], Xn[K_t::kT];
+  double cost = 0;
+  int k0 = 0;
+  std::vector<int> pos, new_e;
+  std::vector<const double*> gin, gout;
+  std::vector<double> scratch;
+  uint32_t ahead[kAhead];
+  int ahead_at = 0;
+  const int TB, last_bound, last_row;  ///< entries the bound reads; prefetch byte offsets
+  int last, completed = 0;
 };
 
 template <int MC, Crit C>
