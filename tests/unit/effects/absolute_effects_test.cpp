@@ -185,8 +185,13 @@ void zero_held(const DeflectionModel& m, const FitResult& f, Geometry* g) {
   (void)n;
 }
 
-TEST(AbsoluteEffects, RecoversGeometryWithinThreeStandardErrors) {
-  const RobotModel robot = ur5();
+/// Robots of every kind the geometric calibration must handle: a URDF with parallel axes 2-3-4
+/// (UR5), modified DH with parallel axes 2-3 (PUMA 560), and two 7-joint URDF arms (KUKA iiwa
+/// with intersecting axes, Franka Panda with offset axes).
+class GeometryRecovery : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(GeometryRecovery, WithinThreeStandardErrors) {
+  const RobotModel robot = load_robot(test::source_path(GetParam()));
   int inside = 0, total = 0;
   double worst_validation = 0;
   for (int seed = 1; seed <= 4; ++seed) {
@@ -226,9 +231,19 @@ TEST(AbsoluteEffects, RecoversGeometryWithinThreeStandardErrors) {
   }
   // Within 3 standard errors in >= 95 % of (parameter, seed) pairs (99.7 % expected).
   EXPECT_GE(inside, 0.95 * total) << inside << " of " << total;
+  // A complete, minimal model of a serial arm has 4R + 2P + 6 parameters (Everett & Roth), 3
+  // fewer with positions only: at least 4 per revolute joint are identified in every seed.
+  EXPECT_GE(total, 4 * 4 * robot.dof()) << "identified (parameter, seed) pairs";
   // Prediction error of a calibrated model: a few sigma at most (poses like the calibration).
   EXPECT_LT(worst_validation, 6 * 20e-6);
 }
+
+INSTANTIATE_TEST_SUITE_P(Robots,
+                         GeometryRecovery,
+                         ::testing::Values("examples/robots/ur5.urdf",
+                                           "examples/robots/puma560.yaml",
+                                           "tests/data/urdf/iiwa14.urdf",
+                                           "tests/data/urdf/panda.urdf"));
 
 TEST(AbsoluteEffects, RedundantDirectionsAreNamedAndHeld) {
   // The first axis's position and tilt are the registration's; they must be held and named.
