@@ -100,10 +100,19 @@ Identifiability structural(const DeflectionModel& model,
     if (clear) return fast;
   }
 
+  // Column norms, inner products, orthogonal rests and least-squares coefficients are the same
+  // for J and for R of J = Q R (Q with orthonormal columns spanning J's range): on tall J the
+  // exact test runs on the p x p triangle of a blocked Householder QR.
+  Eigen::MatrixXd r;
+  if (j.rows() > 2 * j.cols()) {
+    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(j);
+    r = qr.matrixQR().topRows(j.cols()).triangularView<Eigen::Upper>();
+  }
+  const Eigen::MatrixXd& jr = r.size() ? r : j;
   std::vector<Eigen::VectorXd> basis;
   std::vector<int> accepted;
   for (int k : order) {
-    const double norm = j.col(k).norm();
+    const double norm = jr.col(k).norm();
     // Moving the parameter by its typical magnitude changes the residuals by less than 1e-9
     // of one noise sigma in total: it has no effect on these measurements.
     if (!(norm * typical(k) > 1e-9)) {
@@ -111,7 +120,7 @@ Identifiability structural(const DeflectionModel& model,
       out.reason[k] = "it has no effect on any of these measurements";
       continue;
     }
-    Eigen::VectorXd v = j.col(k) / norm;
+    Eigen::VectorXd v = jr.col(k) / norm;
     for (int pass = 0; pass < 2; ++pass)
       for (const auto& b : basis) v -= b.dot(v) * b;
     const double rest = v.norm();
@@ -126,10 +135,10 @@ Identifiability structural(const DeflectionModel& model,
       continue;
     }
     // Name the combination: least-squares coefficients on the accepted (normalised) columns.
-    Eigen::MatrixXd a(j.rows(), accepted.size());
+    Eigen::MatrixXd a(jr.rows(), accepted.size());
     for (size_t i = 0; i < accepted.size(); ++i)
-      a.col(i) = j.col(accepted[i]) / j.col(accepted[i]).norm();
-    const Eigen::VectorXd beta = a.colPivHouseholderQr().solve(j.col(k) / norm);
+      a.col(i) = jr.col(accepted[i]) / jr.col(accepted[i]).norm();
+    const Eigen::VectorXd beta = a.colPivHouseholderQr().solve(jr.col(k) / norm);
     const double big = beta.cwiseAbs().maxCoeff();
     std::string with;
     for (size_t i = 0; i < accepted.size(); ++i)

@@ -465,11 +465,20 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
   constexpr int kMax = 32;  // joints held in fixed-capacity buffers (no allocation)
   using Vec = Eigen::Matrix<double, S, 1>;
   const int n = robot_.dof();
-  if (n > kMax || m.absolute) {
+  // An absolute row of a purely geometric model takes evaluate_into's short cut (no deflection
+  // at all); with a deflection effect it runs here: the deflection as for a displacement row,
+  // under the gravity torque too, then the corrected chain by the chain rule.
+  bool deflects = false;
+  if (m.absolute)
+    for (const auto& e : effects_)
+      deflects = deflects || e->reads_jacobians() ||
+                 (e->stages() & (unsigned{kJointStage} | unsigned{kCartesianStage}));
+  if (n > kMax || (m.absolute && !deflects)) {
     evaluate_into(theta, m, c, s);
     *d = s.d;
     return;
   }
+  const bool gravity = m.absolute && c.tau_gravity.size() == n;
   s.robot = &robot_;
   s.measurement = &m;
   s.context = &c;
@@ -537,7 +546,7 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
     lever_arm(z, o, pm, wm);
     lever_arm(z, o, pl, wl);
     for (int k = 0; k < 3; ++k) jm[j][k] = wm[k];
-    const double tau = joint_torque(wl, z, f, mo);
+    const double tau = joint_torque(wl, z, f, mo) + (gravity ? c.tau_gravity(j) : 0.0);
     Vec tv = Vec::Zero();
     if (moved) {
       // (z x L') . F = L' . (F x z): one dot product per derivative instead of a cross product.
@@ -598,6 +607,12 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
     s.rot(k) = Jet(ra[k], rv[k]);
   }
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->cartesian(theta + offsets_[e], s);
+  if (m.absolute) {
+    s.dq = VectorX<Jet>::Zero(n);
+    s.joint_error = Matrix6X<Jet>::Zero(6, n);
+    for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
+    s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas);
+  }
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
   *d = s.d;
 }

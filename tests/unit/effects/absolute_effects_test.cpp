@@ -168,6 +168,40 @@ TEST(AbsoluteEffects, AutodiffJacobianMatchesCentralDifferences) {
   }
 }
 
+// The identification's fast derivative path (DeflectionModel::evaluate_jet) on absolute rows
+// with deflection effects (gravity compliance, harmonics, the joint compliance under the gravity
+// torque) equals the generic evaluate<Jet> to round-off, pass by pass.
+TEST(AbsoluteEffects, FastJetEvaluationEqualsTheGenericOne) {
+  const RobotModel robot = ur5();
+  std::mt19937_64 rng(12);
+  const Geometry g = random_geometry(robot.dof(), 2, rng);
+  const Dataset data = measure(robot, g, 5, 0.0, rng);
+  std::vector<std::string> all = kGeometric;
+  for (const char* e : {"gravity_lumped", "harmonic", "joint"}) all.push_back(e);
+  const DeflectionModel m(robot, all, &data);
+  const int p = m.parameter_count();
+  Eigen::VectorXd theta = geometric_theta(m, g);
+  for (int k = m.offset(m.find("gravity_lumped")); k < p; ++k)
+    theta(k) = 0.7 * m.spec(k).typical * (k % 3 - 1);
+  const auto ctx = m.contexts(data);
+  EvalState<Jet> scratch;
+  for (size_t r = 0; r < data.size(); ++r)
+    for (int first = 0; first < p; first += kJetStride) {
+      std::vector<Jet> t(p);
+      for (int k = 0; k < p; ++k) t[k] = Jet(theta(k));
+      for (int k = first; k < std::min(p, first + kJetStride); ++k) t[k].v(k - first) = 1.0;
+      Vector3<Jet> slow, fast;
+      m.evaluate<Jet>(t.data(), data.rows[r], ctx[r], &slow, nullptr);
+      m.evaluate_jet(t.data(), data.rows[r], ctx[r], scratch, &fast);
+      for (int i = 0; i < 3; ++i) {
+        EXPECT_NEAR(fast(i).a, slow(i).a, 1e-15 + 1e-12 * std::abs(slow(i).a));
+        for (int k = 0; k < kJetStride; ++k)
+          EXPECT_NEAR(fast(i).v(k), slow(i).v(k), 1e-15 + 1e-11 * slow(i).v.cwiseAbs().maxCoeff())
+              << "row " << r << " parameter " << first + k;
+      }
+    }
+}
+
 /// Zero the truth of every parameter the fit held (the data see only combinations there).
 void zero_held(const DeflectionModel& m, const FitResult& f, Geometry* g) {
   const int n = m.robot().dof();
