@@ -8,8 +8,7 @@ from typing import Optional
 import numpy as np
 
 from . import frames as fr
-from .program import (ANGLE_EXTRA_DECIMALS, FilterError, Program, Target, format_numbers,
-                      parse_numbers)
+from .program import DecimalNumbers, FilterError, Program, Target
 
 NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _MOTION = re.compile(r"^\s*\d+:\s*([JLCA])\s+P\[(\d+)(?::[^\]]*)?\]\s*(?:(" + NUM +
@@ -33,7 +32,7 @@ def _config(text: str, where: str) -> tuple:
             int(m.group(6)))
 
 
-class FanucFormat:
+class FanucFormat(DecimalNumbers):
     name = "Fanuc LS"
 
     @staticmethod
@@ -43,15 +42,6 @@ class FanucFormat:
     @staticmethod
     def values_of(pose: np.ndarray, t: Target) -> list:
         return fr.pose_to_fanuc(pose, t.values)
-
-    @staticmethod
-    def format_values(t: Target, values, min_decimals: int) -> list:
-        return format_numbers(t, values, min_decimals,
-                              lambda i: ANGLE_EXTRA_DECIMALS if t.joint else 0)
-
-    @staticmethod
-    def parse_values(t: Target, texts) -> list:
-        return parse_numbers(t, texts)
 
     @staticmethod
     def config_key(c) -> tuple:

@@ -9,8 +9,7 @@ from typing import Optional
 import numpy as np
 
 from . import frames as fr
-from .program import (ANGLE_EXTRA_DECIMALS, FilterError, Program, Target, ToolLoad, format_numbers,
-                      parse_numbers)
+from .program import DecimalNumbers, FilterError, Program, Target, ToolLoad
 
 NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _PAIR = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)\s+('B[01]+'|" + NUM + ")")
@@ -102,7 +101,7 @@ def _load(fields: dict, text: str, where: str) -> ToolLoad:
     return ToolLoad(m, cog)
 
 
-class KrlFormat:
+class KrlFormat(DecimalNumbers):
     name = "KUKA KRL"
 
     # ---------------------------------------------------------------- numbers
@@ -113,15 +112,6 @@ class KrlFormat:
     @staticmethod
     def values_of(pose: np.ndarray, t: Target) -> list:
         return fr.pose_to_kuka(pose, t.values)
-
-    @staticmethod
-    def format_values(t: Target, values, min_decimals: int) -> list:
-        return format_numbers(t, values, min_decimals,
-                              lambda i: ANGLE_EXTRA_DECIMALS if t.joint else 0)
-
-    @staticmethod
-    def parse_values(t: Target, texts) -> list:
-        return parse_numbers(t, texts)
 
     # ---------------------------------------------------------- configuration
     @staticmethod

@@ -90,6 +90,20 @@ def parse_numbers(t: Target, texts) -> list:
     return [float(s) for s in texts]
 
 
+class DecimalNumbers:
+    """A format whose target numbers are plain decimals: joint angles written with
+    ANGLE_EXTRA_DECIMALS more decimals than positions, read back as written."""
+
+    @staticmethod
+    def format_values(t: Target, values, min_decimals: int) -> list:
+        return format_numbers(t, values, min_decimals,
+                              lambda i: ANGLE_EXTRA_DECIMALS if t.joint else 0)
+
+    @staticmethod
+    def parse_values(t: Target, texts) -> list:
+        return parse_numbers(t, texts)
+
+
 class Program:
     """Texts of a program's files and its targets; `fmt` prints and parses the numbers."""
 
