@@ -1217,8 +1217,38 @@ Diagnosis diagnose(const RobotModel& robot,
   d.final_model = d.fit.model;
   d.final_verdict = d.verdict;
   if (options.auto_loop) {
+    // On absolute data the loop is also a calibration: a residual that no candidate explains
+    // completely (unexplained), or that two candidates explain equally well (ambiguous, e.g. a
+    // joint offset and a tilt of the same axis), still gets the top candidate when the held-out
+    // poses confirm it, i.e. their squared errors fall (paired one-sided t test at alpha): the
+    // model grows while the evidence holds, and the last step says what is left. Displacement
+    // data stop there: their verdicts name a physical effect, not an accuracy.
+    const bool absolute = std::any_of(calibration.rows.begin(), calibration.rows.end(),
+                                      [](const Measurement& m) { return m.absolute; });
+    auto validates = [&](size_t i) {
+      const Level* n = claims(chain.levels[i]) ? chain.next(i) : nullptr;
+      if (!n || !validation) return false;
+      const std::vector<double>& a = chain.levels[i].a.quality.validation_error_m;
+      const std::vector<double>& b = n->a.quality.validation_error_m;
+      const size_t m = a.size();
+      if (m < 3 || b.size() != m) return false;
+      double mean = 0, sq = 0;
+      for (size_t r = 0; r < m; ++r) mean += (a[r] * a[r] - b[r] * b[r]) / m;
+      for (size_t r = 0; r < m; ++r) {
+        const double e = a[r] * a[r] - b[r] * b[r] - mean;
+        sq += e * e;
+      }
+      const double se = std::sqrt(sq / (m - 1) / m);
+      if (!(mean > 0)) return false;
+      if (!(se > 0)) return true;
+      const double t = mean / se;
+      return 0.5 * stats::f_sf(t * t, 1.0, static_cast<double>(m - 1)) < options.alpha;
+    };
     std::string verdict = d.verdict;
-    for (size_t i = 0; verdict == "missing_effect" && static_cast<int>(i) < options.max_steps;
+    for (size_t i = 0;
+         (verdict == "missing_effect" ||
+          (absolute && (verdict == "unexplained" || verdict == "ambiguous") && validates(i))) &&
+         static_cast<int>(i) < options.max_steps;
          ++i) {
       if (!chain.next(i)) break;
       const std::string added = chain.levels[i].scores[chain.levels[i].pick].effect;
