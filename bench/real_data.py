@@ -5,6 +5,7 @@
     .venv/bin/python bench/real_data.py --only ur5      # one dataset (the doc keeps the other)
     .venv/bin/python bench/real_data.py --no-product    # the reference alone
     .venv/bin/python bench/real_data.py --only pooled   # speed on the four UR10 series pooled
+    .venv/bin/python bench/real_data.py --only loop     # the stiff diagnose --auto loops
 
 stiff is run through its command line, as a user would: `stiff identify --robot R --data F
 --model registration+tool+joint_offset+kinematic[+gravity_lumped] -o fit.json`, then
@@ -160,6 +161,64 @@ def speed_pooled():
                   f"{cal.stats['least_squares_seconds']:.2f} s, library "
                   f"{out[n]['library_seconds'] or float('nan'):.2f} s")
     return out
+
+
+def diagnose_loop(robot, calib, valid, tmp):
+    """`stiff diagnose --auto` from the nominal model (registration and tool): its steps."""
+    out = os.path.join(tmp, "diagnosis.json")
+    t = time.perf_counter()
+    _run([stiff_exe(), "diagnose", "--robot", robot, "--data", str(calib), "--validate",
+          str(valid), "--model", "registration+tool", "--auto", "--max-steps", "4",
+          "--json", out])
+    seconds = time.perf_counter() - t
+    d = json.loads(Path(out).read_text())
+    steps = []
+    for st in d["steps"]:
+        e = np.asarray(st["validation_error_m"]) * 1e3
+        steps.append({"model": st["model"], "added": st["added"], "verdict": st["verdict"],
+                      "parameters": st["parameters"],
+                      "fit_rms_mm": st["rms_m"] * 1e3 * math.sqrt(3),
+                      "validation": summary(e)})
+    return {"steps": steps, "final_model": d["final_model"],
+            "final_verdict": d["final_verdict"], "seconds": seconds}
+
+
+def loops(seed=0):
+    """The loop on UR5 (grid -> 20 random poses) and on UR10 (half of C -> the other half)."""
+    out = {}
+    out["ur5"] = None
+    with tempfile.TemporaryDirectory() as tmp:
+        out["ur5"] = diagnose_loop("ur5", REAL / "ur5" / "ur5_grid.csv",
+                                   REAL / "ur5" / "ur5_random.csv", tmp)
+        C = REAL / "ur10" / ref.UR10_SERIES["C"]
+        n = len(ref.read_absolute(C)["q"])
+        perm = np.random.default_rng(seed).permutation(n)
+        write_rows(C, np.sort(perm[:n // 2]), os.path.join(tmp, "tr.csv"))
+        write_rows(C, np.sort(perm[n // 2:]), os.path.join(tmp, "te.csv"))
+        out["ur10"] = diagnose_loop("ur10", os.path.join(tmp, "tr.csv"),
+                                    os.path.join(tmp, "te.csv"), tmp)
+    for k, v in out.items():
+        print(f"loop {k}: " + " -> ".join(f"{st['model']} {st['validation']['mean_mm']:.4f}"
+                                          for st in v["steps"]) + f" ({v['final_verdict']})")
+    return out
+
+
+def write_loop(w, lp, what):
+    """The loop's table: one row per step."""
+    w(f"The loop, `stiff diagnose --auto` from the nominal model (registration and tool) on "
+      f"{what}, as a user runs it (docs/diagnosis.md, rule 5):")
+    w("")
+    w("| step | added | parameters | calibration RMS [mm] | validation mean [mm] | max [mm] | "
+      "RMS [mm] | verdict |")
+    w("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for i, st in enumerate(lp["steps"]):
+        v = st["validation"]
+        w(f"| {i} | {st['added'] or '-'} | {st['parameters']} | {st['fit_rms_mm']:.4f} | "
+          f"{v['mean_mm']:.4f} ± {v['ci95_mean_mm']:.4f} | {v['max_mm']:.4f} | "
+          f"{v['rms_mm']:.4f} | {st['verdict']} |")
+    w("")
+    w(f"Final model: {lp['final_model']} ({lp['final_verdict']}), {lp['seconds']:.0f} s.")
+    w("")
 
 
 def summary(e):
@@ -404,6 +463,8 @@ def write_doc(res):
         elif "ur5" in prod:
             w(f"stiff: not run ({_clean(prod['ur5']['skipped'])}).")
             w("")
+        if res.get("loop", {}).get("ur5"):
+            write_loop(w, res["loop"]["ur5"], "the grid, validated on the 20 random poses")
         cvs = {n: np.array(r[n]["cv"]["per_pose_mm"]) for n in ref.UR5_MODELS}
         best = min(cvs, key=lambda n: cvs[n].mean())
         w("Paired differences of the cross-validated errors (same folds, same poses; mean "
@@ -454,6 +515,8 @@ def write_doc(res):
           f"D ISO cubes ({rows.get('D')}), A a grid ({rows.get('A')} rows shipped: every 5th "
           "of 11911). Orientation residuals weigh 1 mm per mrad.")
         w("")
+        if res.get("loop", {}).get("ur10"):
+            write_loop(w, res["loop"]["ur10"], "a random half of C, validated on the other half")
         w("(b) Calibrated on a random half of C, validated on the other half:")
         w("")
         w("| model (reference) | parameters | calibration RMS [mm] | validation mean [mm] | "
@@ -566,7 +629,7 @@ def write_doc(res):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--only", choices=["ur5", "ur10", "pooled"])
+    ap.add_argument("--only", choices=["ur5", "ur10", "pooled", "loop"])
     ap.add_argument("--no-product", action="store_true", help="run the reference alone")
     ap.add_argument("--doc-only", action="store_true",
                     help="rewrite the document and plots from the last results, run nothing")
@@ -593,6 +656,8 @@ def main(argv=None):
             res["product"][ds] = {"skipped": msg}
     if not a.doc_only and not a.no_product and a.only in (None, "pooled"):
         res["pooled"] = speed_pooled()
+    if not a.doc_only and not a.no_product and a.only in (None, "loop"):
+        res["loop"] = loops()
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(res, indent=1) + "\n")
     write_doc(res)
