@@ -3,6 +3,7 @@
 
 #include "boundary.hpp"
 #include "handles.hpp"
+#include "stiff/io/robot_io.hpp"
 
 using namespace stiff;
 using namespace stiff::capi;
@@ -102,6 +103,37 @@ stiff_status stiff_robot_calibrated(stiff_robot** out,
     for (const auto& l : left_out) r->report.notes.push_back("not built in: " + l);
     *out = r.release();
     return STIFF_OK;
+  });
+}
+
+stiff_status stiff_result_registration(double pose[16],
+                                       const stiff_result* fit,
+                                       const char* session) {
+  return guarded(__func__, [&] {
+    require(pose, "pose");
+    const Eigen::Matrix4d t = registration_pose(fit_of(fit), session ? session : "");
+    for (int k = 0; k < 16; ++k) pose[k] = t(k / 4, k % 4);
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_robot_to_urdf(char* text,
+                                 size_t capacity,
+                                 size_t* needed,
+                                 const stiff_robot* robot,
+                                 const double world_pose[16]) {
+  return guarded(__func__, [&] {
+    require(robot, "robot");
+    UrdfWriteOptions o;
+    if (world_pose) {
+      Eigen::Matrix4d t;
+      for (int k = 0; k < 16; ++k) t(k / 4, k % 4) = world_pose[k];
+      o.world_from_base = t;
+    }
+    o.comments.push_back("written by stiff " + std::string(stiff_version_string()) +
+                         ": the kinematic chain stiff uses (docs/formats.md, URDF export)");
+    for (const auto& n : robot->report.notes) o.comments.push_back(n);
+    return copy_string(robot_to_urdf(robot->model, o), text, capacity, needed);
   });
 }
 

@@ -357,6 +357,26 @@ STIFF_API stiff_status stiff_identify(stiff_result** out,
 STIFF_API stiff_status stiff_robot_calibrated(stiff_robot** out,
                                               const stiff_robot* robot,
                                               const stiff_result* fit);
+/** The registration of one session of a fit: the pose of the robot's base in that session's
+ *  instrument frame, a 4 x 4 homogeneous transform, row-major, translation in m (p_instrument
+ *  = R p_base + t). session NULL or "": the fit's only session. INVALID_ARGUMENT when the fit
+ *  has no registration, when a fit of several sessions names none or when the session is not
+ *  the fit's (the message lists its sessions). @since 0.3 */
+STIFF_API stiff_status stiff_result_registration(double pose[16],
+                                                 const stiff_result* fit,
+                                                 const char* session);
+/** The robot as a URDF serial chain with the same kinematics (docs/formats.md, "URDF
+ *  export"), UTF-8 with NUL: links base_link, link_1..link_n, tool0 (the flange) and tcp (the
+ *  measured point); joint origins, axes and limits; masses as point-mass inertials; names
+ *  XML-escaped. world_pose (row-major 4 x 4, may be NULL): the base's pose in a `world` link
+ *  joined by a fixed joint (e.g. stiff_result_registration). For a calibrated robot
+ *  (stiff_robot_calibrated) the joint offsets and kinematic errors are in the joint origins.
+ *  Write it with stiff_file_write. @since 0.3 */
+STIFF_API stiff_status stiff_robot_to_urdf(char* text,
+                                           size_t capacity,
+                                           size_t* needed,
+                                           const stiff_robot* robot,
+                                           const double world_pose[16]);
 /** Release a result; NULL is a no-op. @since 0.1 */
 STIFF_API void stiff_result_destroy(stiff_result* result);
 /** Read / write a fit file (JSON, docs/formats.md). Writing is atomic. @since 0.1 */

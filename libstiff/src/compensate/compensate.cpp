@@ -19,6 +19,16 @@ Measurement make_measurement(const Eigen::VectorXd& q, const Vector6d& wrench) {
   return m;
 }
 
+/// A model of absolute accuracy: one of its effects corrects the chain (geometry stage) or is
+/// seen only in absolute data (tool, registration, self-weight, temperature). Its tool pose is
+/// the calibrated robot's, not the nominal one plus a deflection.
+bool absolute_model(const DeflectionModel& model) {
+  for (const auto& e : model.effects())
+    if ((e->stages() & unsigned{kGeometryStage}) || (e->requirements() & unsigned{kNeedsAbsolute}))
+      return true;
+  return false;
+}
+
 /// Loaded pose and the rigid tool pose at q from one chain evaluation.
 struct Loaded {
   Eigen::Matrix4d rigid;
@@ -30,9 +40,22 @@ Loaded evaluate_loaded(const DeflectionModel& model,
                        const Eigen::VectorXd& theta,
                        const Eigen::VectorXd& q,
                        const Vector6d& wrench) {
-  const Measurement m = make_measurement(q, wrench);
-  const MeasurementContext c = model.context(m, 0);
+  Measurement m = make_measurement(q, wrench);
   Loaded l;
+  if (absolute_model(model)) {
+    // Where the calibrated model puts the tool under the process wrench and the robot's own
+    // weight, in the base frame (the instrument's registration is not the robot's), at the
+    // reference temperature of the thermal model (20 C, ISO 1).
+    m.absolute = true;
+    m.temperature = 20.0;
+    const MeasurementContext c = model.context(m, 0);
+    l.rigid = c.chain.flange;
+    l.rigid.block<3, 1>(0, 3) = model.robot().point_position(c.chain, model.robot().measured_point);
+    l.loaded = model.tool_pose(theta, m, c);
+    l.deflection = -pose_error(l.rigid, l.loaded);
+    return l;
+  }
+  const MeasurementContext c = model.context(m, 0);
   l.deflection = model.predict(theta, m, c);
   l.rigid = c.chain.flange;
   l.rigid.block<3, 1>(0, 3) = model.robot().point_position(c.chain, model.robot().measured_point);
@@ -173,7 +196,7 @@ PathCompensation compensate_path(const DeflectionModel& model,
       continue;
     }
     const Eigen::VectorXd qn = out.nominal.q.row(i).transpose();
-    out.predicted.row(i) = predict_deflection(model, theta, qn, wi).transpose();
+    out.predicted.row(i) = evaluate_loaded(model, theta, qn, wi).deflection.transpose();
     const PoseCompensation c = compensate_pose(model, theta, poses[k], qn, wi, options);
     out.q_cmd.row(i) = c.q_cmd.transpose();
     out.residual(i) = c.residual;

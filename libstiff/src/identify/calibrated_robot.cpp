@@ -2,6 +2,8 @@
 #include <ceres/rotation.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
 
 #include "stiff/error.hpp"
 #include "stiff/identify/fit.hpp"
@@ -123,6 +125,52 @@ RobotModel calibrated_robot(const RobotModel& robot,
   cal.name = robot.name + "_calibrated";
   if (left_out) *left_out = out;
   return cal;
+}
+
+Eigen::Matrix4d registration_pose(const FitResult& fit, const std::string& session) {
+  // The registration effect names its parameters omega_<axis>_<tag>, t_<axis>_<tag>, the tag
+  // being the session label (its 1-based number when the data had no labels).
+  std::vector<std::string> tags;
+  for (const auto& p : fit.parameters)
+    if (p.effect == "registration" && p.name.rfind("omega_x_", 0) == 0)
+      tags.push_back(p.name.substr(8));
+  if (tags.empty())
+    throw InvalidArgument("the fit has no registration (model " + [&] {
+      std::string m;
+      for (const auto& e : fit.model) m += (m.empty() ? "" : "+") + e;
+      return m;
+    }() + "): it places the robot in no instrument frame");
+  std::string list;
+  for (const auto& t : tags) list += (list.empty() ? "'" : ", '") + t + "'";
+  std::string tag = session;
+  if (tag.empty()) {
+    if (tags.size() > 1)
+      throw InvalidArgument("the fit has " + std::to_string(tags.size()) + " sessions (" + list +
+                            "); name the one whose frame to use");
+    tag = tags.front();
+  } else if (std::find(tags.begin(), tags.end(), tag) == tags.end()) {
+    throw InvalidArgument("the fit has no session '" + session + "' (its sessions: " + list + ")");
+  }
+  double w[3], t[3];
+  const char* axis[3] = {"x", "y", "z"};
+  for (int a = 0; a < 3; ++a) {
+    w[a] = t[a] = NAN;
+    for (const auto& p : fit.parameters) {
+      if (p.effect != "registration") continue;
+      if (p.name == std::string("omega_") + axis[a] + "_" + tag) w[a] = p.value;
+      if (p.name == std::string("t_") + axis[a] + "_" + tag) t[a] = p.value;
+    }
+  }
+  for (int a = 0; a < 3; ++a)
+    if (!std::isfinite(w[a]) || !std::isfinite(t[a]))
+      throw InvalidArgument("the fit's registration of session '" + tag +
+                            "' is incomplete or not finite");
+  Eigen::Matrix3d r;
+  ceres::AngleAxisToRotationMatrix(w, r.data());
+  Eigen::Matrix4d pose = Eigen::Matrix4d::Identity();
+  pose.topLeftCorner<3, 3>() = r;
+  pose.topRightCorner<3, 1>() = Eigen::Vector3d(t[0], t[1], t[2]);
+  return pose;
 }
 
 }  // namespace stiff

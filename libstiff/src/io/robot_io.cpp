@@ -440,6 +440,8 @@ RobotModel parse_robot_urdf(const std::string& text,
       if (joint->type == urdf::Joint::REVOLUTE && joint->limits) {
         j.lower = joint->limits->lower;
         j.upper = joint->limits->upper;
+        j.effort = joint->limits->effort;
+        j.velocity = joint->limits->velocity;
         if (!(j.lower < j.upper))
           throw ParseError(file, 0, 0, "URDF joint '" + joint->name + "' has lower > upper limit");
       } else if (joint->type == urdf::Joint::CONTINUOUS) {
@@ -447,6 +449,10 @@ RobotModel parse_robot_urdf(const std::string& text,
         // crossing a limit, and keeps ranges finite for sampling.
         j.lower = -2 * kPi;
         j.upper = 2 * kPi;
+        if (joint->limits) {
+          j.effort = joint->limits->effort;
+          j.velocity = joint->limits->velocity;
+        }
         notes.push_back("joint '" + joint->name +
                         "' is continuous: range [-2 pi, 2 pi] rad (one turn either way)");
       }
@@ -607,6 +613,186 @@ std::string robot_to_yaml(const RobotModel& robot) {
   o << "}\ngravity: ";
   vec(robot.gravity);
   o << "\n";
+  return o.str();
+}
+
+}  // namespace stiff
+
+namespace stiff {
+namespace {
+
+/// An XML attribute value: the five markup characters as entities; tab, newline and carriage
+/// return as character references (an attribute's literal ones are normalised to spaces on
+/// reading); characters XML 1.0 cannot hold at all (other C0 controls) as '_'.
+std::string xml_attribute(const std::string& s) {
+  std::string o;
+  for (const unsigned char c : s) {
+    switch (c) {
+      case '&':
+        o += "&amp;";
+        break;
+      case '<':
+        o += "&lt;";
+        break;
+      case '>':
+        o += "&gt;";
+        break;
+      case '"':
+        o += "&quot;";
+        break;
+      case '\'':
+        o += "&apos;";
+        break;
+      case '\t':
+        o += "&#9;";
+        break;
+      case '\n':
+        o += "&#10;";
+        break;
+      case '\r':
+        o += "&#13;";
+        break;
+      default:
+        o += c < 0x20 ? '_' : static_cast<char>(c);
+    }
+  }
+  return o;
+}
+
+/// Text inside an XML comment: no "--", no trailing '-', no characters XML cannot hold.
+std::string xml_comment_text(const std::string& s) {
+  std::string o;
+  for (const unsigned char c : s) {
+    if (c == '-' && !o.empty() && o.back() == '-') o += ' ';
+    o += (c < 0x20 && c != '\t') ? ' ' : static_cast<char>(c);
+  }
+  if (!o.empty() && o.back() == '-') o += ' ';
+  return o;
+}
+
+void require_rigid(const Eigen::Matrix4d& t, const std::string& what) {
+  const Eigen::Matrix3d r = t.topLeftCorner<3, 3>();
+  if (!t.allFinite() || (r.transpose() * r - Eigen::Matrix3d::Identity()).norm() > 1e-9 ||
+      r.determinant() < 0 || t.row(3) != Eigen::RowVector4d(0, 0, 0, 1))
+    throw InvalidArgument(what + " is not a finite rigid transform (rotation and translation)");
+}
+
+/// URDF origin angles: R = Rz(yaw) Ry(pitch) Rx(roll) (fixed axes x, y, z). Roll is taken
+/// from what remains once pitch and yaw are removed, so that near pitch = +-pi/2, where roll
+/// and yaw only count together, the product still reproduces R to rounding.
+Eigen::Vector3d urdf_rpy(const Eigen::Matrix3d& r) {
+  const double pitch = std::atan2(-r(2, 0), std::hypot(r(0, 0), r(1, 0)));
+  const double yaw = std::hypot(r(0, 0), r(1, 0)) > 1e-12 ? std::atan2(r(1, 0), r(0, 0)) : 0.0;
+  const Eigen::Matrix3d rest = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
+                                Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()))
+                                   .toRotationMatrix()
+                                   .transpose() *
+                               r;
+  const double roll = std::atan2(rest(2, 1), rest(1, 1));
+  return {roll, pitch, yaw};
+}
+
+}  // namespace
+
+std::string robot_to_urdf(const RobotModel& robot, const UrdfWriteOptions& options) {
+  const int n = robot.dof();
+  if (n == 0) throw InvalidArgument("URDF export: the robot has no joint");
+  for (int j = 0; j < n; ++j) {
+    const Joint& jt = robot.joints[j];
+    const std::string where =
+        "URDF export: joint " + std::to_string(j + 1) + " ('" + jt.name + "')";
+    require_rigid(jt.pre, where + " fixed transform before the joint");
+    require_rigid(jt.post, where + " fixed transform after the joint");
+    if (!jt.axis.allFinite() || jt.axis.norm() < 1e-12)
+      throw InvalidArgument(where + " has no finite axis");
+    if (!std::isfinite(jt.lower) || !std::isfinite(jt.upper) || !(jt.lower < jt.upper))
+      throw InvalidArgument(where + " limits are not a finite range");
+    if (!std::isfinite(jt.mass) || jt.mass < 0 || !jt.com.allFinite())
+      throw InvalidArgument(where + " mass or centre of mass is not finite");
+  }
+  if (!robot.measured_point.allFinite() || !robot.tool_com.allFinite() ||
+      !std::isfinite(robot.tool_mass) || robot.tool_mass < 0)
+    throw InvalidArgument("URDF export: the measured point or the tool is not finite");
+  if (options.world_from_base) require_rigid(*options.world_from_base, "URDF export: world pose");
+
+  // Names the robot's joints already take: a generated joint never shares one (URDF joint
+  // names are unique).
+  std::set<std::string> used;
+  std::vector<std::string> names(n);
+  for (int j = 0; j < n; ++j) {
+    const std::string base =
+        robot.joints[j].name.empty() ? "joint" + std::to_string(j + 1) : robot.joints[j].name;
+    std::string name = base;
+    for (int k = 2; used.count(name); ++k) name = base + "_" + std::to_string(k);
+    used.insert(name);
+    names[j] = name;
+  }
+  auto fresh = [&](const std::string& base) {
+    std::string name = base;
+    for (int k = 2; used.count(name); ++k) name = base + "_" + std::to_string(k);
+    used.insert(name);
+    return name;
+  };
+
+  std::ostringstream o;
+  o << std::setprecision(17);
+  auto origin = [&](const Eigen::Matrix4d& t) {
+    const Eigen::Vector3d p = t.topRightCorner<3, 1>();
+    const Eigen::Vector3d rpy = urdf_rpy(t.topLeftCorner<3, 3>());
+    o << "    <origin xyz=\"" << p(0) << " " << p(1) << " " << p(2) << "\" rpy=\"" << rpy(0) << " "
+      << rpy(1) << " " << rpy(2) << "\"/>\n";
+  };
+  // A point mass: stiff's links carry a mass and a centre of mass, no inertia tensor.
+  auto inertial = [&](double mass, const Eigen::Vector3d& com) {
+    if (!(mass > 0)) return;
+    o << "    <inertial>\n      <origin xyz=\"" << com(0) << " " << com(1) << " " << com(2)
+      << "\" rpy=\"0 0 0\"/>\n      <mass value=\"" << mass
+      << "\"/>\n      <inertia ixx=\"0\" ixy=\"0\" ixz=\"0\" iyy=\"0\" iyz=\"0\" izz=\"0\"/>\n"
+      << "    </inertial>\n";
+  };
+  auto fixed_joint = [&](const std::string& name, const std::string& parent,
+                         const std::string& child, const Eigen::Matrix4d& t) {
+    o << "  <joint name=\"" << xml_attribute(name) << "\" type=\"fixed\">\n    <parent link=\""
+      << parent << "\"/>\n    <child link=\"" << child << "\"/>\n";
+    origin(t);
+    o << "  </joint>\n";
+  };
+
+  o << "<?xml version=\"1.0\"?>\n";
+  for (const auto& c : options.comments) o << "<!-- " << xml_comment_text(c) << " -->\n";
+  o << "<robot name=\"" << xml_attribute(robot.name.empty() ? "robot" : robot.name) << "\">\n";
+  if (options.world_from_base) {
+    o << "  <link name=\"world\"/>\n";
+    fixed_joint(fresh("world_joint"), "world", "base_link", *options.world_from_base);
+  }
+  o << "  <link name=\"base_link\"/>\n";
+  Eigen::Matrix4d before = Eigen::Matrix4d::Identity();  // post of the previous joint
+  std::string parent = "base_link";
+  for (int j = 0; j < n; ++j) {
+    const Joint& jt = robot.joints[j];
+    const std::string child = "link_" + std::to_string(j + 1);
+    o << "  <joint name=\"" << xml_attribute(names[j]) << "\" type=\"revolute\">\n"
+      << "    <parent link=\"" << parent << "\"/>\n    <child link=\"" << child << "\"/>\n";
+    origin(before * jt.pre);
+    const Eigen::Vector3d a = jt.axis.normalized();
+    o << "    <axis xyz=\"" << a(0) << " " << a(1) << " " << a(2) << "\"/>\n"
+      << "    <limit lower=\"" << jt.lower << "\" upper=\"" << jt.upper << "\" effort=\""
+      << jt.effort << "\" velocity=\"" << jt.velocity << "\"/>\n  </joint>\n";
+    // stiff's link frame is after `post`, the URDF link frame before it.
+    o << "  <link name=\"" << child << "\">\n";
+    inertial(jt.mass, (jt.post * jt.com.homogeneous()).head<3>());
+    o << "  </link>\n";
+    before = jt.post;
+    parent = child;
+  }
+  fixed_joint(fresh("flange_joint"), parent, "tool0", before);
+  o << "  <link name=\"tool0\">\n";
+  inertial(robot.tool_mass, robot.tool_com);
+  o << "  </link>\n";
+  Eigen::Matrix4d tcp = Eigen::Matrix4d::Identity();
+  tcp.topRightCorner<3, 1>() = robot.measured_point;
+  fixed_joint(fresh("tcp_joint"), "tool0", "tcp", tcp);
+  o << "  <link name=\"tcp\"/>\n</robot>\n";
   return o.str();
 }
 

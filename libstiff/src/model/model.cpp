@@ -260,15 +260,16 @@ namespace {
 /// angles q + dq and, after each joint's `pre`, the small transform of joint_error's column
 /// (translation, rotation vector): T = prod_j pre_j E_j Rot(axis_j, q_j + dq_j) post_j.
 template <typename T>
-Vector3<T> corrected_point(const RobotModel& robot,
-                           const Eigen::VectorXd& q,
-                           const VectorX<T>& dq,
-                           const Matrix6X<T>& joint_error,
-                           const Vector3<T>& r) {
+void corrected_flange(const RobotModel& robot,
+                      const Eigen::VectorXd& q,
+                      const VectorX<T>& dq,
+                      const Matrix6X<T>& joint_error,
+                      Matrix3<T>& rot,
+                      Vector3<T>& pos) {
   using std::cos;
   using std::sin;
-  Matrix3<T> rot = Matrix3<T>::Identity();
-  Vector3<T> pos = Vector3<T>::Zero();
+  rot = Matrix3<T>::Identity();
+  pos = Vector3<T>::Zero();
   // Products with the constant transforms stay T x double (half the work of T x T).
   auto apply = [&](const Eigen::Matrix4d& a) {  // (rot, pos) <- (rot, pos) * a
     pos += rot * a.topRightCorner<3, 1>();
@@ -295,6 +296,17 @@ Vector3<T> corrected_point(const RobotModel& robot,
       for (int v = 0; v < 3; ++v) rot(u, v) += st * rk(u, v) + ct * rk2(u, v);
     apply(jt.post);
   }
+}
+
+template <typename T>
+Vector3<T> corrected_point(const RobotModel& robot,
+                           const Eigen::VectorXd& q,
+                           const VectorX<T>& dq,
+                           const Matrix6X<T>& joint_error,
+                           const Vector3<T>& r) {
+  Matrix3<T> rot;
+  Vector3<T> pos;
+  corrected_flange(robot, q, dq, joint_error, rot, pos);
   return rot * r + pos;
 }
 
@@ -379,7 +391,8 @@ template <typename T>
 void DeflectionModel::evaluate_into(const T* theta,
                                     const Measurement& m,
                                     const MeasurementContext& c,
-                                    EvalState<T>& s) const {
+                                    EvalState<T>& s,
+                                    bool instrument) const {
   const int n = robot_.dof();
   s.robot = &robot_;
   s.measurement = &m;
@@ -410,7 +423,9 @@ void DeflectionModel::evaluate_into(const T* theta,
       s.joint_error = Matrix6X<T>::Zero(6, n);
       for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
       s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas);
-      for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
+      if (instrument)
+        for (size_t e = 0; e < effects_.size(); ++e)
+          effects_[e]->measurement(theta + offsets_[e], s);
       return;
     }
   }
@@ -445,7 +460,8 @@ void DeflectionModel::evaluate_into(const T* theta,
     for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
     s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas);
   }
-  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
+  if (instrument)
+    for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
 }
 
 template void DeflectionModel::evaluate<double>(const double*,
@@ -652,6 +668,29 @@ Eigen::Matrix<double, 6, 1> DeflectionModel::predict(const Eigen::VectorXd& thet
   Eigen::Matrix<double, 6, 1> out;
   out << d, rot;
   return out;
+}
+
+Eigen::Matrix4d DeflectionModel::tool_pose(const Eigen::VectorXd& theta,
+                                           const Measurement& m,
+                                           const MeasurementContext& c) const {
+  if (theta.size() != count_)
+    throw InvalidArgument("tool_pose: " + std::to_string(theta.size()) +
+                          " parameters for a model with " + std::to_string(count_));
+  if (!m.absolute) throw InvalidArgument("tool_pose: needs an absolute row");
+  EvalState<double> s;
+  evaluate_into(theta.data(), m, c, s, false);
+  // s.d is the corrected position with its deflection; the orientation is the corrected
+  // chain's flange turned by the deflection's small rotation (zero for a geometric model).
+  Eigen::Matrix3d rot;
+  Eigen::Vector3d pos;
+  corrected_flange(robot_, m.q, s.dq, s.joint_error, rot, pos);
+  Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
+  t.topLeftCorner<3, 3>() = rot;
+  t.topRightCorner<3, 1>() = s.d;
+  const double angle = s.rot.norm();
+  if (angle > 0)
+    t.topLeftCorner<3, 3>() = Eigen::AngleAxisd(angle, s.rot / angle).toRotationMatrix() * rot;
+  return t;
 }
 
 Eigen::Matrix<double, 3, Eigen::Dynamic> DeflectionModel::displacement_jacobian(

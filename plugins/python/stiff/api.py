@@ -126,6 +126,35 @@ class Robot(_Handle):
         """The robot as stiff uses it, in the YAML format (SI units), loadable again."""
         return _c.get_string(lib.stiff_robot_to_yaml, self)
 
+    def to_urdf(self, world=None) -> str:
+        """The robot as a URDF serial chain with the same kinematics (links base_link,
+        link_1..link_n, tool0 = the flange, tcp = the measured point; masses as point masses),
+        for ROS and OLP tools. `world`: the 4 x 4 pose of the base in a `world` link joined by
+        a fixed joint, e.g. `fit.registration()` to place a calibrated robot in the
+        instrument's frame."""
+        if world is None:
+            return _c.get_string(lib.stiff_robot_to_urdf, self, None)
+        w = np.ascontiguousarray(world, dtype=np.float64)
+        if w.shape != (4, 4):
+            raise ValueError(f"world must be a 4 x 4 pose, got shape {w.shape}")
+        return _c.get_string(lib.stiff_robot_to_urdf, self, _c.ptr(w))
+
+    def save(self, path, world=None) -> None:
+        """Write the robot, atomically, in the format its name ends in: .urdf or .xml (URDF,
+        `world` as in `to_urdf`), .yaml or .yml (the YAML robot format)."""
+        ext = os.path.splitext(os.fspath(path))[1].lower()
+        if ext in (".urdf", ".xml"):
+            text = self.to_urdf(world)
+        elif ext in (".yaml", ".yml"):
+            if world is not None:
+                raise ValueError("a world pose is written to URDF only; the YAML robot format "
+                                 "has no world frame")
+            text = self.to_yaml()
+        else:
+            raise ValueError(f"{os.fspath(path)}: name a robot file .urdf, .xml, .yaml or .yml "
+                             f"(got '{ext or 'no extension'}')")
+        _outputs.write_text(path, text)
+
     def calibrated(self, fit: "Fit") -> "Robot":
         """This robot with the fit's pose-independent geometry (joint offsets, kinematic
         errors, tool) built into its chain; `notes` names what a robot description cannot
@@ -360,6 +389,14 @@ class Fit(_Handle):
 
     def write(self, path) -> None:
         check(lib.stiff_result_write_json(self, _c.encode(_outputs.target(path))))
+
+    def registration(self, session: Optional[str] = None) -> np.ndarray:
+        """Pose of the robot's base in the instrument frame of `session` (4 x 4, m): the
+        registration the fit identified. None: the fit's only session."""
+        pose = np.empty(16)
+        check(lib.stiff_result_registration(_c.ptr(pose), self,
+                                             _c.encode(session) if session else None))
+        return pose.reshape(4, 4)
 
     @property
     def json(self) -> dict:

@@ -101,6 +101,13 @@ RobotModel calibrated_robot(const RobotModel& robot,
                             const FitResult& fit,
                             std::vector<std::string>* left_out = nullptr);
 
+/// The registration of one session of a fit: the pose of the robot's base in that session's
+/// instrument frame (p_instrument = R p_base + t as a 4 x 4 transform), for placing the
+/// calibrated robot in the instrument's (the cell's) frame. `session` empty: the fit's only
+/// session. Throws InvalidArgument when the fit has no registration, when a fit of several
+/// sessions names none, or when the session is not one of the fit's (the message lists them).
+Eigen::Matrix4d registration_pose(const FitResult& fit, const std::string& session = "");
+
 /// Predicted (dx, dy, dz, rx, ry, rz) of every row of `data` under a fit. The model is rebuilt
 /// from the fit's effect names for this robot.
 Eigen::MatrixXd predict_dataset(const RobotModel& robot, const FitResult& fit, const Dataset& data);

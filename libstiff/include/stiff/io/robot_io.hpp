@@ -53,4 +53,23 @@ RobotModel parse_robot_urdf(const std::string& text,
 /// Write the robot in the YAML format (SI units), e.g. into an FMU's resources.
 std::string robot_to_yaml(const RobotModel& robot);
 
+/// What robot_to_urdf writes besides the chain.
+struct UrdfWriteOptions {
+  /// Pose of the base in a `world` link joined to `base_link` by a fixed joint (a
+  /// calibration's registration: the base in the instrument frame); unset: no world link.
+  std::optional<Eigen::Matrix4d> world_from_base;
+  /// Lines of the header comment (what the robot is, what the description leaves out).
+  std::vector<std::string> comments;
+};
+
+/// Write the robot as a URDF serial chain with the same kinematics (docs/formats.md, "URDF
+/// export"): links base_link, link_1..link_n, tool0 (the flange: the last link frame) and tcp
+/// (the measured point, flange orientation); joint j's origin is post_{j-1} pre_j as xyz and
+/// fixed-axis roll-pitch-yaw, its axis and limits as in the robot, the flange transform
+/// post_n a fixed joint to tool0. Masses become point-mass inertials (stiff holds no inertia
+/// tensors), the tool's on tool0. Names are XML-escaped; a generated joint name that a joint
+/// of the robot already uses gets a suffix. Throws InvalidArgument for non-finite or
+/// non-rigid transforms.
+std::string robot_to_urdf(const RobotModel& robot, const UrdfWriteOptions& options = {});
+
 }  // namespace stiff

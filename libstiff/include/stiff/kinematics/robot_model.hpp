@@ -50,6 +50,10 @@ struct JointTpl {
   Matrix4<Scalar> post = Matrix4<Scalar>::Identity();
   double lower = -3.141592653589793;  ///< joint limit [rad]
   double upper = 3.141592653589793;   ///< joint limit [rad]
+  /// Effort [N*m] and velocity [rad/s] limits a URDF gave (0: unknown); carried to the URDF
+  /// export, not used by the models.
+  double effort = 0.0;
+  double velocity = 0.0;
   /// The DH row it came from (alpha, a, d, theta offset) [rad, m]; NaN for URDF joints.
   double dh[4] = {0, 0, 0, 0};
   /// Mass [kg] of the link moved by this joint and its centre of mass in that link's frame [m].
@@ -65,6 +69,8 @@ struct JointTpl {
     j.post = post.template cast<NewScalar>();
     j.lower = lower;
     j.upper = upper;
+    j.effort = effort;
+    j.velocity = velocity;
     for (int k = 0; k < 4; ++k) j.dh[k] = dh[k];
     j.mass = mass;
     j.com = com;

@@ -91,6 +91,15 @@ class DeflectionModel {
   Eigen::Matrix<double, 6, 1> predict(const Eigen::VectorXd& theta,
                                       const Measurement& m,
                                       const MeasurementContext& c) const;
+  /// Pose of the tool (measured point, flange orientation), base frame, that the model
+  /// predicts for an absolute row before the instrument sees it: the corrected chain of the
+  /// geometry stage (joint offsets, axis errors, tool) at m.q, its point moved by the
+  /// deflection of stages 1-3 under m's wrench (and the robot's weight) and turned by its
+  /// small rotation; the measurement stage (registration, tracker frame) is not applied.
+  /// Throws InvalidArgument for a displacement row.
+  Eigen::Matrix4d tool_pose(const Eigen::VectorXd& theta,
+                            const Measurement& m,
+                            const MeasurementContext& c) const;
   /// Jacobian of the predicted displacement d (3 x P) with respect to theta at theta
   /// (automatic differentiation).
   Eigen::Matrix<double, 3, Eigen::Dynamic> displacement_jacobian(const Eigen::VectorXd& theta,
@@ -109,7 +118,8 @@ class DeflectionModel {
   void evaluate_into(const T* theta,
                      const Measurement& m,
                      const MeasurementContext& c,
-                     EvalState<T>& s) const;
+                     EvalState<T>& s,
+                     bool instrument = true) const;
   RobotModel robot_;
   std::vector<std::unique_ptr<Effect>> effects_;
   std::vector<int> offsets_;
