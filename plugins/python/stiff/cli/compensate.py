@@ -236,6 +236,11 @@ def run(args):
           f"{pd.mean() * 1e6:.1f} um, orientation max {np.max(pr, initial=0.0) * 1e6:.1f} urad")
     print(f"commanded correction: position max {np.max(corr_pos[ok], initial=0.0) * 1e6:.1f} um, "
           f"orientation max {np.max(corr_rot[ok], initial=0.0) * 1e6:.1f} urad")
+    absolute = [e for e in fits[0].model if "absolute" in api.describe_effect(e)["needs"]]
+    if absolute:
+        print(f"the fit calibrates the robot ({'+'.join(absolute)}): the command brings the "
+              "calibrated tool point to the path under the calibrated geometry and the robot's "
+              "weight as well; the deflection above is the process load's alone")
     problems = main.problems()
     if problems:
         kinds = {}
