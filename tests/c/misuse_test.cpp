@@ -99,6 +99,21 @@ TEST(CApiMisuse, EveryFunctionReturnsItsStatusAndNamesItself) {
        [&] { return stiff_robot_tool_pose(pose, f.robot, q, 5); }},
       {"stiff_robot_jacobian", STIFF_E_BUFFER_TOO_SMALL,
        [&] { return stiff_robot_jacobian(out, 35, &needed, f.robot, q, 6); }},
+      {"stiff_robot_to_urdf", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_robot_to_urdf(text, sizeof text, &needed, nullptr, nullptr); }},
+      {"stiff_robot_to_urdf", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_robot_to_urdf(text, sizeof text, &needed, f.robot, nullptr); }},
+      {"stiff_robot_to_urdf", STIFF_E_INVALID_ARGUMENT,
+       [&] {
+         double world[16] = {2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 1};  // not rigid
+         return stiff_robot_to_urdf(nullptr, 0, &needed, f.robot, world);
+       }},
+      {"stiff_result_registration", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_result_registration(pose, nullptr, nullptr); }},
+      {"stiff_result_registration", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_result_registration(nullptr, f.fit, nullptr); }},
+      {"stiff_result_registration", STIFF_E_INVALID_ARGUMENT,  // a deflection fit: none
+       [&] { return stiff_result_registration(pose, f.fit, nullptr); }},
       {"stiff_dataset_read_csv", STIFF_E_IO,
        [&] { return stiff_dataset_read_csv(&d, f.robot, "/nonexistent.csv"); }},
       {"stiff_dataset_read_csv", STIFF_E_PARSE,
