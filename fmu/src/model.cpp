@@ -51,6 +51,12 @@ class LineReader {
   std::vector<std::string> expect(const char* key, size_t count, std::string* rest = nullptr) {
     std::vector<std::string> t;
     if (!next(&t, rest)) fail(std::string("unexpected end of file, expected '") + key + "'");
+    return check(t, key, count);
+  }
+  /// The tokens of a line already read, checked as expect() does.
+  std::vector<std::string> check(const std::vector<std::string>& t,
+                                 const char* key,
+                                 size_t count) const {
     if (t[0] != key) fail(std::string("expected '") + key + "', found '" + t[0] + "'");
     if (count != 0 && t.size() != count + 1)
       fail(std::string("'") + key + "' needs " + std::to_string(count) + " values, found " +
@@ -133,12 +139,23 @@ std::shared_ptr<const Layout> read_layout(const std::string& resources_dir) {
   if (t.size() < 2 || static_cast<size_t>(r.integer(t[1])) != t.size() - 2)
     r.fail("'effects' needs a count and that many names");
   layout->effects.assign(t.begin() + 2, t.end());
+  // Optional: the fit's session count (per-session parameters, e.g. the registration). Only
+  // the count matters here: the outputs are in the base frame, not an instrument's.
+  std::vector<std::string> sessions;
+  if (!r.next(&t)) r.fail("unexpected end of file, expected 'variables'");
+  if (t[0] == "sessions") {
+    const int s = r.integer(r.check(t, "sessions", 1)[1]);
+    if (s < 1 || s > 100000) r.fail("bad session count");
+    for (int k = 0; k < s; ++k) sessions.push_back(std::to_string(k + 1));
+    if (!r.next(&t)) r.fail("unexpected end of file, expected 'variables'");
+  }
   try {
-    layout->model = std::make_unique<DeflectionModel>(layout->robot, layout->effects);
+    layout->model =
+        std::make_unique<DeflectionModel>(layout->robot, layout->effects, nullptr, sessions);
   } catch (const std::exception& e) {
     r.fail(std::string("this FMU binary cannot build the model: ") + e.what());
   }
-  const int count = r.integer(r.expect("variables", 1)[1]);
+  const int count = r.integer(r.check(t, "variables", 1)[1]);
   if (count < 1 || count > 100000) r.fail("bad variable count");
   // References: the fixed ones below kParameters, then one per model parameter.
   const int max_vr = static_cast<int>(fmu_format::vr::kParameters) + 100000;
@@ -344,6 +361,21 @@ Eigen::Matrix<double, 6, 1> Model::predict_at(const Eigen::VectorXd& q,
   return model.predict(theta_, measurement_, c);
 }
 
+Eigen::Matrix4d Model::loaded_at(const Eigen::VectorXd& q) {
+  MeasurementContext c;
+  Eigen::Vector3d p;
+  const Eigen::Matrix<double, 6, 1> d = predict_at(q, &p, &c);
+  if (layout_->model->absolute_accuracy()) {
+    Vector6d w;
+    w << measurement_.force, measurement_.moment;  // the base wrench at q (predict_at)
+    return predicted_tool_pose(*layout_->model, theta_, q, w, values_.time);
+  }
+  Eigen::Matrix4d rigid = Eigen::Matrix4d::Identity();
+  rigid.block<3, 3>(0, 0) = c.chain.flange.block<3, 3>(0, 0);
+  rigid.block<3, 1>(0, 3) = p;
+  return loaded_pose(rigid, d);
+}
+
 Status Model::deflection(const double** d6, std::string* msg) {
   if (!deflection_valid_) {
     if (validate(msg) != Status::ok) return Status::error;
@@ -357,6 +389,12 @@ Status Model::deflection(const double** d6, std::string* msg) {
     p_unloaded_ = p;
     for (int i = 0; i < 6; ++i) out_[i] = d(i);
     for (int i = 0; i < 3; ++i) out_[6 + i] = p(i) + d(i);
+    // A calibrated model: the tool is where the corrected chain, deflected under the wrench
+    // and the robot's weight, puts it.
+    if (layout_->model->absolute_accuracy()) {
+      const Eigen::Matrix4d t = loaded_at(q);
+      for (int i = 0; i < 3; ++i) out_[6 + i] = t(i, 3);
+    }
     for (double x : out_)
       if (!std::isfinite(x)) {
         *msg = "the deflection overflows (not finite): parameters, pose or wrench out of range";
@@ -395,15 +433,7 @@ Status Model::compensation(const double** qcmd, std::string* msg) {
     Eigen::Matrix4d target = Eigen::Matrix4d::Identity();
     target.block<3, 3>(0, 0) = flange_rotation_;
     target.block<3, 1>(0, 3) = p_unloaded_;
-    MeasurementContext c;
-    const auto loaded = [&](const Eigen::VectorXd& qc) {
-      Eigen::Vector3d pc;
-      const Eigen::Matrix<double, 6, 1> d = predict_at(qc, &pc, &c);
-      Eigen::Matrix4d rigid = Eigen::Matrix4d::Identity();
-      rigid.block<3, 3>(0, 0) = c.chain.flange.block<3, 3>(0, 0);
-      rigid.block<3, 1>(0, 3) = pc;
-      return loaded_pose(rigid, d);
-    };
+    const auto loaded = [&](const Eigen::VectorXd& qc) { return loaded_at(qc); };
     const PoseCompensation solved = solve_compensation(robot, loaded, target, q);
     Eigen::VectorXd qc = solved.q_cmd;
     const double err = solved.residual;

@@ -107,6 +107,11 @@ class Model {
                                          Eigen::Vector3d* p,
                                          MeasurementContext* context);
 
+  /// Tool pose (base frame) with the joints commanded to q under the current wrench: the
+  /// calibrated model's for a model of absolute accuracy (stiff::predicted_tool_pose), else
+  /// FK(q) displaced by the deflection.
+  Eigen::Matrix4d loaded_at(const Eigen::VectorXd& q);
+
   std::shared_ptr<const Layout> layout_;
   Values values_;
   Eigen::VectorXd theta_;

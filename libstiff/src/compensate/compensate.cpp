@@ -19,16 +19,6 @@ Measurement make_measurement(const Eigen::VectorXd& q, const Vector6d& wrench) {
   return m;
 }
 
-/// A model of absolute accuracy: one of its effects corrects the chain (geometry stage) or is
-/// seen only in absolute data (tool, registration, self-weight, temperature). Its tool pose is
-/// the calibrated robot's, not the nominal one plus a deflection.
-bool absolute_model(const DeflectionModel& model) {
-  for (const auto& e : model.effects())
-    if ((e->stages() & unsigned{kGeometryStage}) || (e->requirements() & unsigned{kNeedsAbsolute}))
-      return true;
-  return false;
-}
-
 /// Loaded pose and the rigid tool pose at q from one chain evaluation.
 struct Loaded {
   Eigen::Matrix4d rigid;
@@ -40,25 +30,17 @@ Loaded evaluate_loaded(const DeflectionModel& model,
                        const Eigen::VectorXd& theta,
                        const Eigen::VectorXd& q,
                        const Vector6d& wrench) {
-  Measurement m = make_measurement(q, wrench);
+  const Measurement m = make_measurement(q, wrench);
+  const MeasurementContext c = model.context(m, 0);
   Loaded l;
-  if (absolute_model(model)) {
-    // Where the calibrated model puts the tool under the process wrench and the robot's own
-    // weight, in the base frame (the instrument's registration is not the robot's), at the
-    // reference temperature of the thermal model (20 C, ISO 1).
-    m.absolute = true;
-    m.temperature = 20.0;
-    const MeasurementContext c = model.context(m, 0);
-    l.rigid = c.chain.flange;
-    l.rigid.block<3, 1>(0, 3) = model.robot().point_position(c.chain, model.robot().measured_point);
-    l.loaded = model.tool_pose(theta, m, c);
+  l.rigid = c.chain.flange;
+  l.rigid.block<3, 1>(0, 3) = model.robot().point_position(c.chain, model.robot().measured_point);
+  if (model.absolute_accuracy()) {
+    l.loaded = predicted_tool_pose(model, theta, q, wrench);
     l.deflection = -pose_error(l.rigid, l.loaded);
     return l;
   }
-  const MeasurementContext c = model.context(m, 0);
   l.deflection = model.predict(theta, m, c);
-  l.rigid = c.chain.flange;
-  l.rigid.block<3, 1>(0, 3) = model.robot().point_position(c.chain, model.robot().measured_point);
   l.loaded = loaded_pose(l.rigid, l.deflection);
   return l;
 }
@@ -93,6 +75,29 @@ Eigen::Matrix4d loaded_pose(const Eigen::Matrix4d& pose, const Vector6d& d) {
     t.block<3, 3>(0, 0) = r * pose.block<3, 3>(0, 0);
   }
   return t;
+}
+
+Eigen::Matrix4d predicted_tool_pose(const DeflectionModel& model,
+                                    const Eigen::VectorXd& theta,
+                                    const Eigen::VectorXd& q,
+                                    const Vector6d& wrench,
+                                    double time) {
+  Measurement m = make_measurement(q, wrench);
+  if (!model.absolute_accuracy()) {
+    MeasurementContext c = model.context(m, 0);
+    c.time = time;
+    Eigen::Matrix4d rigid = c.chain.flange;
+    rigid.block<3, 1>(0, 3) = model.robot().point_position(c.chain, model.robot().measured_point);
+    return loaded_pose(rigid, model.predict(theta, m, c));
+  }
+  // Where the calibrated model puts the tool under the process wrench and the robot's own
+  // weight, in the base frame (the instrument's registration is not the robot's), at the
+  // reference temperature of the thermal model (20 C, ISO 1).
+  m.absolute = true;
+  m.temperature = 20.0;
+  MeasurementContext c = model.context(m, 0);
+  c.time = time;
+  return model.tool_pose(theta, m, c);
 }
 
 PoseCompensation compensate_pose(const DeflectionModel& model,

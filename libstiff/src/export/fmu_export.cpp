@@ -216,6 +216,8 @@ std::string model_file(const RobotModel& robot,
   v3("gravity", robot.gravity);
   o << "effects " << model.effects().size();
   for (const auto& e : model.effects()) o << ' ' << e->name();
+  // Per-session parameters (registration) come in blocks, one per session of the fit.
+  if (!model.session_labels().empty()) o << "\nsessions " << model.session_labels().size();
   o << "\nvariables " << vars.size() << "\n";
   for (const Var& v : vars) {
     o << "var " << v.vr << ' ' << v.name << ' ' << fmu_format::kRoleNames[static_cast<int>(v.role)]
@@ -478,7 +480,7 @@ void export_fmu(const RobotModel& robot,
     throw InvalidArgument("fmu export: model identifier '" + options.model_identifier +
                           "' is not a C identifier");
   if (path.empty()) throw InvalidArgument("fmu export: output path is empty");
-  const DeflectionModel model(robot, fit.model);
+  const DeflectionModel model(robot, fit.model, nullptr, fit.sessions);
   check_fit_applies(fit, robot, model, "fmu export");
   if (options.array_inputs && options.fmi_version != 3)
     throw InvalidArgument(

@@ -670,6 +670,13 @@ Eigen::Matrix<double, 6, 1> DeflectionModel::predict(const Eigen::VectorXd& thet
   return out;
 }
 
+bool DeflectionModel::absolute_accuracy() const {
+  for (const auto& e : effects_)
+    if ((e->stages() & unsigned{kGeometryStage}) || (e->requirements() & unsigned{kNeedsAbsolute}))
+      return true;
+  return false;
+}
+
 Eigen::Matrix4d DeflectionModel::tool_pose(const Eigen::VectorXd& theta,
                                            const Measurement& m,
                                            const MeasurementContext& c) const {

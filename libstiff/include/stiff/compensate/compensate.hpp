@@ -39,6 +39,17 @@ Vector6d predict_deflection(const DeflectionModel& model,
 /// Loaded tool pose: FK(q) displaced by the deflection d (position) and rotated by rot.
 Eigen::Matrix4d loaded_pose(const Eigen::Matrix4d& pose, const Vector6d& deflection);
 
+/// The tool pose (base frame) the model predicts when the joints are commanded to q under
+/// wrench (F, M) at the load point: for a model of absolute accuracy the calibrated model's
+/// (DeflectionModel::tool_pose: corrected chain, deflection under the wrench and the robot's
+/// weight, no instrument; thermal expansion at its 20 C reference), else FK(q) displaced by
+/// the deflection (loaded_pose). `time` [s] for effects that drift with time.
+Eigen::Matrix4d predicted_tool_pose(const DeflectionModel& model,
+                                    const Eigen::VectorXd& theta,
+                                    const Eigen::VectorXd& q,
+                                    const Vector6d& wrench,
+                                    double time = 0.0);
+
 struct PoseCompensation {
   Eigen::VectorXd q_cmd;  ///< commanded joints [rad]
   int iterations = 0;

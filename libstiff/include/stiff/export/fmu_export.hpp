@@ -26,6 +26,7 @@
 ///   tool <mass> <com x> <com y> <com z>
 ///   gravity <gx> <gy> <gz>
 ///   effects <count> <name>...
+///   sessions <count>            (only for a fit with sessions: per-session parameter blocks)
 ///   variables <count>
 ///   var <vr> <name> <role> <index> <start>... <min> <max>
 ///       (vr: the fixed references of fmu_format::vr, unique; one start per element: n for

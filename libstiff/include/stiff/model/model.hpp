@@ -33,6 +33,10 @@ class DeflectionModel {
   std::vector<std::string> effect_names() const;
   std::string model_string() const;  ///< "joint+link"
   int parameter_count() const { return count_; }
+  /// A model of absolute accuracy: one of its effects corrects the chain (geometry stage) or
+  /// is seen only in absolute data (tool, registration, self-weight, temperature). Its tool
+  /// pose is the calibrated one (tool_pose), not the nominal pose plus a deflection.
+  bool absolute_accuracy() const;
   /// Every effect is linear (Effect::linear): d is affine in theta.
   bool linear() const { return linear_; }
   /// The parameters whose derivatives need evaluate_jet passes: all of them, or, when the
