@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from . import UserError
 from .common import Formatter, add_robot, atomic_write_text, load_robot, table
 
 EXAMPLE = """example:
@@ -51,8 +52,8 @@ def run_show(args):
     robot = load_robot(args)
     fit = None
     if args.session and not (args.fit and args.urdf):
-        raise SystemExit("stiff robot show: --session needs --fit and --urdf (it places the "
-                         "calibrated robot in that session's instrument frame)")
+        raise UserError("--session needs --fit and --urdf (it places the calibrated robot "
+                        "in that session's instrument frame)")
     if args.fit:
         from .. import api
         fit = api.Fit.read(args.fit)
