@@ -144,6 +144,43 @@ Options read_options(const Options* in, bool output = false) {
   return out;
 }
 
+/// A default string of a core option struct as a C string with static storage (option structs
+/// hold borrowed pointers, so the one *_options_init writes must outlive every call):
+/// `static_string([] { return IdentifyOptions{}.loss; })`. Each lambda is its own type, so each
+/// call site keeps its own copy. An empty default gives NULL (the library then decides).
+template <typename Make>
+const char* static_string(Make make) {
+  static const std::string s = make();
+  return s.empty() ? nullptr : s.c_str();
+}
+
+/// The body of every stiff_*_options_init (libgit2's options_init convention): write `defaults`
+/// (built from the core's option structs, never restated numbers) into the caller's struct.
+/// `struct_size` is sizeof the struct as the caller compiled it: at least `first_size` (the
+/// first released version) and, when smaller than this library's struct, the end of one of
+/// its versions. Bytes beyond min(struct_size, sizeof(Options)) are not touched; struct_size
+/// is set to the bytes written.
+template <typename Options>
+stiff_status init_options(Options* options,
+                          size_t struct_size,
+                          size_t first_size,
+                          const char* type_name,
+                          Options defaults) {
+  require(options, "options");
+  if (struct_size < first_size)
+    throw InvalidArgument("struct_size " + std::to_string(struct_size) +
+                          " is smaller than the first released " + type_name + " (" +
+                          std::to_string(first_size) + " bytes; pass sizeof the struct)");
+  if (struct_size < sizeof(Options) && !is_version_size<Options>(struct_size))
+    throw InvalidArgument("struct_size " + std::to_string(struct_size) + " ends " +
+                          field_cut_by<Options>(struct_size) + ", so it is no version of " +
+                          type_name + " (pass sizeof the struct)");
+  const size_t n = struct_size < sizeof(Options) ? struct_size : sizeof(Options);
+  defaults.struct_size = static_cast<uint32_t>(n);
+  std::memcpy(options, &defaults, n);
+  return STIFF_OK;
+}
+
 /// A 4 x 4 row-major pose read from the caller's 16 doubles: finite, with an orthonormal
 /// right-handed rotation and last row 0 0 0 1, else InvalidArgument naming `what`.
 inline Eigen::Matrix4d rigid_pose_at(const double* p, const char* what) {

@@ -242,6 +242,26 @@ stiff_status stiff_truth_deviation(double* deviation,
   });
 }
 
+stiff_status stiff_path_options_init(stiff_path_options* options, size_t struct_size) {
+  return guarded(__func__, [&] {
+    // The core's PathOptions{}: the frame and the default tool orientation as x y z r p y.
+    const PathOptions po;
+    stiff_path_options o{};
+    const Eigen::Matrix<double, 6, 1> frame = xyz_rpy_from_pose(po.frame);
+    for (int k = 0; k < 6; ++k) o.frame[k] = frame(k);
+    Eigen::Matrix4d tool = Eigen::Matrix4d::Identity();
+    tool.block<3, 3>(0, 0) = po.tool_orientation;
+    const Eigen::Matrix<double, 6, 1> rpy = xyz_rpy_from_pose(tool);
+    // Written but not used until flags has STIFF_PATH_TOOL_RPY: setting that bit alone keeps
+    // the default orientation.
+    for (int k = 0; k < 3; ++k) o.tool_rpy[k] = rpy(3 + k);
+    o.flags = 0u;
+    o.segment_m = po.segment_m;
+    return capi::init_options(options, struct_size, sizeof(stiff_path_options),
+                              "stiff_path_options", o);
+  });
+}
+
 namespace {
 ToolPath read_path_with(const char* path, const stiff_path_options* options) {
   capi::require_string(path, "path");
@@ -256,7 +276,6 @@ ToolPath read_path_with(const char* path, const stiff_path_options* options) {
     f << 0, 0, 0, o.tool_rpy[0], o.tool_rpy[1], o.tool_rpy[2];
     po.tool_orientation = pose_from_xyz_rpy(f).block<3, 3>(0, 0);
   }
-  if (!(o.segment_m >= 0)) throw InvalidArgument("options.segment_m must be >= 0");
   po.segment_m = o.segment_m;
   return read_path(path, po);
 }

@@ -1,6 +1,9 @@
 // Model diagnosis over the C ABI (stiff_diagnose.h).
 #include "stiff/diagnose/diagnose.hpp"
 
+#include <algorithm>
+#include <limits>
+
 #include "boundary.hpp"
 #include "handles.hpp"
 #include "stiff/stiff_diagnose.h"
@@ -24,6 +27,21 @@ const stiff_diagnosis& diagnosis_of(const stiff_diagnosis* d) {
 
 extern "C" {
 
+stiff_status stiff_diagnose_options_init(stiff_diagnose_options* options, size_t struct_size) {
+  return guarded(__func__, [&] {
+    // The core's DiagnosisOptions{}: nothing is restated here.
+    const DiagnosisOptions d;
+    stiff_diagnose_options o{};
+    o.model = kDefaultModel;
+    o.candidates = nullptr;  // every registered effect not in the model (d.candidates empty)
+    o.alpha = d.alpha;
+    o.auto_steps = d.auto_loop ? static_cast<uint32_t>(d.max_steps) : 0u;
+    o.command_prefix = static_string([] { return DiagnosisOptions{}.command_prefix; });
+    return init_options(options, struct_size, sizeof(stiff_diagnose_options),
+                        "stiff_diagnose_options", o);
+  });
+}
+
 stiff_status stiff_diagnose(stiff_diagnosis** out,
                             const stiff_robot* robot,
                             const stiff_dataset* calibration,
@@ -35,16 +53,15 @@ stiff_status stiff_diagnose(stiff_diagnosis** out,
     require(robot, "robot");
     require(calibration, "calibration");
     const stiff_diagnose_options o = read_options(options);
-    const std::vector<std::string> model = parse_model_string(o.model ? o.model : "joint");
+    const std::vector<std::string> model = parse_model_string(o.model ? o.model : kDefaultModel);
+    // Zero fields keep the core's defaults; every value is checked once, by diagnose().
     DiagnosisOptions d;
     if (o.candidates) d.candidates = parse_model_string(o.candidates);
-    if (o.alpha != 0) {
-      if (!(o.alpha > 0 && o.alpha < 1)) throw InvalidArgument("alpha must be in (0, 1)");
-      d.alpha = o.alpha;
-    }
-    if (o.auto_steps > 20) throw InvalidArgument("auto_steps must be <= 20");
+    if (o.alpha != 0) d.alpha = o.alpha;
     d.auto_loop = o.auto_steps > 0;
-    if (o.auto_steps > 0) d.max_steps = static_cast<int>(o.auto_steps);
+    if (o.auto_steps > 0)
+      d.max_steps =
+          static_cast<int>(std::min<uint32_t>(o.auto_steps, std::numeric_limits<int>::max()));
     if (o.command_prefix) d.command_prefix = o.command_prefix;
     auto r = std::make_unique<stiff_diagnosis>();
     r->diagnosis = diagnose(robot->model, calibration->data,

@@ -2,7 +2,10 @@
 #include <dlfcn.h>
 #include <sys/stat.h>
 
+#include <algorithm>
+#include <cstddef>
 #include <cstdlib>
+#include <limits>
 #include <string>
 
 #include "boundary.hpp"
@@ -31,6 +34,22 @@ std::string packaged_binaries_dir() {
 
 }  // namespace
 
+extern "C" stiff_status stiff_fmu_options_init(stiff_fmu_options* options, size_t struct_size) {
+  return stiff::capi::guarded(__func__, [&] {
+    // The core's FmuExportOptions{}: nothing is restated here.
+    const stiff::FmuExportOptions f;
+    stiff_fmu_options o{};
+    o.fmi_version = static_cast<uint32_t>(f.fmi_version);
+    o.model_identifier =
+        stiff::capi::static_string([] { return stiff::FmuExportOptions{}.model_identifier; });
+    o.binaries_dir =
+        stiff::capi::static_string([] { return stiff::FmuExportOptions{}.binaries_dir; });
+    o.array_inputs = f.array_inputs ? 1u : 0u;
+    return stiff::capi::init_options(
+        options, struct_size, offsetof(stiff_fmu_options, array_inputs), "stiff_fmu_options", o);
+  });
+}
+
 extern "C" stiff_status stiff_fmu_export(const char* path,
                                          const stiff_robot* robot,
                                          const stiff_result* fit,
@@ -41,7 +60,9 @@ extern "C" stiff_status stiff_fmu_export(const char* path,
     stiff::capi::require(fit, "fit");
     const stiff_fmu_options o = stiff::capi::read_options(options);
     stiff::FmuExportOptions opt;
-    opt.fmi_version = o.fmi_version == 0 ? 2 : static_cast<int>(o.fmi_version);
+    if (o.fmi_version != 0)
+      opt.fmi_version =
+          static_cast<int>(std::min<uint32_t>(o.fmi_version, std::numeric_limits<int>::max()));
     if (o.model_identifier) opt.model_identifier = o.model_identifier;
     if (o.binaries_dir) opt.binaries_dir = o.binaries_dir;
     if (opt.binaries_dir.empty() && !is_dir(stiff::fmu_binaries_dir(opt)))

@@ -1,6 +1,9 @@
 // Identification, fit results, prediction.
 #include "stiff/identify/identify.hpp"
 
+#include <algorithm>
+#include <limits>
+
 #include "boundary.hpp"
 #include "handles.hpp"
 #include "stiff/io/robot_io.hpp"
@@ -19,6 +22,22 @@ const FitResult& fit_of(const stiff_result* r) {
 
 extern "C" {
 
+stiff_status stiff_identify_options_init(stiff_identify_options* options, size_t struct_size) {
+  return guarded(__func__, [&] {
+    // The core's IdentifyOptions{}: nothing is restated here.
+    const IdentifyOptions io;
+    stiff_identify_options o{};
+    o.model = kDefaultModel;
+    o.loss = static_string([] { return IdentifyOptions{}.loss; });
+    o.loss_scale_m = io.loss_scale_m;
+    o.max_iterations = static_cast<uint32_t>(io.max_iterations);
+    o.method = STIFF_METHOD_AUTO;
+    o.max_relative_se = io.max_relative_se;
+    return init_options(options, struct_size, offsetof(stiff_identify_options, max_relative_se),
+                        "stiff_identify_options", o);
+  });
+}
+
 stiff_status stiff_identify(stiff_result** out,
                             const stiff_robot* robot,
                             const stiff_dataset* data,
@@ -29,18 +48,22 @@ stiff_status stiff_identify(stiff_result** out,
     require(robot, "robot");
     require(data, "data");
     const stiff_identify_options o = read_options(options);
-    const std::vector<std::string> effects = parse_model_string(o.model ? o.model : "joint");
-    const std::string loss = o.loss ? o.loss : "none";
-    if (!(std::isfinite(o.loss_scale_m) && o.loss_scale_m >= 0))
-      throw InvalidArgument("loss_scale_m must be finite and >= 0");
+    const std::vector<std::string> effects = parse_model_string(o.model ? o.model : kDefaultModel);
     if (o.method > STIFF_METHOD_CERES)
       throw InvalidArgument("unknown method " + std::to_string(o.method));
-    if (!std::isfinite(o.max_relative_se)) throw InvalidArgument("max_relative_se must be finite");
-    const double max_relative_se = o.max_relative_se == 0.0
-                                       ? IdentifyOptions{}.max_relative_se
-                                       : (o.max_relative_se < 0.0 ? 0.0 : o.max_relative_se);
-    const bool linear_ok =
-        effects.size() == 1 && effects[0] == "joint" && loss == "none" && !o.start;
+    // The C fields' 0 means the default, a negative max_relative_se "off" (the core's 0); every
+    // value is then checked once, by the core, whichever method solves.
+    IdentifyOptions io;
+    if (o.loss) io.loss = o.loss;
+    io.loss_scale_m = o.loss_scale_m;
+    if (o.max_relative_se != 0.0)
+      io.max_relative_se = o.max_relative_se < 0.0 ? 0.0 : o.max_relative_se;
+    if (o.max_iterations)
+      io.max_iterations =
+          static_cast<int>(std::min<uint32_t>(o.max_iterations, std::numeric_limits<int>::max()));
+    check_identify_options(io);
+    const bool linear_ok = effects.size() == 1 && effects[0] == kDefaultModel &&
+                           io.loss == IdentifyOptions{}.loss && !o.start;
     auto r = std::make_unique<stiff_result>();
     // Absolute rows need the nonlinear path (the linear one reads displacement rows only).
     const bool displacement_only = data->data.absolute_rows() == 0;
@@ -49,16 +72,11 @@ stiff_status stiff_identify(stiff_result** out,
       if (!linear_ok)
         throw InvalidArgument("the linear method fits the model 'joint' without robust loss only");
       LinearOptions lo;
-      lo.max_relative_se = max_relative_se;
+      lo.max_relative_se = io.max_relative_se;
       r->fit = identify_joint_linear(robot->model, data->data, lo);
     } else {
-      IdentifyOptions io;
       if (o.start) io.start = &o.start->fit;
       if (o.refit && *o.refit) io.refit = parse_model_string(o.refit);
-      io.loss = loss;
-      io.loss_scale_m = o.loss_scale_m;
-      io.max_relative_se = max_relative_se;
-      if (o.max_iterations) io.max_iterations = static_cast<int>(o.max_iterations);
       if (o.progress) {
         const auto fn = o.progress;
         void* ud = o.progress_user_data;

@@ -21,12 +21,6 @@ using namespace stiff;
 using namespace stiff::capi;
 
 namespace {
-/// The default criterion's name with static storage (stiff_plan_options.criterion is a
-/// borrowed pointer).
-const char* default_criterion() {
-  static const std::string name = PlanOptions{}.criterion;
-  return name.c_str();
-}
 /// Every criterion's value of `set` as JSON; errors name the calling function `fn`.
 stiff_status criteria_json(const char* fn,
                            char* json,
@@ -56,18 +50,12 @@ extern "C" {
 
 stiff_status stiff_plan_options_init(stiff_plan_options* options, size_t struct_size) {
   return guarded(__func__, [&] {
-    require(options, "options");
-    if (struct_size < offsetof(stiff_plan_options, annealing_initial_temperature))
-      throw InvalidArgument("struct_size " + std::to_string(struct_size) +
-                            " is smaller than the first released stiff_plan_options");
-    const size_t n = std::min(struct_size, sizeof(stiff_plan_options));
     // The defaults are the core's own option structs: nothing is restated here.
     const PoolOptions pool;
     const PlanOptions plan;
     stiff_plan_options o{};
-    o.struct_size = static_cast<uint32_t>(n);
     o.count = static_cast<uint32_t>(plan.count);
-    o.criterion = default_criterion();
+    o.criterion = static_string([] { return PlanOptions{}.criterion; });
     o.seed = plan.seed;
     o.pool_poses = static_cast<uint32_t>(pool.pose_count);
     o.pool_loads = static_cast<uint32_t>(pool.load_count);
@@ -75,7 +63,9 @@ stiff_status stiff_plan_options_init(stiff_plan_options* options, size_t struct_
     o.load_min_N = pool.load_min_N;
     o.load_max_N = pool.load_max_N;
     o.load_step_N = pool.load_step_N > 0 ? pool.load_step_N : -1.0;
-    o.load_max_magnitude_N = 0.0;  // unlimited
+    // The C field's 0 is the core's "unlimited" (infinity).
+    o.load_max_magnitude_N =
+        std::isfinite(pool.load_max_magnitude_N) ? pool.load_max_magnitude_N : 0.0;
     o.min_sigma_m = pool.min_sigma_m;
     o.optimizers = (plan.annealing.enabled ? STIFF_PLAN_ANNEALING : 0u) |
                    (plan.exchange.enabled ? STIFF_PLAN_EXCHANGE : 0u) |
@@ -85,8 +75,9 @@ stiff_status stiff_plan_options_init(stiff_plan_options* options, size_t struct_
     o.tracker_ppm = pool.noise.tracker_ppm;
     o.annealing_initial_temperature = plan.annealing.initial_temperature;
     o.annealing_initial_swap_count = static_cast<uint32_t>(plan.annealing.initial_swap_count);
-    std::memcpy(options, &o, n);
-    return STIFF_OK;
+    return init_options(options, struct_size,
+                        offsetof(stiff_plan_options, annealing_initial_temperature),
+                        "stiff_plan_options", o);
   });
 }
 

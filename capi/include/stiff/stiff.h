@@ -16,6 +16,11 @@
  *    size query); it is accepted when there is nothing to write.
  *  - Option structs start with struct_size = sizeof(struct) as the caller compiled it; zero
  *    fields mean "library default"; fields are only ever appended. NULL options: defaults.
+ *    Each has a stiff_*_options_init(&o, sizeof o) that fills the library's defaults (the one
+ *    place they are written); change only the fields you mean to set.
+ *  - Pointers inside option structs (strings, arrays, handles, user_data) are borrowed for the
+ *    duration of the call: read during it, never kept; the caller owns them and may free them
+ *    when the call returns. No result refers to an option's memory.
  *  - Threading: a handle is used by one thread at a time; distinct handles are independent;
  *    const handles (robot, result, model) may be shared by threads that only read them.
  *  - Nothing is printed; no exception or abort crosses this boundary.
@@ -44,7 +49,8 @@
 extern "C" {
 #endif
 
-/** Result of every call that can fail. Values are ABI: append only, never renumber. */
+/** Result of every call that can fail. Values are ABI: append only, never renumber.
+ *  @since 0.1 */
 typedef enum stiff_status {
   STIFF_OK = 0,
   STIFF_E_INVALID_ARGUMENT = -1, /**< NULL, NaN, wrong size, out of range, unknown name */
@@ -58,7 +64,7 @@ typedef enum stiff_status {
   STIFF_E_INTERNAL = -99         /**< unexpected failure: a bug, please report */
 } stiff_status;
 
-/** Opaque handles. */
+/** Opaque handles. @since 0.1 */
 typedef struct stiff_robot stiff_robot;     /**< robot description (kinematics, masses) */
 typedef struct stiff_dataset stiff_dataset; /**< one experiment: poses, loads, displacements */
 typedef struct stiff_result stiff_result;   /**< an identified model (a "fit") */
@@ -111,7 +117,7 @@ STIFF_API stiff_status stiff_robot_jacobian(double* jacobian,
                                             const double* q,
                                             size_t n);
 
-/** Which fields of stiff_robot_options replace the file's values (bits of `set`). */
+/** Which fields of stiff_robot_options replace the file's values (bits of `set`). @since 0.1 */
 #define STIFF_ROBOT_SET_MEASURED_POINT 1u
 #define STIFF_ROBOT_SET_LOAD_POINT 2u
 #define STIFF_ROBOT_SET_TOOL_MASS 4u
@@ -120,7 +126,8 @@ STIFF_API stiff_status stiff_robot_jacobian(double* jacobian,
 /** How to read a robot file (docs/formats.md, "Robot files"). Points are in the tip
  *  (flange) frame [m]. A field replaces the file's value only when its bit is in `set`; a URDF
  *  has no such values (points at the tip frame's origin, no tool). Without a measured point's
- *  load point, the load point follows the measured point as in the YAML format. */
+ *  load point, the load point follows the measured point as in the YAML format. The strings are
+ * borrowed for the duration of the call. @since 0.1 */
 typedef struct stiff_robot_options {
   uint32_t struct_size;
   const char* base_link;      /**< URDF: first link; NULL or "": base_link, else the root */
@@ -131,6 +138,13 @@ typedef struct stiff_robot_options {
   double tool_mass_kg;        /**< tool mass [kg], >= 0 */
   double tool_com_m[3];       /**< tool centre of mass, tip frame [m] */
 } stiff_robot_options;
+
+/** Fill *options with the library's defaults (the reader's choice of chain ends, the file's
+ *  points: base_link and tip_link NULL, set 0) and struct_size = the bytes written, at most
+ *  struct_size = sizeof(stiff_robot_options) as the caller knows it; fields beyond it are not
+ *  touched. Errors: INVALID_ARGUMENT (NULL, a struct_size that is no version of the struct).
+ *  @since 0.3 */
+STIFF_API stiff_status stiff_robot_options_init(stiff_robot_options* options, size_t struct_size);
 
 /** Load a robot description with options (NULL: as stiff_robot_load). base/tip on a YAML robot
  *  is INVALID_ARGUMENT; an ambiguous URDF tip is a PARSE error listing the candidates.
@@ -166,7 +180,7 @@ STIFF_API stiff_status stiff_robot_to_yaml(char* text,
 
 /** Columns of a dataset, for stiff_dataset_get. Shapes: Q rows x dof [rad]; FORCE, MOMENT,
  *  DISPLACEMENT, ROTATION rows x 3 [N, N*m, m, rad], base frame; SIGMA rows [m]; TIME rows
- *  [s]. */
+ *  [s]. @since 0.1 */
 typedef enum stiff_column {
   STIFF_COLUMN_Q = 0,
   STIFF_COLUMN_FORCE = 1,
@@ -233,7 +247,9 @@ STIFF_API stiff_status stiff_dataset_id(
 
 /* ---------------------------------------------------------------- simulation */
 
-/** Noise of a simulated experiment. Zero fields mean zero error, except the seed (0 = 1). */
+/** Noise of a simulated experiment. Zero fields mean zero error, except the seed (0: the
+ *  default seed) and tracker_position_m (0, 0, 0: the default station). NULL noise options are
+ *  the library's default noise, which stiff_noise_options_init writes. @since 0.1 */
 typedef struct stiff_noise_options {
   uint32_t struct_size;
   double tracker_sigma_m;       /**< per-axis tracker sigma, constant part [m] */
@@ -246,6 +262,14 @@ typedef struct stiff_noise_options {
   double outlier_size_m;        /**< size of a gross error [m] */
   uint64_t seed;                /**< random seed; same seed, same data */
 } stiff_noise_options;
+
+/** Fill *options with the library's default noise (what stiff_simulate uses for NULL noise:
+ *  the virtual tracker's noise and station, the default seed, no force, joint or gross
+ *  errors) and
+ *  struct_size = the bytes written, at most struct_size = sizeof(stiff_noise_options) as the
+ *  caller knows it; fields beyond it are not touched. Errors: INVALID_ARGUMENT (NULL, a
+ *  struct_size that is no version of the struct). @since 0.3 */
+STIFF_API stiff_status stiff_noise_options_init(stiff_noise_options* options, size_t struct_size);
 
 /** Read a noise file (YAML, docs/formats.md) into *noise (set its struct_size first).
  *  Errors: IO, PARSE with path:line:column. @since 0.1 */
@@ -303,17 +327,23 @@ STIFF_API stiff_status stiff_simulate(stiff_dataset** out,
 
 /* ---------------------------------------------------------------- identification */
 
-/** Progress callback: return 0 to continue, non-zero to stop (the call then returns
- *  STIFF_E_CANCELLED). Called from the calling thread. */
+/** Progress of identification: the solver's iteration and cost. Return 0 to continue,
+ *  non-zero to stop (the call then returns STIFF_E_CANCELLED). Called from the calling thread.
+ *  The planning callback (stiff_plan_progress_fn) has another shape, with uint64_t counters:
+ *  both stay as released, since changing either would break the ABI; uint32_t holds every
+ *  iteration here (max_iterations is a uint32_t). @since 0.1 */
 typedef int (*stiff_progress_fn)(uint32_t iteration, double cost, void* user_data);
 
-/** Identification methods. */
+/** Identification methods. @since 0.1 */
 typedef enum stiff_method {
   STIFF_METHOD_AUTO = 0,   /**< linear least squares for "joint" without robust loss, else Ceres */
   STIFF_METHOD_LINEAR = 1, /**< linear least squares (model "joint" only) */
   STIFF_METHOD_CERES = 2   /**< nonlinear robust least squares (any model) */
 } stiff_method;
 
+/** Options of stiff_identify; zero fields take the defaults that stiff_identify_options_init
+ *  writes. model, loss, refit and start are borrowed for the duration of the call (a result
+ *  never refers to them). @since 0.1 */
 typedef struct stiff_identify_options {
   uint32_t struct_size;
   const char* model;          /**< effects joined by '+', e.g. "joint+link"; NULL: "joint" */
@@ -336,9 +366,20 @@ typedef struct stiff_identify_options {
    *  everything. @since 0.3 */
   const char* refit;
 } stiff_identify_options;
-/* Every field spelled out: a bare {sizeof(...)} trips -Wmissing-field-initializers. */
+/* Every field spelled out: a bare {sizeof(...)} trips -Wmissing-field-initializers. All zero:
+ * every field at its default. stiff_identify_options_init writes the defaults themselves.
+ * @since 0.1 */
 #define STIFF_IDENTIFY_OPTIONS_INIT \
   { sizeof(stiff_identify_options), NULL, NULL, 0.0, 0, 0, NULL, NULL, 0.0, NULL, NULL }
+
+/** Fill *options with the library's defaults (model "joint", loss "none", loss_scale_m 0 =
+ *  from the noise, the solver's iteration limit, STIFF_METHOD_AUTO, the default
+ *  max_relative_se, no start) and struct_size = the bytes written, at most struct_size =
+ *  sizeof(stiff_identify_options) as the caller knows it; fields beyond it are not touched.
+ *  Errors: INVALID_ARGUMENT (NULL, a struct_size smaller than the first released struct or
+ *  not the end of one of its versions). @since 0.3 */
+STIFF_API stiff_status stiff_identify_options_init(stiff_identify_options* options,
+                                                   size_t struct_size);
 
 /** Identify the model from data with measured displacements. Joints or parameters that the
  *  data cannot identify are named in the result's warnings and held fixed. Errors:
@@ -379,20 +420,23 @@ STIFF_API stiff_status stiff_robot_to_urdf(char* text,
                                            const double world_pose[16]);
 /** Release a result; NULL is a no-op. @since 0.1 */
 STIFF_API void stiff_result_destroy(stiff_result* result);
-/** Read / write a fit file (JSON, docs/formats.md). Writing is atomic. @since 0.1 */
+/** Read a fit file (JSON, docs/formats.md). Release with stiff_result_destroy. @since 0.1 */
 STIFF_API stiff_status stiff_result_read_json(stiff_result** out, const char* path);
+/** Write a fit file (JSON, docs/formats.md), atomically. @since 0.1 */
 STIFF_API stiff_status stiff_result_write_json(const stiff_result* result, const char* path);
 /** The fit file's JSON text (UTF-8 with NUL; buffer in bytes). @since 0.1 */
 STIFF_API stiff_status stiff_result_json(char* json,
                                          size_t capacity,
                                          size_t* needed,
                                          const stiff_result* result);
-/** Joint stiffness k_j = 1/c_j [N*m/rad] (dof values; NaN for unidentified joints). */
+/** Joint stiffness k_j = 1/c_j [N*m/rad] (dof values; NaN for unidentified joints).
+ *  @since 0.1 */
 STIFF_API stiff_status stiff_result_joint_stiffness(double* values,
                                                     size_t capacity,
                                                     size_t* needed,
                                                     const stiff_result* result);
-/** Standard errors of the joint stiffness [N*m/rad] (delta method; NaN when unidentified). */
+/** Standard errors of the joint stiffness [N*m/rad] (delta method; NaN when unidentified).
+ *  @since 0.1 */
 STIFF_API stiff_status stiff_result_joint_stiffness_se(double* values,
                                                        size_t capacity,
                                                        size_t* needed,
@@ -404,7 +448,7 @@ STIFF_API stiff_status stiff_result_parameters(double* values,
                                                size_t capacity,
                                                size_t* needed,
                                                const stiff_result* result);
-/** Parameter covariance, p x p row-major (NaN rows for unidentified parameters). */
+/** Parameter covariance, p x p row-major (NaN rows for unidentified parameters). @since 0.1 */
 STIFF_API stiff_status stiff_result_covariance(double* covariance,
                                                size_t capacity,
                                                size_t* needed,
@@ -415,7 +459,8 @@ STIFF_API stiff_status stiff_result_residuals(double* residuals,
                                               size_t* needed,
                                               const stiff_result* result);
 
-/** Fit statistics. */
+/** Fit statistics (an output struct: set struct_size, stiff_result_statistics fills the
+ *  rest). @since 0.1 */
 typedef struct stiff_fit_statistics {
   uint32_t struct_size;
   uint32_t measurements;   /**< N rows */
@@ -443,6 +488,7 @@ STIFF_API stiff_status stiff_result_warning(
 STIFF_API stiff_status stiff_model_create(stiff_model** out,
                                           const stiff_robot* robot,
                                           const stiff_result* fit);
+/** Release a model; NULL is a no-op. @since 0.1 */
 STIFF_API void stiff_model_destroy(stiff_model* model);
 /** Predicted deflection (dx, dy, dz [m], rx, ry, rz [rad]), base frame, of the measured point
  *  at joint positions q (n = dof, rad) under the wrench (fx, fy, fz [N], mx, my, mz [N*m])

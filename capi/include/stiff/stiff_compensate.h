@@ -25,7 +25,8 @@
 extern "C" {
 #endif
 
-/** Per-point status bits of stiff_ik_path and stiff_compensate_path (bitwise OR). */
+/** Per-point status bits of stiff_ik_path and stiff_compensate_path (bitwise OR).
+ *  @since 0.1 */
 #define STIFF_POINT_OK 0
 #define STIFF_POINT_SINGULAR 1       /**< near a singularity (6 x n Jacobian sigma_min < 1e-5) */
 #define STIFF_POINT_UNREACHABLE 2    /**< no IK solution within the limits: previous q held */
@@ -162,7 +163,9 @@ STIFF_API stiff_status stiff_filter_target(double pose_out[16],
                                            const double base[16],
                                            const double tool[16]);
 
-/** Options of stiff_path_read. */
+/** Options of stiff_path_read and stiff_path_read_flags; zero fields take the defaults that
+ *  stiff_path_options_init writes (the base frame, the tool pointing down, end points only).
+ *  It holds no pointers. @since 0.1 */
 typedef struct stiff_path_options {
   uint32_t struct_size;
   /** Workpiece frame in the base frame (x, y, z [m], rx, ry, rz [rad] fixed-axis XYZ); the
@@ -176,7 +179,14 @@ typedef struct stiff_path_options {
   /** G-code: split G1 moves into segments of at most this length [m]; 0: end points only. */
   double segment_m;
 } stiff_path_options;
-#define STIFF_PATH_TOOL_RPY 1u
+#define STIFF_PATH_TOOL_RPY 1u /**< bit of flags: use tool_rpy. @since 0.1 */
+
+/** Fill *options with the library's defaults: frame zeros, tool_rpy the default tool
+ *  orientation (used only once flags has STIFF_PATH_TOOL_RPY), flags 0, segment_m 0; and
+ *  struct_size = the bytes written, at most struct_size = sizeof(stiff_path_options) as the
+ *  caller knows it; fields beyond it are not touched. Errors: INVALID_ARGUMENT (NULL, a
+ *  struct_size that is no version of the struct). @since 0.3 */
+STIFF_API stiff_status stiff_path_options_init(stiff_path_options* options, size_t struct_size);
 
 /** Read a path file: .csv (columns x, y, z with _m/_mm/_um, orientation rx, ry, rz with
  *  _rad/_deg or qw, qx, qy, qz, optional fx..mz wrench) or G-code (any other extension: G0/G1,
@@ -196,7 +206,7 @@ STIFF_API stiff_status stiff_path_read(double* poses,
                                        const char* path,
                                        const stiff_path_options* options);
 
-/** Bits of stiff_path_read_flags. */
+/** Bits of stiff_path_read_flags. @since 0.1 */
 #define STIFF_PATH_POINT_RAPID 1u /**< a G0 (rapid) move: positioning, no process force */
 
 /** Per-point flags of the path stiff_path_read reads with the same options: flags (capacity

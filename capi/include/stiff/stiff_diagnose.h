@@ -25,8 +25,11 @@ extern "C" {
 typedef struct stiff_diagnosis stiff_diagnosis;
 
 /**
- * Options of stiff_diagnose. Zero-initialise, set struct_size = sizeof(stiff_diagnose_options),
- * then the fields you need; a NULL options pointer means all defaults. Zero means default.
+ * Options of stiff_diagnose. Fill with stiff_diagnose_options_init (or zero-initialise and set
+ * struct_size = sizeof(stiff_diagnose_options)), then set the fields you need; a NULL options
+ * pointer means all defaults. Zero means default. The strings (model, candidates,
+ * command_prefix) are borrowed for the duration of the call: read during it, never kept; the
+ * diagnosis holds its own copies.
  * @since 0.1
  */
 typedef struct stiff_diagnose_options {
@@ -39,6 +42,17 @@ typedef struct stiff_diagnose_options {
    *  NULL = "stiff diagnose". */
   const char* command_prefix;
 } stiff_diagnose_options;
+
+/**
+ * Fill *options with the library's defaults (model "joint", every other effect a candidate,
+ * the default alpha, no loop, the default command prefix) and struct_size = the bytes written,
+ * at most struct_size = sizeof(stiff_diagnose_options) as the caller knows it; fields beyond it
+ * are not touched. Errors: STIFF_E_INVALID_ARGUMENT (NULL, a struct_size that is no version of
+ * the struct).
+ * @since 0.3
+ */
+STIFF_API stiff_status stiff_diagnose_options_init(stiff_diagnose_options* options,
+                                                   size_t struct_size);
 
 /**
  * Diagnose the model on the calibration data (with displacements); `validation` may be NULL.

@@ -21,8 +21,10 @@ extern "C" {
 #endif
 
 /**
- * Options of stiff_fmu_export. Zero-initialise, set struct_size = sizeof(stiff_fmu_options),
- * then the fields you need; a NULL options pointer means all defaults.
+ * Options of stiff_fmu_export. Fill with stiff_fmu_options_init (or zero-initialise and set
+ * struct_size = sizeof(stiff_fmu_options)), then set the fields you need; a NULL options
+ * pointer means all defaults. The strings are borrowed for the duration of the call: read
+ * during it, never kept.
  * @since 0.1
  */
 typedef struct stiff_fmu_options {
@@ -43,6 +45,16 @@ typedef struct stiff_fmu_options {
    *  STIFF_E_INVALID_ARGUMENT). Either way an FMU has one set of inputs. @since 0.2 */
   uint32_t array_inputs;
 } stiff_fmu_options;
+
+/**
+ * Fill *options with the library's defaults (FMI 2, modelIdentifier "stiff_arm", the binaries
+ * found as described above, scalar inputs) and struct_size = the bytes written, at most
+ * struct_size = sizeof(stiff_fmu_options) as the caller knows it; fields beyond it are not
+ * touched. Errors: STIFF_E_INVALID_ARGUMENT (NULL, a struct_size smaller than the first
+ * released struct or not the end of one of its versions).
+ * @since 0.3
+ */
+STIFF_API stiff_status stiff_fmu_options_init(stiff_fmu_options* options, size_t struct_size);
 
 /**
  * Write an FMU (a .fmu zip file) of `fit` identified for `robot` to `path`.

@@ -9,20 +9,26 @@
 extern "C" {
 #endif
 
-typedef struct stiff_plan stiff_plan; /**< a planned set of measurements */
+/** A planned set of measurements (opaque). @since 0.1 */
+typedef struct stiff_plan stiff_plan;
 
 /** Progress of planning: optimizer name ("annealing", "exchange", "nlopt"), iteration of
  *  total (0: unknown) and the best score so far. Return 0 to continue, non-zero to stop (the
- *  call then returns STIFF_E_CANCELLED). Called on the calling thread. */
+ *  call then returns STIFF_E_CANCELLED). Called on the calling thread. Its counters are
+ *  uint64_t and identification's (stiff_progress_fn) uint32_t: both stay as released
+ *  (changing either would break the ABI). @since 0.1 */
 typedef int (*stiff_plan_progress_fn)(
     const char* optimizer, uint64_t iteration, uint64_t total, double best_score, void* user_data);
 
-/** Optimizers, a bit mask. */
+/** Optimizers, a bit mask. @since 0.1 */
 #define STIFF_PLAN_ANNEALING 1u /**< the paper's simulated annealing */
 #define STIFF_PLAN_EXCHANGE 2u  /**< Fedorov exchange */
 #define STIFF_PLAN_REFINE 4u    /**< NLopt continuous refinement of the discrete result */
 
-/** Planning options; zero fields take the defaults in brackets. */
+/** Planning options; zero fields take the defaults in brackets. The pointers (criterion,
+ *  q_fixed, candidate_file, task, fixture_directions, fixture_forces_N, progress_user_data)
+ *  are borrowed for the duration of stiff_plan_create: read during it, never kept; a plan
+ *  never refers to them. @since 0.1 */
 typedef struct stiff_plan_options {
   uint32_t struct_size;
   uint32_t count;                /**< measurements N [10] */
@@ -68,7 +74,8 @@ typedef struct stiff_plan_options {
  *  choices stay 0) and struct_size = sizeof(stiff_plan_options), the one place where the
  *  defaults are written (libgit2's options_init convention). Callers then change only the
  *  fields they mean to set. struct_size: sizeof(stiff_plan_options) as the caller knows it;
- *  fields beyond it are not touched. Errors: INVALID_ARGUMENT (NULL, struct_size too small).
+ *  fields beyond it are not touched. Errors: INVALID_ARGUMENT (NULL, struct_size smaller than
+ *  the first released struct or not the end of one of its versions).
  *  @since 0.1 */
 STIFF_API stiff_status stiff_plan_options_init(stiff_plan_options* options, size_t struct_size);
 
@@ -79,18 +86,22 @@ STIFF_API stiff_status stiff_plan_options_init(stiff_plan_options* options, size
 STIFF_API stiff_status stiff_plan_create(stiff_plan** out,
                                          const stiff_robot* robot,
                                          const stiff_plan_options* options);
+/** Release a plan; NULL is a no-op. @since 0.1 */
 STIFF_API void stiff_plan_destroy(stiff_plan* plan);
 /** The plan as a plan file (a measurement dataset without displacements, with extra columns
- *  fx_flange_N, fy_flange_N, fz_flange_N, contribution). Release with stiff_dataset_destroy. */
+ *  fx_flange_N, fy_flange_N, fz_flange_N, contribution). Release with stiff_dataset_destroy.
+ *  @since 0.1 */
 STIFF_API stiff_status stiff_plan_dataset(stiff_dataset** out, const stiff_plan* plan);
 /** JSON summary: criterion, value, which optimizer found the set, every criterion's value,
- *  optimizer traces, pool size, the measurements. UTF-8 with NUL, buffer in bytes. */
+ *  optimizer traces, pool size, the measurements. UTF-8 with NUL, buffer in bytes.
+ *  @since 0.1 */
 STIFF_API stiff_status stiff_plan_json(char* json,
                                        size_t capacity,
                                        size_t* needed,
                                        const stiff_plan* plan);
 /** Every criterion's value (JSON object name -> value; also "count", "m") for any given set of
- *  poses and loads, e.g. a printed design. tracker_sigma_m weights the rows (0: 10e-6). */
+ *  poses and loads, e.g. a printed design. tracker_sigma_m weights the rows (0: the planning
+ *  default, stiff_plan_options_init's tracker_sigma_m). @since 0.1 */
 STIFF_API stiff_status stiff_criteria_json(char* json,
                                            size_t capacity,
                                            size_t* needed,
@@ -106,8 +117,9 @@ STIFF_API stiff_status stiff_criteria_task_json(char* json,
                                                 const stiff_dataset* set,
                                                 const stiff_dataset* task,
                                                 double tracker_sigma_m);
-/** Number of criteria and the name of criterion i. @since 0.1 */
+/** Number of criteria. @since 0.1 */
 STIFF_API size_t stiff_criterion_count(void);
+/** Name of criterion `index` (0 .. count-1), UTF-8 with NUL; buffer in bytes. @since 0.1 */
 STIFF_API stiff_status stiff_criterion_name(char* name,
                                             size_t capacity,
                                             size_t* needed,

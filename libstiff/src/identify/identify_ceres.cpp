@@ -54,11 +54,8 @@ using detail::weighted_residuals;
 
 std::vector<std::string> loss_names() { return known_losses(); }
 
-FitResult identify(const RobotModel& robot,
-                   const Dataset& data,
-                   const std::vector<std::string>& effects,
-                   const IdentifyOptions& opt) {
-  // ---- validate everything before Ceres sees it (Ceres CHECK-aborts on misuse).
+void check_identify_options(const IdentifyOptions& opt) {
+  // Everything is validated before Ceres sees it (Ceres CHECK-aborts on misuse).
   const auto& losses = known_losses();
   if (std::find(losses.begin(), losses.end(), opt.loss) == losses.end()) {
     std::string k;
@@ -66,7 +63,8 @@ FitResult identify(const RobotModel& robot,
     throw InvalidArgument("identify: unknown loss '" + opt.loss + "'; known losses:" + k);
   }
   if (!std::isfinite(opt.loss_scale_m) || opt.loss_scale_m < 0)
-    throw InvalidArgument("identify: loss scale must be a finite value >= 0 [m]");
+    throw InvalidArgument("identify: loss_scale_m must be finite and >= 0 [m] (got " +
+                          std::to_string(opt.loss_scale_m) + ")");
   if (opt.max_iterations <= 0) throw InvalidArgument("identify: max_iterations must be > 0");
   if (!(opt.outlier_weight > 0 && opt.outlier_weight <= 1))
     throw InvalidArgument("identify: outlier_weight must be in (0, 1]");
@@ -74,6 +72,13 @@ FitResult identify(const RobotModel& robot,
     throw InvalidArgument("identify: rank_tolerance must be in (0, 0.1)");
   if (!(opt.max_relative_se >= 0) || !std::isfinite(opt.max_relative_se))
     throw InvalidArgument("identify: max_relative_se must be a finite value >= 0");
+}
+
+FitResult identify(const RobotModel& robot,
+                   const Dataset& data,
+                   const std::vector<std::string>& effects,
+                   const IdentifyOptions& opt) {
+  check_identify_options(opt);
   detail::validate_identification_data(data, robot.dof());
   const DeflectionModel model(robot, effects, &data);  // unknown effects, missing masses
   const int n = static_cast<int>(data.rows.size());

@@ -156,7 +156,9 @@ void check_options(const PathOptions& o, const std::string& file) {
       (o.tool_orientation.transpose() * o.tool_orientation - Eigen::Matrix3d::Identity()).norm() >
           1e-6)
     throw InvalidArgument(file + ": the workpiece frame or tool orientation is not a rotation");
-  if (!(o.segment_m >= 0)) throw InvalidArgument(file + ": segment length must be >= 0");
+  if (!(o.segment_m >= 0))
+    throw InvalidArgument(file + ": the segment length segment_m must be >= 0 [m] (got " +
+                          std::to_string(o.segment_m) + ")");
 }
 
 }  // namespace
@@ -614,6 +616,7 @@ ToolPath parse_gcode(const std::string& text, const std::string& file, const Pat
 }
 
 ToolPath read_path(const std::string& path, const PathOptions& options) {
+  check_options(options, path);  // a bad option is refused whatever the file holds
   const std::string text = read_text_file(path);
   const size_t dot = path.find_last_of('.');
   std::string ext = dot == std::string::npos ? "" : path.substr(dot + 1);

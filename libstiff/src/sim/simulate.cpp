@@ -184,7 +184,8 @@ static NoiseModel parse_noise_yaml_unguarded(const std::string& text, const std:
       n.joint_sigma_rad = nonneg(yaml_number(file, v, key)) * M_PI / 180.0;
     else if (key == "outlier_rate") {
       n.outlier_rate = nonneg(yaml_number(file, v, key));
-      if (n.outlier_rate > 0.5) fail_at(file, v, "outlier_rate must be <= 0.5");
+      if (n.outlier_rate > kMaxOutlierRate)
+        fail_at(file, v, "outlier_rate must be <= " + fmt(kMaxOutlierRate));
     } else if (key == "outlier_size_m")
       n.outlier_size_m = nonneg(yaml_number(file, v, key));
     else if (key == "seed")
@@ -265,11 +266,29 @@ Dataset random_design(const RobotModel& robot, const RandomDesignOptions& o) {
   return d;
 }
 
+void check_noise_model(const NoiseModel& noise) {
+  const std::pair<const char*, double> sizes[] = {
+      {"tracker_sigma_m", noise.tracker_sigma_m}, {"tracker_ppm", noise.tracker_ppm},
+      {"force_relative", noise.force_relative},   {"force_absolute_N", noise.force_absolute_N},
+      {"joint_sigma_rad", noise.joint_sigma_rad}, {"outlier_rate", noise.outlier_rate},
+      {"outlier_size_m", noise.outlier_size_m}};
+  for (const auto& [name, value] : sizes)
+    if (!(std::isfinite(value) && value >= 0))
+      throw InvalidArgument(std::string("simulate: noise ") + name +
+                            " must be finite and >= 0 (got " + fmt(value) + ")");
+  if (noise.outlier_rate > kMaxOutlierRate)
+    throw InvalidArgument("simulate: noise outlier_rate must be <= " + fmt(kMaxOutlierRate) +
+                          " (got " + fmt(noise.outlier_rate) + ")");
+  if (!noise.tracker_position_m.allFinite())
+    throw InvalidArgument("simulate: noise tracker_position_m must be finite");
+}
+
 Dataset simulate(const RobotModel& robot,
                  const Truth& truth,
                  const Dataset& design,
                  const NoiseModel& noise,
                  std::vector<int>* outlier_rows) {
+  check_noise_model(noise);
   validate_dataset(design, robot.dof(), false);
   DeflectionModel model(robot, truth.effects, &design);
   if (truth.theta.size() != model.parameter_count())

@@ -10,6 +10,11 @@
 
 namespace stiff {
 
+/// Default statistical identifiability limit (IdentifyOptions::max_relative_se): a standard
+/// error two orders of magnitude above a parameter's typical size is beyond any physically
+/// plausible value.
+inline constexpr double kDefaultMaxRelativeSe = 100.0;
+
 /// Options of the linear least-squares identification (Jiang & Fang 2023).
 struct LinearOptions {
   /// Relative tolerance on the column-scaled pivoted QR diagonal below which a direction is
@@ -18,7 +23,7 @@ struct LinearOptions {
   /// Weight rows by 1/sigma_d when the data has sigma_d.
   bool use_sigma = true;
   /// The statistical identifiability limit, as IdentifyOptions::max_relative_se.
-  double max_relative_se = 100.0;
+  double max_relative_se = kDefaultMaxRelativeSe;
 };
 
 /// Least-squares identification of the diagonal joint compliances (`joint` model), c =
@@ -54,7 +59,7 @@ struct IdentifyOptions {
   /// plausible value) and a third of its distance from its null value is not determined by
   /// the data: it is held at its null value, named in `warnings`, and the rest solved again
   /// (docs/identifiability.md). 0 turns the statistical test off (structural rank only).
-  double max_relative_se = 100.0;
+  double max_relative_se = kDefaultMaxRelativeSe;
   /// Called after every Ceres iteration with (iteration, cost); return false to cancel (the
   /// call then throws Cancelled).
   std::function<bool(int, double)> progress;
@@ -66,6 +71,12 @@ struct IdentifyOptions {
   /// register a new placement of the instrument to a calibrated robot. Empty: fit everything.
   std::vector<std::string> refit;
 };
+
+/// Throws InvalidArgument, with the message every surface shows, for options identify() cannot
+/// use (unknown loss, negative or non-finite loss scale or max_relative_se, max_iterations <= 0,
+/// outlier_weight or rank_tolerance out of range). identify() runs it first; callers that pick
+/// the linear method run it too, so that a bad value is refused whichever method solves.
+void check_identify_options(const IdentifyOptions& options);
 
 /// Checks of absolute rows against the nominal robot that the file alone cannot make
 /// (identify() runs them): without a `registration` effect (`registered` false) the measured

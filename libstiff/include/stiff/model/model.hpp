@@ -13,6 +13,10 @@
 
 namespace stiff {
 
+/// The model when none is named: the diagonal joint compliances (the paper's model). Every
+/// surface (C ABI, Python, command line) takes its default from here.
+inline constexpr const char* kDefaultModel = "joint";
+
 /// Split "joint+link+point_offset" into names; throws InvalidArgument on an empty or
 /// duplicated name (unknown names are caught when the model is built).
 std::vector<std::string> parse_model_string(const std::string& text);

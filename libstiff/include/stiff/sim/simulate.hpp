@@ -46,6 +46,15 @@ struct NoiseModel {
   double tracker_sigma_at(const Eigen::Vector3d& p) const;
 };
 
+/// The largest fraction of rows with a gross error the virtual robot simulates: beyond half the
+/// rows no robust estimator can tell outliers from data.
+inline constexpr double kMaxOutlierRate = 0.5;
+
+/// Throws InvalidArgument naming the field for a noise model simulate() cannot use: an error
+/// size that is negative or not finite, an outlier rate above kMaxOutlierRate, a tracker
+/// position that is not finite. simulate() runs it; every surface shows its message.
+void check_noise_model(const NoiseModel& noise);
+
 NoiseModel parse_noise_yaml(const std::string& text, const std::string& name_for_errors);
 NoiseModel read_noise(const std::string& path);
 
