@@ -29,7 +29,7 @@ int main(int argc, char** argv) {
   stiff_model* model = NULL;
   const double k[6] = {5.0914e4, 1.6382e4, 3.1311e4, 7.7911e3, 5.6136e3, 4.0e3};
   stiff_noise_options noise;
-  stiff_identify_options options = STIFF_IDENTIFY_OPTIONS_INIT;
+  stiff_identify_options options;
   double values[6], se[6], pose[16], jac[36], deflection[6];
   const double q[6] = {0.1, 1.2, 0.5, -1.0, 1.3, 0.0};
   const double wrench[6] = {20.0, -30.0, 25.0, 0.0, 0.0, 0.0};
@@ -51,11 +51,16 @@ int main(int argc, char** argv) {
   CHECK(stiff_dataset_read_csv(&design, robot, design_path) == STIFF_OK);
   CHECK(stiff_dataset_size(&rows, NULL, design) == STIFF_OK && rows == 10);
 
-  memset(&noise, 0, sizeof noise);
-  noise.struct_size = sizeof noise;
-  noise.tracker_sigma_m = 10e-6;
+  /* The library's defaults (the virtual tracker's noise), then only what this run changes. */
+  CHECK(stiff_noise_options_init(&noise, sizeof noise) == STIFF_OK);
+  CHECK(noise.struct_size == sizeof noise && noise.tracker_sigma_m > 0);
   noise.seed = 42;
+  CHECK(stiff_noise_options_init(NULL, sizeof noise) == STIFF_E_INVALID_ARGUMENT);
   CHECK(stiff_simulate(&data, robot, design, NULL, k, 6, &noise) == STIFF_OK);
+  CHECK(stiff_identify_options_init(&options, sizeof options) == STIFF_OK);
+  CHECK(strcmp(options.model, "joint") == 0 && options.method == STIFF_METHOD_AUTO);
+  CHECK(stiff_identify_options_init(&options, 2) == STIFF_E_INVALID_ARGUMENT);
+  CHECK(strstr(stiff_last_error(), "stiff_identify_options_init: struct_size 2") != NULL);
   CHECK(stiff_identify(&fit, robot, data, &options) == STIFF_OK);
   CHECK(stiff_result_parameters(values, se, 6, &needed, fit) == STIFF_OK && needed == 6);
   for (i = 0; i < 6; ++i) printf("c%u %.17g\n", (unsigned)(i + 1), values[i]);

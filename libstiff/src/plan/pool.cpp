@@ -136,6 +136,19 @@ CandidatePool build_pool(const RobotModel& robot, const PoolOptions& o) {
   if (!o.q_fixed.empty() && static_cast<int>(o.q_fixed.size()) != n)
     throw InvalidArgument("plan pool: q_fixed needs one value per joint (" + std::to_string(n) +
                           ")");
+  for (size_t j = 0; j < o.q_fixed.size(); ++j) {
+    const double v = o.q_fixed[j];
+    const auto& joint = robot.joints[j];
+    if (std::isnan(v)) continue;  // free
+    if (!(std::isfinite(v) && joint.lower <= v && v <= joint.upper)) {
+      std::ostringstream m;
+      m.precision(6);
+      m << "plan: joint " << j + 1 << " fixed at " << v * 180.0 / M_PI
+        << " deg is outside its limits [" << joint.lower * 180.0 / M_PI << ", "
+        << joint.upper * 180.0 / M_PI << "] deg";
+      throw InvalidArgument(m.str());
+    }
+  }
   if (!(o.min_sigma_m >= 0)) throw InvalidArgument("plan pool: min_sigma_m must be >= 0");
   if (o.use_workspace_box && !(o.box_min_m.array() < o.box_max_m.array()).all())
     throw InvalidArgument("plan pool: workspace box needs min < max on every axis");

@@ -40,6 +40,7 @@ PROGRESS_FN = C.CFUNCTYPE(C.c_int, C.c_uint32, C.c_double, C.c_void_p)
 
 
 class NoiseOptions(C.Structure):
+    _init_ = "stiff_noise_options_init"
     _fields_ = [
         ("struct_size", C.c_uint32),
         ("tracker_sigma_m", C.c_double),
@@ -55,6 +56,7 @@ class NoiseOptions(C.Structure):
 
 
 class RobotOptions(C.Structure):
+    _init_ = "stiff_robot_options_init"
     _fields_ = [
         ("struct_size", C.c_uint32),
         ("base_link", C.c_char_p),
@@ -68,6 +70,7 @@ class RobotOptions(C.Structure):
 
 
 class IdentifyOptions(C.Structure):
+    _init_ = "stiff_identify_options_init"
     _fields_ = [
         ("struct_size", C.c_uint32),
         ("model", C.c_char_p),
@@ -140,6 +143,9 @@ _proto("stiff_dataset_has", S, C.POINTER(C.c_int), H, C.c_int)
 _proto("stiff_dataset_get", S, c_double_p, C.c_size_t, c_size_p, H, C.c_int)
 _proto("stiff_dataset_set_displacement", S, H, c_double_p, C.c_size_t)
 _proto("stiff_dataset_id", S, C.c_char_p, C.c_size_t, c_size_p, H, C.c_size_t)
+_proto("stiff_noise_options_init", S, C.POINTER(NoiseOptions), C.c_size_t)
+_proto("stiff_robot_options_init", S, C.POINTER(RobotOptions), C.c_size_t)
+_proto("stiff_identify_options_init", S, C.POINTER(IdentifyOptions), C.c_size_t)
 _proto("stiff_noise_read", S, C.POINTER(NoiseOptions), C.c_char_p)
 _proto("stiff_design_random", S, HP, H, C.c_size_t, C.c_uint64)
 
@@ -265,6 +271,7 @@ PLAN_PROGRESS_FN = C.CFUNCTYPE(C.c_int, C.c_char_p, C.c_uint64, C.c_uint64, C.c_
 
 
 class PlanOptions(C.Structure):
+    _init_ = "stiff_plan_options_init"
     _fields_ = [
         ("struct_size", C.c_uint32),
         ("count", C.c_uint32),
@@ -314,6 +321,7 @@ _proto("stiff_criterion_name", S, C.c_char_p, C.c_size_t, c_size_p, C.c_size_t)
 
 
 class FmuOptions(C.Structure):
+    _init_ = "stiff_fmu_options_init"
     _fields_ = [
         ("struct_size", C.c_uint32),
         ("fmi_version", C.c_uint32),
@@ -323,11 +331,13 @@ class FmuOptions(C.Structure):
     ]
 
 
+_proto("stiff_fmu_options_init", S, C.POINTER(FmuOptions), C.c_size_t)
 _proto("stiff_fmu_export", S, C.c_char_p, H, H, C.POINTER(FmuOptions))
 
 
 # ---- diagnosis (stiff_diagnose.h)
 class DiagnoseOptions(C.Structure):
+    _init_ = "stiff_diagnose_options_init"
     _fields_ = [
         ("struct_size", C.c_uint32),
         ("model", C.c_char_p),
@@ -338,6 +348,7 @@ class DiagnoseOptions(C.Structure):
     ]
 
 
+_proto("stiff_diagnose_options_init", S, C.POINTER(DiagnoseOptions), C.c_size_t)
 _proto("stiff_diagnose", S, HP, H, H, H, C.POINTER(DiagnoseOptions))
 _proto("stiff_diagnosis_json", S, C.c_char_p, C.c_size_t, c_size_p, H)
 _proto("stiff_diagnosis_verdict", S, C.c_char_p, C.c_size_t, c_size_p, H)
@@ -346,6 +357,7 @@ _proto("stiff_diagnosis_destroy", None, H)
 
 # ---------------------------------------------------------------- compensation (stiff_compensate.h)
 class PathOptions(C.Structure):
+    _init_ = "stiff_path_options_init"
     _fields_ = [
         ("struct_size", C.c_uint32),
         ("frame", C.c_double * 6),
@@ -357,6 +369,7 @@ class PathOptions(C.Structure):
 
 PATH_TOOL_RPY = 1
 c_int_p = C.POINTER(C.c_int)
+_proto("stiff_path_options_init", S, C.POINTER(PathOptions), C.c_size_t)
 _proto("stiff_ik_analytic", S, c_int_p, H)
 _proto("stiff_tool_pose_batch", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, C.c_size_t)
 _proto("stiff_tool_poses", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, C.c_size_t, C.c_size_t)
@@ -376,3 +389,17 @@ _proto("stiff_path_read", S, c_double_p, c_double_p, C.POINTER(C.c_uint32), C.c_
 _proto("stiff_path_read_flags", S, C.POINTER(C.c_uint32), C.c_size_t, c_size_p, C.c_char_p,
        C.POINTER(PathOptions))
 PATH_POINT_RAPID = 1
+
+
+def defaults(struct):
+    """An options struct filled by its stiff_*_options_init: the library's defaults, written in
+    one place (the core's option structs). Callers set only what the user gave and leave every
+    other field alone."""
+    o = struct()
+    check(getattr(lib, struct._init_)(C.byref(o), C.sizeof(o)))
+    return o
+
+
+def text(value) -> "str | None":
+    """A C string field of an options struct as text (None for NULL)."""
+    return None if value is None else value.decode("utf-8")

@@ -18,7 +18,8 @@ from ._capi import check, lib
 from .errors import InvalidArgumentError
 
 __all__ = ["Robot", "Dataset", "Fit", "Model", "identify", "simulate", "random_design",
-           "predict", "effects", "describe_effect", "library_version"]
+           "predict", "effects", "describe_effect", "library_version", "identify_defaults",
+           "noise_defaults"]
 
 
 
@@ -66,10 +67,11 @@ class Robot(_Handle):
         from .data import find
 
         path = find("robots", path)
-        o = _c.RobotOptions()
-        o.struct_size = C.sizeof(o)
-        o.base_link = _c.encode(base) if base else None
-        o.tip_link = _c.encode(tip) if tip else None
+        o = _c.defaults(_c.RobotOptions)
+        if base:
+            o.base_link = _c.encode(base)
+        if tip:
+            o.tip_link = _c.encode(tip)
         for bit, field, value in ((1, "measured_point_m", measured_point),
                                   (2, "load_point_m", load_point), (8, "tool_com_m", tool_com)):
             if value is not None:
@@ -550,42 +552,66 @@ class Model(_Handle):
         return _c.get_doubles(lib.stiff_predict_dataset, self, data).reshape(-1, 3)
 
 
-def identify(robot: Robot, data: Dataset, model: str = "joint", loss: str = "none",
-             loss_scale_m: float = 0.0, method: str = "auto", max_iterations: int = 0,
-             max_relative_se: float = 100.0, start: Optional["Fit"] = None,
+METHODS = {"auto": 0, "linear": 1, "ceres": 2}  # stiff_method
+
+
+def identify_defaults() -> dict:
+    """The library's identification defaults (stiff_identify_options_init): what every
+    argument of identify() left at None and every unset option of `stiff identify` takes."""
+    o = _c.defaults(_c.IdentifyOptions)
+    return {"model": _c.text(o.model), "loss": _c.text(o.loss), "loss_scale_m": o.loss_scale_m,
+            "method": next(k for k, v in METHODS.items() if v == o.method),
+            "max_iterations": o.max_iterations, "max_relative_se": o.max_relative_se}
+
+
+def identify(robot: Robot, data: Dataset, model: Optional[str] = None,
+             loss: Optional[str] = None, loss_scale_m: Optional[float] = None,
+             method: Optional[str] = None, max_iterations: Optional[int] = None,
+             max_relative_se: Optional[float] = None, start: Optional["Fit"] = None,
              refit: Optional[str] = None) -> Fit:
     """Identify the model (effects joined by '+') from measured displacements and/or absolute
     positions (e.g. model='registration+tool+joint_offset+kinematic' on absolute data).
+    An argument left at None takes the library's default (identify_defaults()); the library
+    checks every value and its message names the option. `method`: auto, linear or ceres.
     `max_relative_se`: a parameter whose standard error exceeds this many times its typical
     magnitude and also a third of its value (t < 3) is held (docs/identifiability.md); 0 keeps
     only the structural rank test. `start`: a previous fit of the robot whose parameters start
     this one; with `refit` (effects joined by '+', e.g. 'registration'), only those effects are
     fitted and every other parameter is kept from `start` (a new placement of the instrument
     registered to a calibrated robot)."""
-    methods = {"auto": 0, "linear": 1, "ceres": 2}
-    if method not in methods:
-        raise ValueError(f"unknown method {method!r} (use auto, linear, ceres)")
-    o = _c.IdentifyOptions()
-    o.struct_size = C.sizeof(o)
-    for name, v in (("model", model), ("loss", loss)):
-        if not isinstance(v, str):
-            raise TypeError(f"{name} must be a string such as 'joint+link', not {type(v).__name__}")
-    o.model = _c.encode(model)
-    o.loss = _c.encode(loss)
-    o.loss_scale_m = loss_scale_m
-    o.max_iterations = max_iterations
-    o.method = methods[method]
-    if not (max_relative_se >= 0 and math.isfinite(max_relative_se)):
-        raise ValueError("max_relative_se must be a finite value >= 0")
-    o.max_relative_se = max_relative_se if max_relative_se > 0 else -1.0
-    if refit is not None and not isinstance(refit, str):
-        raise TypeError(f"refit must be a string such as 'registration', not "
-                        f"{type(refit).__name__}")
+    o = _c.defaults(_c.IdentifyOptions)
+    for name, v in (("model", model), ("loss", loss), ("refit", refit)):
+        if v is not None and not isinstance(v, str):  # ctypes would take bytes or a pointer
+            raise TypeError(f"{name} must be a string such as "
+                            f"{'registration' if name == 'refit' else 'joint+link'!r}, not "
+                            f"{type(v).__name__}")
+    if model is not None:
+        o.model = _c.encode(model)
+    if loss is not None:
+        o.loss = _c.encode(loss)
+    if loss_scale_m is not None:
+        o.loss_scale_m = loss_scale_m
+    if max_iterations is not None:
+        # a uint32 field: a negative count would wrap around instead of being refused
+        o.max_iterations = _c.require_count("max_iterations", max_iterations)
+    if method is not None:
+        if method not in METHODS:
+            raise InvalidArgumentError(
+                f"identify: unknown method {method!r} (use {', '.join(METHODS)})", -1)
+        o.method = METHODS[method]
+    if max_relative_se is not None:
+        # Python follows the core: 0 turns the test off. The C field reads 0 as "default" and
+        # a negative value as "off", so a negative value cannot reach the core's check.
+        if not (math.isfinite(max_relative_se) and max_relative_se >= 0):
+            raise InvalidArgumentError(
+                f"identify: max_relative_se must be a finite value >= 0 (got {max_relative_se})", -1)
+        o.max_relative_se = max_relative_se if max_relative_se > 0 else -1.0
     if start is not None:
         if not isinstance(start, Fit):
             raise TypeError(f"start must be a Fit, not {type(start).__name__}")
         o.start = start._as_parameter_
-    o.refit = _c.encode(refit) if refit else None
+    if refit:
+        o.refit = _c.encode(refit)
     h = C.c_void_p()
     check(lib.stiff_identify(C.byref(h), robot, data, C.byref(o)))
     return Fit(h)
@@ -630,22 +656,44 @@ def random_design(robot: Robot, count: int = 20, seed: int = 1, *,
     return Dataset(h)
 
 
+NOISE_FIELDS = ("tracker_sigma_m", "tracker_ppm", "force_relative", "force_absolute_N",
+                "joint_sigma_rad", "outlier_rate", "outlier_size_m", "seed")
+
+
+def noise_defaults() -> dict:
+    """The virtual robot's default noise (stiff_noise_options_init): what every noise argument
+    of simulate() left at None and every unset option of `stiff simulate` takes."""
+    o = _c.defaults(_c.NoiseOptions)
+    d = {k: getattr(o, k) for k in NOISE_FIELDS}
+    d["tracker_position_m"] = list(o.tracker_position_m)
+    return d
+
+
 def simulate(robot: Robot, design: Optional[Dataset] = None, *, stiffness=None, truth=None,
-             tracker_sigma_m: float = 10e-6, tracker_ppm: float = 0.0, force_relative: float = 0.0,
-             force_absolute_N: float = 0.0, joint_sigma_rad: float = 0.0,
-             outlier_rate: float = 0.0, outlier_size_m: float = 0.0, seed: int = 1,
+             tracker_sigma_m: Optional[float] = None, tracker_ppm: Optional[float] = None,
+             force_relative: Optional[float] = None, force_absolute_N: Optional[float] = None,
+             joint_sigma_rad: Optional[float] = None, outlier_rate: Optional[float] = None,
+             outlier_size_m: Optional[float] = None, seed: Optional[int] = None,
              tracker_position_m=None) -> Dataset:
     """Simulate measurements of `design` on the virtual robot. The truth is a YAML file or the
     name of a built-in one (`truth`, e.g. "rokae_backlash"), or the joint stiffness
-    `stiffness` [N*m/rad]."""
-    o = _c.NoiseOptions()
-    o.struct_size = C.sizeof(o)
-    o.tracker_sigma_m, o.tracker_ppm = tracker_sigma_m, tracker_ppm
+    `stiffness` [N*m/rad]. A noise argument left at None takes the library's default
+    (noise_defaults()); 0 means no such error. The library checks every value."""
+    o = _c.defaults(_c.NoiseOptions)
+    given = dict(tracker_sigma_m=tracker_sigma_m, tracker_ppm=tracker_ppm,
+                 force_relative=force_relative, force_absolute_N=force_absolute_N,
+                 joint_sigma_rad=joint_sigma_rad, outlier_rate=outlier_rate,
+                 outlier_size_m=outlier_size_m)
+    for name, value in given.items():
+        if value is not None:
+            setattr(o, name, float(value))
+    if seed is not None:
+        o.seed = seed
     if tracker_position_m is not None:
-        o.tracker_position_m[:] = list(tracker_position_m)
-    o.force_relative, o.force_absolute_N = force_relative, force_absolute_N
-    o.joint_sigma_rad, o.outlier_rate, o.outlier_size_m = joint_sigma_rad, outlier_rate, outlier_size_m
-    o.seed = seed
+        v = np.asarray(tracker_position_m, dtype=float)
+        if v.shape != (3,):
+            raise ValueError(f"tracker_position_m must be 3 numbers [m], got shape {v.shape}")
+        o.tracker_position_m[:] = [float(x) for x in v]
     k = None if stiffness is None else _c.as_array(stiffness)
     if truth is not None:
         from .data import find

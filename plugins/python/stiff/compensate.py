@@ -114,25 +114,34 @@ class ToolPath:
         return self.poses.shape[0]
 
 
+def path_defaults() -> dict:
+    """The library's path-reading defaults (stiff_path_options_init): frame (x, y, z [m],
+    rx, ry, rz [rad]), the default tool orientation tool_rpy [rad] and segment_m [m]."""
+    o = _c.defaults(_c.PathOptions)
+    return {"frame": list(o.frame), "tool_rpy": list(o.tool_rpy), "segment_m": o.segment_m}
+
+
 def read_path(path, frame: Optional[Sequence[float]] = None,
-              tool_rpy: Optional[Sequence[float]] = None, segment_m: float = 0.0) -> ToolPath:
+              tool_rpy: Optional[Sequence[float]] = None,
+              segment_m: Optional[float] = None) -> ToolPath:
     """Read a path: .csv (tool poses, optional wrench columns) or G-code (any other extension);
     a file or a built-in path by name ("rokae_contour", "pocket.nc").
     `frame`: workpiece frame in the base frame (x, y, z [m], rx, ry, rz [rad]); `tool_rpy`:
     tool orientation in the workpiece frame [rad] for G-code and CSV without orientation
-    (default: pointing down); `segment_m`: split G1 moves into pieces of at most this length.
-    Raises ParseError with path, line and column."""
+    (default: pointing down); `segment_m`: split G1 moves into pieces of at most this length
+    (default: end points only). Unset arguments keep the library's defaults
+    (stiff_path_options_init). Raises ParseError with path, line and column."""
     from .data import find
 
     path = find("paths", path)
-    o = _c.PathOptions()
-    o.struct_size = C.sizeof(o)
+    o = _c.defaults(_c.PathOptions)
     if frame is not None:
         o.frame[:] = [float(v) for v in frame]
     if tool_rpy is not None:
         o.tool_rpy[:] = [float(v) for v in tool_rpy]
         o.flags |= _c.PATH_TOOL_RPY
-    o.segment_m = float(segment_m)
+    if segment_m is not None:
+        o.segment_m = float(segment_m)
     _outputs.note_input(path)
     name = _c.encode(os.fspath(path))
     rows, has_w = C.c_size_t(0), C.c_int(0)

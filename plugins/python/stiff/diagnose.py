@@ -14,8 +14,9 @@ from typing import Iterable, Optional, Union
 from . import _capi as _c
 from ._capi import check, lib
 from .api import Dataset, Robot
+from .errors import InvalidArgumentError
 
-__all__ = ["Diagnosis", "diagnose", "VERDICTS"]
+__all__ = ["Diagnosis", "diagnose", "diagnose_defaults", "VERDICTS"]
 
 VERDICTS = ("missing_effect", "adequate", "ambiguous", "unexplained")
 
@@ -87,21 +88,42 @@ def _join(v: Union[None, str, Iterable[str]]) -> Optional[bytes]:
     return v.encode("utf-8")
 
 
+def diagnose_defaults() -> dict:
+    """The library's diagnosis defaults (stiff_diagnose_options_init): what every argument of
+    diagnose() left at None and every unset option of `stiff diagnose` takes (candidates None:
+    every effect not in the model; auto_steps 0: no loop)."""
+    o = _c.defaults(_c.DiagnoseOptions)
+    return {"model": _c.text(o.model), "candidates": _c.text(o.candidates), "alpha": o.alpha,
+            "auto_steps": o.auto_steps, "command_prefix": _c.text(o.command_prefix)}
+
+
 def diagnose(robot: Robot, calibration: Dataset, validation: Optional[Dataset] = None,
-             model: Union[str, Iterable[str]] = "joint", candidates=None, alpha: float = 0.05,
-             auto_steps: int = 0, command_prefix: Optional[str] = None) -> Diagnosis:
+             model: Union[None, str, Iterable[str]] = None, candidates=None,
+             alpha: Optional[float] = None, auto_steps: Optional[int] = None,
+             command_prefix: Optional[str] = None) -> Diagnosis:
     """Diagnose ``model`` (e.g. "joint" or "joint+link") on ``calibration``.
 
     candidates: effects to test ('+'-joined or a list; default every effect not in the model);
     alpha: family-wise error rate (Holm); auto_steps: > 0 walks the loop (add the top effect,
-    re-fit, re-score) up to that many times; command_prefix: start of the suggested commands."""
-    o = _c.DiagnoseOptions()
-    o.struct_size = C.sizeof(_c.DiagnoseOptions)
-    o.model = _join(model)
-    o.candidates = _join(candidates)
-    o.alpha = float(alpha)
-    o.auto_steps = int(auto_steps)
-    o.command_prefix = None if command_prefix is None else command_prefix.encode("utf-8")
+    re-fit, re-score) up to that many times; command_prefix: start of the suggested commands.
+    An argument left at None takes the library's default (diagnose_defaults()); the library
+    checks every value and its message names the option."""
+    o = _c.defaults(_c.DiagnoseOptions)
+    if model is not None:
+        o.model = _join(model)
+    if candidates is not None:
+        o.candidates = _join(candidates)
+    if alpha is not None:
+        if alpha == 0:  # the C field reads 0 as "default"; the library checks every other value
+            raise InvalidArgumentError(f"diagnose: alpha must be in (0, 1) (got {alpha})", -1)
+        o.alpha = float(alpha)
+    if auto_steps is not None:
+        if int(auto_steps) != auto_steps or auto_steps < 0:  # a uint32 field would wrap around
+            raise InvalidArgumentError(
+                f"diagnose: auto_steps must be a whole number >= 0 (got {auto_steps})", -1)
+        o.auto_steps = int(auto_steps)
+    if command_prefix is not None:
+        o.command_prefix = _c.encode(command_prefix)
     h = C.c_void_p()
     check(lib.stiff_diagnose(C.byref(h), robot, calibration,
                              validation if validation is not None else None, C.byref(o)))

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import ctypes as C
 import json
-import math
 import os
 from typing import Callable, Optional, Sequence
 
@@ -23,12 +22,13 @@ def criteria() -> list[str]:
     return [_c.get_string(lib.stiff_criterion_name, i) for i in range(lib.stiff_criterion_count())]
 
 
-def evaluate_criteria(robot: Robot, design: Dataset, tracker_sigma_m: float = 10e-6,
+def evaluate_criteria(robot: Robot, design: Dataset, tracker_sigma_m: Optional[float] = None,
                       task: Optional[Dataset] = None) -> dict:
     """Every criterion's value for a given set of poses and loads; `task` (poses and loads of
-    use) gives the `task` criterion a value (None without it)."""
+    use) gives the `task` criterion a value (None without it). `tracker_sigma_m` weights the
+    rows; None (or 0): the planning default, plan_defaults()["tracker_sigma_m"]."""
     return json.loads(_c.get_string(lib.stiff_criteria_task_json, robot, design, task,
-                                    tracker_sigma_m))
+                                    0.0 if tracker_sigma_m is None else tracker_sigma_m))
 
 
 class Plan(_Handle):
@@ -75,8 +75,7 @@ class Plan(_Handle):
 def plan_defaults() -> dict:
     """The library's planning defaults (stiff_plan_options_init): what every unset argument
     of plan() and every unset option of `stiff plan` takes."""
-    o = _c.PlanOptions()
-    check(lib.stiff_plan_options_init(C.byref(o), C.sizeof(o)))
+    o = _c.defaults(_c.PlanOptions)
     return {"count": o.count, "criterion": o.criterion.decode(), "seed": o.seed,
             "pool_poses": o.pool_poses, "pool_loads": o.pool_loads,
             "range_fraction": o.range_fraction, "load_range_N": (o.load_min_N, o.load_max_N),
@@ -112,8 +111,7 @@ def plan(robot: Robot, count: Optional[int] = None, criterion: Optional[str] = N
     is the annealing's initial temperature in cost units and `annealing_k0` the elements
     swapped per step at its start; 0 = automatic (T0 from random swaps of the start set,
     k0 = max(1, count / 3)). A load step <= 0 means continuous loads."""
-    o = _c.PlanOptions()
-    check(lib.stiff_plan_options_init(C.byref(o), C.sizeof(o)))
+    o = _c.defaults(_c.PlanOptions)
 
     # The C fields read 0 as "default": an explicit 0 or a negative count is refused with the
     # one message every count gets (require_count).
@@ -154,16 +152,8 @@ def plan(robot: Robot, count: Optional[int] = None, criterion: Optional[str] = N
         o.tracker_ppm = tracker_ppm
     keep = []
     if q_fixed is not None:
-        qf = _c.as_array(q_fixed)
-        lo, hi = robot.limits
-        if qf.shape != lo.shape:
-            raise InvalidArgumentError(f"plan: q_fixed has {qf.size} values, the robot has "
-                                       f"{lo.size} joints")
-        for j, v in enumerate(qf):
-            if not math.isnan(v) and not (math.isfinite(v) and lo[j] <= v <= hi[j]):
-                raise InvalidArgumentError(
-                    f"plan: joint {j + 1} fixed at {math.degrees(v):.6g} deg is outside its "
-                    f"limits [{math.degrees(lo[j]):.6g}, {math.degrees(hi[j]):.6g}] deg")
+        # The library checks the count and every value against the joint limits.
+        qf = _c.as_array(q_fixed).ravel()
         keep.append(qf)
         o.q_fixed, o.q_fixed_count = _c.ptr(qf), qf.size
     if optimizers is not None:

@@ -185,7 +185,7 @@ def test_nul_bytes_are_refused_not_truncated(rokae_path, good):
     with pytest.raises(stiff.errors.InvalidArgumentError, match="NUL"):
         stiff.identify(r, d, model="joint\x00+link")
     with pytest.raises(TypeError, match="model must be a string"):
-        stiff.identify(r, d, model=None)
+        stiff.identify(r, d, model=3)  # None is the library's default model
 
 
 # ------------------------------------------------------------------ study files

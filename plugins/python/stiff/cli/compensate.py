@@ -64,7 +64,7 @@ def register(sub):
                    "[mm, deg]; the path's poses are given in it (default: base frame)")
     p.add_argument("--tool-rpy", help="tool orientation rx,ry,rz [deg] in the workpiece frame "
                    "for G-code and CSV without orientation (default 180,0,0: pointing down)")
-    p.add_argument("--segment", type=float, default=0.0,
+    p.add_argument("--segment", type=float, default=None,
                    help="split G1 moves into pieces of at most this length [mm] (default: end "
                    "points only)")
     p.add_argument("--q-start", help="joint positions [deg] the path starts from (picks the "
@@ -140,12 +140,12 @@ def run(args):
     tool = None
     if args.tool_rpy:
         tool = [math.radians(a) for a in _floats(args.tool_rpy, "--tool-rpy", (3,))]
-    if not (args.segment >= 0):
-        raise UserError("--segment must be >= 0")
     args.path = builtin_path("paths", args.path)
     if args.truth:
         args.truth = builtin_path("truths", args.truth)
-    path = cp.read_path(args.path, frame=frame, tool_rpy=tool, segment_m=args.segment * 1e-3)
+    path = cp.read_path(args.path, frame=frame, tool_rpy=tool, segment_m=None if args.segment is None else args.segment * 1e-3)
+    if args.segment is None:  # recorded in the outputs as the value the library used
+        args.segment = cp.path_defaults()["segment_m"] * 1e3
     n_pts = len(path)
     if args.wrench:
         w = _floats(args.wrench, "--wrench", (3, 6))

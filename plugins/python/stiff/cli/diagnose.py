@@ -6,8 +6,7 @@ import json
 import shlex
 
 from .. import api
-from ..diagnose import diagnose
-from . import UserError
+from ..diagnose import diagnose, diagnose_defaults
 from .common import (Formatter, add_robot, atomic_write_text, fmt, load_robot, robot_path, table,
                      whole)
 
@@ -36,9 +35,12 @@ def register(sub):
     add_robot(p)
     p.add_argument("--data", "-d", required=True, help="calibration CSV with displacements")
     p.add_argument("--validate", "-v", help="validation CSV (new poses) with displacements")
-    p.add_argument("--model", "-m", default="joint", help="current model, effects joined by '+' (default joint)")
+    # Unset options stay None: the library's defaults (stiff_diagnose_options_init) apply and the
+    # library checks every value.
+    d = diagnose_defaults()
+    p.add_argument("--model", "-m", help=f"current model, effects joined by '+' (default {d['model']})")
     p.add_argument("--candidates", help="effects to test, joined by '+' (default: all not in the model)")
-    p.add_argument("--alpha", type=float, default=0.05, help="family-wise error rate (Holm, default 0.05)")
+    p.add_argument("--alpha", type=float, help=f"family-wise error rate (Holm, default {d['alpha']:g})")
     p.add_argument("--auto", action="store_true", help="add the top effect while the evidence holds, re-fit, repeat")
     p.add_argument("--max-steps", type=whole, default=4, help="steps of --auto (default 4)")
     p.add_argument("--report", help="HTML report to write (self-contained, with plots)")
@@ -114,10 +116,6 @@ def print_text(d) -> None:
 
 
 def run(args):
-    if not 0 < args.alpha < 1:
-        raise UserError("--alpha must be in (0, 1)")
-    if not 1 <= args.max_steps <= 20:
-        raise UserError("--max-steps must be in 1..20")
     robot = load_robot(args)
     calib = api.Dataset.read(args.data, robot)
     valid = api.Dataset.read(args.validate, robot) if args.validate else None

@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .. import api
-from ..fmu import export_fmu
+from ..fmu import export_fmu, fmu_defaults
 from .._outputs import written
 from .common import Formatter, add_robot, load_robot, robot_path
 
@@ -28,8 +28,10 @@ def register(sub):
                         formatter_class=Formatter)
     add_robot(e)
     e.add_argument("--fit", "-f", required=True, help="fit JSON from `stiff identify`")
-    e.add_argument("--fmi", type=int, choices=[2, 3], default=2, help="FMI version (default 2)")
-    e.add_argument("--identifier", default="stiff_arm", help="model identifier (default stiff_arm)")
+    d = fmu_defaults()  # the library's (stiff_fmu_options_init); unset options stay None
+    e.add_argument("--fmi", type=int, choices=[2, 3], help=f"FMI version (default {d['fmi_version']})")
+    e.add_argument("--identifier",
+                   help=f"model identifier (default {d['model_identifier']})")
     e.add_argument("--array-inputs", action="store_true",
                    help="FMI 3: inputs as the arrays q[n] and wrench[6] instead of the scalars "
                         "q1..qn, fx..mz (one set of inputs per FMU)")
@@ -42,7 +44,10 @@ def run(args):
     robot = load_robot(args)
     fit = api.Fit.read(args.fit)
     path = export_fmu(robot, fit, args.output, fmi_version=args.fmi,
-                      model_identifier=args.identifier, array_inputs=args.array_inputs)
+                      model_identifier=args.identifier, array_inputs=args.array_inputs or None)
+    d = fmu_defaults()
+    args.fmi = d["fmi_version"] if args.fmi is None else args.fmi
+    args.identifier = d["model_identifier"] if args.identifier is None else args.identifier
     size = Path(written(path)).stat().st_size  # committed when the command ends
     inputs = "array inputs q, wrench" if args.array_inputs else "scalar inputs"
     print(f"wrote {path} (FMI {args.fmi}.0, model '{args.identifier}', {inputs}, "

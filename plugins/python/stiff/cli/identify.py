@@ -33,17 +33,22 @@ def register(sub):
     add_robot(p)
     p.add_argument("--data", "-d", required=True,
                    help="measurement CSV with displacements and/or absolute positions")
+    # Unset options stay None: the library's defaults (stiff_identify_options_init) apply and
+    # the library checks every value.
+    d = api.identify_defaults()
     p.add_argument("--model", "-m", default=None,
-                   help="effects joined by '+' (default: the --start fit's model, else joint)")
-    p.add_argument("--loss", default="none", help="none, huber, cauchy, soft_l1, tukey (default none)")
-    p.add_argument("--loss-scale-um", type=float, default=0.0,
+                   help=f"effects joined by '+' (default: the --start fit's model, else {d['model']})")
+    p.add_argument("--loss", help=f"none, huber, cauchy, soft_l1, tukey (default {d['loss']})")
+    p.add_argument("--loss-scale-um", type=float,
                    help="robust loss scale [um] (default: from sigma_d or the data)")
-    p.add_argument("--method", default="auto", choices=["auto", "linear", "ceres"])
-    p.add_argument("--max-relative-se", type=float, default=100.0,
+    p.add_argument("--method", choices=list(api.METHODS),
+                   help=f"default {d['method']}: linear least squares for the joint model "
+                        "without robust loss on displacement data, else ceres")
+    p.add_argument("--max-relative-se", type=float,
                    help="hold a parameter whose standard error exceeds this many times its "
                         "typical magnitude and also a third of its value, t < 3 "
                         "(docs/identifiability.md); "
-                        "0: structural rank test only (default 100)")
+                        f"0: structural rank test only (default {d['max_relative_se']:g})")
     p.add_argument("--start", metavar="FIT",
                    help="a previous fit of this robot whose parameters start this one")
     p.add_argument("--refit", metavar="EFFECTS",
@@ -107,10 +112,11 @@ def run(args):
     if args.refit and not args.start:
         raise UserError("--refit needs --start FIT: the fit that gives the other parameters")
     start = api.Fit.read(args.start) if args.start else None
-    model = args.model or ("+".join(start.model) if start is not None else "joint")
+    model = args.model or ("+".join(start.model) if start is not None else None)
     try:
         fit = api.identify(robot, data, model=model, loss=args.loss,
-                           loss_scale_m=args.loss_scale_um * 1e-6, method=args.method,
+                           loss_scale_m=None if args.loss_scale_um is None else args.loss_scale_um * 1e-6,
+                           method=args.method,
                            max_relative_se=args.max_relative_se, start=start,
                            refit=args.refit)
     except Exception:

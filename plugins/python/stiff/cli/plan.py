@@ -114,8 +114,8 @@ def run(args):
     robot = load_robot(args)
     if args.evaluate:
         design = api.Dataset.read(builtin_path("paper", args.evaluate), robot)
-        sigma_um = args.tracker_sigma_um if args.tracker_sigma_um is not None else 10.0
-        values = evaluate_criteria(robot, design, sigma_um * 1e-6)
+        values = evaluate_criteria(robot, design, None if args.tracker_sigma_um is None
+                                   else args.tracker_sigma_um * 1e-6)
         print(f"{args.evaluate}: {int(values['count'])} measurements, {int(values['m'])} identifiable compliances")
         _print_criteria(values)
         if args.json:

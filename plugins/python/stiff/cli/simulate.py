@@ -27,13 +27,19 @@ def register(sub):
     g.add_argument("--truth", help="truth YAML (stiffness and hidden effects)")
     g.add_argument("--stiffness", help="true joint stiffness, comma-separated [N*m/rad]")
     p.add_argument("--noise", help="noise YAML (overrides the noise options below)")
-    p.add_argument("--tracker-sigma-um", type=float, default=10.0, help="tracker sigma per axis [um] (default 10)")
-    p.add_argument("--tracker-ppm", type=float, default=0.0, help="distance-proportional tracker error [ppm]")
-    p.add_argument("--force-relative", type=float, default=0.0, help="relative force error (1 sigma)")
-    p.add_argument("--force-absolute-n", type=float, default=0.0, help="absolute force error [N]")
+    # Unset options stay None: the library's default noise (stiff_noise_options_init) applies.
+    d = api.noise_defaults()
+    p.add_argument("--tracker-sigma-um", type=float,
+                   help=f"tracker sigma per axis [um] (default {d['tracker_sigma_m'] * 1e6:g})")
+    p.add_argument("--tracker-ppm", type=float,
+                   help=f"distance-proportional tracker error [ppm] (default {d['tracker_ppm']:g})")
+    p.add_argument("--force-relative", type=float,
+                   help=f"relative force error, 1 sigma (default {d['force_relative']:g})")
+    p.add_argument("--force-absolute-n", type=float,
+                   help=f"absolute force error [N] (default {d['force_absolute_N']:g})")
     p.add_argument("--seed", type=int, default=None,
-                   help="random seed of the design and the noise (default 1; given, it also "
-                   "replaces the noise file's seed)")
+                   help=f"random seed of the design and the noise (default {d['seed']}; given, "
+                   "it also replaces the noise file's seed)")
     p.add_argument("--record-truth", action="store_true",
                    help="write the truth's effects into the output's header (# truth_model:)")
     p.add_argument("-o", "--output", required=True, help="measurement CSV to write")
@@ -44,12 +50,13 @@ def run(args):
     from . import UserError
 
     robot = load_robot(args)
-    seed = 1 if args.seed is None else args.seed
+    seed = api.noise_defaults()["seed"] if args.seed is None else args.seed
     design = (api.Dataset.read(builtin_path("paper", args.plan), robot) if args.plan
               else api.random_design(robot, args.count, seed))
-    noise = dict(tracker_sigma_m=args.tracker_sigma_um * 1e-6, tracker_ppm=args.tracker_ppm,
-                 force_relative=args.force_relative, force_absolute_N=args.force_absolute_n,
-                 seed=seed)
+    # Only what the user gave; simulate() leaves every other noise field at the library's value.
+    noise = dict(tracker_sigma_m=None if args.tracker_sigma_um is None else args.tracker_sigma_um * 1e-6,
+                 tracker_ppm=args.tracker_ppm, force_relative=args.force_relative,
+                 force_absolute_N=args.force_absolute_n, seed=args.seed)
     if args.noise:
         noise = api.read_noise(builtin_path("truths", args.noise))
         if args.seed is not None:
