@@ -35,9 +35,10 @@ stiff_status stiff_diagnose_options_init(stiff_diagnose_options* options, size_t
     o.model = kDefaultModel;
     o.candidates = nullptr;  // every registered effect not in the model (d.candidates empty)
     o.alpha = d.alpha;
-    o.auto_steps = d.auto_loop ? static_cast<uint32_t>(d.max_steps) : 0u;
+    o.auto_steps = 0u;  // with auto_loop: the core's number of steps (d.max_steps)
+    o.auto_loop = d.auto_loop ? 1u : 0u;
     o.command_prefix = static_string([] { return DiagnosisOptions{}.command_prefix; });
-    return init_options(options, struct_size, sizeof(stiff_diagnose_options),
+    return init_options(options, struct_size, offsetof(stiff_diagnose_options, auto_loop),
                         "stiff_diagnose_options", o);
   });
 }
@@ -58,7 +59,7 @@ stiff_status stiff_diagnose(stiff_diagnosis** out,
     DiagnosisOptions d;
     if (o.candidates) d.candidates = parse_model_string(o.candidates);
     if (o.alpha != 0) d.alpha = o.alpha;
-    d.auto_loop = o.auto_steps > 0;
+    d.auto_loop = o.auto_steps > 0 || o.auto_loop != 0;
     if (o.auto_steps > 0)
       d.max_steps =
           static_cast<int>(std::min<uint32_t>(o.auto_steps, std::numeric_limits<int>::max()));

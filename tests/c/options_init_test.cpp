@@ -294,16 +294,27 @@ TEST_F(OptionsInit, DiagnoseOptions) {
   EXPECT_EQ(o.candidates, nullptr);
   EXPECT_TRUE(core.candidates.empty());
   EXPECT_EQ(o.alpha, core.alpha);
-  EXPECT_EQ(o.auto_steps, core.auto_loop ? static_cast<uint32_t>(core.max_steps) : 0u);
+  EXPECT_EQ(o.auto_steps, 0u);  // with auto_loop: the core's own number of steps
+  EXPECT_EQ(o.auto_loop, core.auto_loop ? 1u : 0u);
   EXPECT_EQ(str(o.command_prefix), core.command_prefix);
   expect_refuses_bad_arguments(stiff_diagnose_options_init, "stiff_diagnose_options_init",
-                               sizeof(stiff_diagnose_options));
+                               offsetof(stiff_diagnose_options, auto_loop));
 
   stiff_dataset* data = measured(nullptr);
   ASSERT_TRUE(data);
   stiff_diagnosis *a = nullptr, *b = nullptr;
   ASSERT_EQ(stiff_diagnose(&a, robot_, data, nullptr, nullptr), STIFF_OK) << stiff_last_error();
   ASSERT_EQ(stiff_diagnose(&b, robot_, data, nullptr, &o), STIFF_OK) << stiff_last_error();
+  EXPECT_EQ(text_of(stiff_diagnosis_json, a), text_of(stiff_diagnosis_json, b));
+  stiff_diagnosis_destroy(a);
+  stiff_diagnosis_destroy(b);
+
+  // auto_loop alone walks the loop with the core's number of steps.
+  stiff_diagnose_options loop = o, steps = o;
+  loop.auto_loop = 1;
+  steps.auto_steps = static_cast<uint32_t>(core.max_steps);
+  ASSERT_EQ(stiff_diagnose(&a, robot_, data, nullptr, &loop), STIFF_OK) << stiff_last_error();
+  ASSERT_EQ(stiff_diagnose(&b, robot_, data, nullptr, &steps), STIFF_OK) << stiff_last_error();
   EXPECT_EQ(text_of(stiff_diagnosis_json, a), text_of(stiff_diagnosis_json, b));
   stiff_diagnosis_destroy(a);
   stiff_diagnosis_destroy(b);

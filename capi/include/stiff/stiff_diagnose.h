@@ -41,14 +41,18 @@ typedef struct stiff_diagnose_options {
   /** Start of the command printed for each candidate ("stiff diagnose --robot r --data d.csv");
    *  NULL = "stiff diagnose". */
   const char* command_prefix;
+  /** Non-zero: walk the loop even when auto_steps is 0, then with the library's number of steps
+   *  (auto_steps > 0 still walks the loop with that many). A caller whose struct_size ends
+   *  before this field: no such request. @since 0.3 */
+  uint32_t auto_loop;
 } stiff_diagnose_options;
 
 /**
  * Fill *options with the library's defaults (model "joint", every other effect a candidate,
- * the default alpha, no loop, the default command prefix) and struct_size = the bytes written,
- * at most struct_size = sizeof(stiff_diagnose_options) as the caller knows it; fields beyond it
- * are not touched. Errors: STIFF_E_INVALID_ARGUMENT (NULL, a struct_size that is no version of
- * the struct).
+ * the default alpha, no loop: auto_steps 0 and auto_loop 0, the default command prefix) and
+ * struct_size = the bytes written, at most struct_size = sizeof(stiff_diagnose_options) as the
+ * caller knows it; fields beyond it are not touched. Errors: STIFF_E_INVALID_ARGUMENT (NULL, a
+ * struct_size smaller than the first released struct or not the end of one of its versions).
  * @since 0.3
  */
 STIFF_API stiff_status stiff_diagnose_options_init(stiff_diagnose_options* options,

@@ -345,6 +345,7 @@ class DiagnoseOptions(C.Structure):
         ("alpha", C.c_double),
         ("auto_steps", C.c_uint32),
         ("command_prefix", C.c_char_p),
+        ("auto_loop", C.c_uint32),
     ]
 
 

@@ -91,21 +91,24 @@ def _join(v: Union[None, str, Iterable[str]]) -> Optional[bytes]:
 def diagnose_defaults() -> dict:
     """The library's diagnosis defaults (stiff_diagnose_options_init): what every argument of
     diagnose() left at None and every unset option of `stiff diagnose` takes (candidates None:
-    every effect not in the model; auto_steps 0: no loop)."""
+    every effect not in the model; auto_loop False: no loop; auto_steps 0: the library's
+    number of steps when the loop is walked)."""
     o = _c.defaults(_c.DiagnoseOptions)
     return {"model": _c.text(o.model), "candidates": _c.text(o.candidates), "alpha": o.alpha,
-            "auto_steps": o.auto_steps, "command_prefix": _c.text(o.command_prefix)}
+            "auto_loop": bool(o.auto_loop), "auto_steps": o.auto_steps,
+            "command_prefix": _c.text(o.command_prefix)}
 
 
 def diagnose(robot: Robot, calibration: Dataset, validation: Optional[Dataset] = None,
              model: Union[None, str, Iterable[str]] = None, candidates=None,
              alpha: Optional[float] = None, auto_steps: Optional[int] = None,
-             command_prefix: Optional[str] = None) -> Diagnosis:
+             command_prefix: Optional[str] = None, auto_loop: Optional[bool] = None) -> Diagnosis:
     """Diagnose ``model`` (e.g. "joint" or "joint+link") on ``calibration``.
 
     candidates: effects to test ('+'-joined or a list; default every effect not in the model);
     alpha: family-wise error rate (Holm); auto_steps: > 0 walks the loop (add the top effect,
-    re-fit, re-score) up to that many times; command_prefix: start of the suggested commands.
+    re-fit, re-score) up to that many times; auto_loop: walk the loop, with the library's number
+    of steps unless auto_steps gives one; command_prefix: start of the suggested commands.
     An argument left at None takes the library's default (diagnose_defaults()); the library
     checks every value and its message names the option."""
     o = _c.defaults(_c.DiagnoseOptions)
@@ -122,6 +125,8 @@ def diagnose(robot: Robot, calibration: Dataset, validation: Optional[Dataset] =
             raise InvalidArgumentError(
                 f"diagnose: auto_steps must be a whole number >= 0 (got {auto_steps})", -1)
         o.auto_steps = int(auto_steps)
+    if auto_loop is not None:
+        o.auto_loop = 1 if auto_loop else 0
     if command_prefix is not None:
         o.command_prefix = _c.encode(command_prefix)
     h = C.c_void_p()

@@ -57,7 +57,7 @@ def test_option_arguments_default_to_none_so_the_library_decides():
                                         "force_absolute_N", "joint_sigma_rad", "outlier_rate",
                                         "outlier_size_m", "seed", "tracker_position_m")),
                       (stiff.diagnose, ("model", "candidates", "alpha", "auto_steps",
-                                        "command_prefix")),
+                                        "command_prefix", "auto_loop")),
                       (stiff.export_fmu, ("fmi_version", "model_identifier", "array_inputs")),
                       (read_path, ("frame", "tool_rpy", "segment_m")),
                       (stiff.plan, ("count", "criterion", "seed", "annealing_iterations"))):

@@ -42,7 +42,7 @@ def register(sub):
     p.add_argument("--candidates", help="effects to test, joined by '+' (default: all not in the model)")
     p.add_argument("--alpha", type=float, help=f"family-wise error rate (Holm, default {d['alpha']:g})")
     p.add_argument("--auto", action="store_true", help="add the top effect while the evidence holds, re-fit, repeat")
-    p.add_argument("--max-steps", type=whole, default=4, help="steps of --auto (default 4)")
+    p.add_argument("--max-steps", type=whole, help="steps of --auto (default: the library's)")
     p.add_argument("--report", help="HTML report to write (self-contained, with plots)")
     p.add_argument("--json", help="diagnosis JSON to write (docs/diagnosis.md)")
     p.set_defaults(func=run)
@@ -120,7 +120,8 @@ def run(args):
     calib = api.Dataset.read(args.data, robot)
     valid = api.Dataset.read(args.validate, robot) if args.validate else None
     d = diagnose(robot, calib, valid, model=args.model, candidates=args.candidates,
-                 alpha=args.alpha, auto_steps=args.max_steps if args.auto else 0,
+                 alpha=args.alpha, auto_loop=args.auto or None,
+                 auto_steps=args.max_steps if args.auto else None,
                  command_prefix=_command_prefix(args))
     print_text(d)
     if args.json:
