@@ -379,4 +379,22 @@ TEST_F(OptionsInit, PlanOptionsRefuseSizesThatAreNoVersion) {
             std::isfinite(pool.load_max_magnitude_N) ? pool.load_max_magnitude_N : 0.0);
 }
 
+// A joint held outside its limits is refused by the core (build_pool), so the C ABI shows the
+// message Python and the command line show.
+TEST_F(OptionsInit, PlanQFixedOutsideTheLimitsIsRefusedByTheCore) {
+  stiff_plan_options o = filled(stiff_plan_options_init);
+  double lower[6], upper[6];
+  ASSERT_EQ(stiff_robot_limits(lower, upper, 6, nullptr, robot_), STIFF_OK);
+  const double nan = std::nan("");
+  const double q_fixed[6] = {upper[0] + 0.1, nan, nan, nan, nan, nan};
+  o.q_fixed = q_fixed;
+  o.q_fixed_count = 6;
+  stiff_plan* p = nullptr;
+  EXPECT_EQ(stiff_plan_create(&p, robot_, &o), STIFF_E_INVALID_ARGUMENT);
+  EXPECT_EQ(p, nullptr);
+  EXPECT_NE(std::string(stiff_last_error()).find("plan: joint 1 fixed at"), std::string::npos)
+      << stiff_last_error();
+  EXPECT_NE(std::string(stiff_last_error()).find("is outside its limits"), std::string::npos);
+}
+
 }  // namespace
