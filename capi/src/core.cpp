@@ -533,16 +533,8 @@ stiff_status stiff_design_random(stiff_dataset** out,
 stiff_status stiff_design_random_options_init(stiff_design_random_options* options,
                                               size_t struct_size) {
   return guarded(__func__, [&] {
-    require(options, "options");
-    if (struct_size < sizeof(uint32_t) ||
-        (struct_size < sizeof(stiff_design_random_options) &&
-         !is_version_size<stiff_design_random_options>(struct_size)))
-      throw InvalidArgument("struct_size " + std::to_string(struct_size) +
-                            " is no version of stiff_design_random_options");
-    const size_t n = std::min(struct_size, sizeof(stiff_design_random_options));
     const RandomDesignOptions d;  // the defaults are the core's, nothing restated here
     stiff_design_random_options o{};
-    o.struct_size = static_cast<uint32_t>(n);
     o.count = static_cast<uint32_t>(d.count);
     o.seed = d.seed;
     o.range_fraction = d.range_fraction;
@@ -554,8 +546,8 @@ stiff_status stiff_design_random_options_init(stiff_design_random_options* optio
       o.box_min_m[k] = d.box_min_m(k);
       o.box_max_m[k] = d.box_max_m(k);
     }
-    std::memcpy(options, &o, n);
-    return STIFF_OK;
+    return init_options(options, struct_size, sizeof(stiff_design_random_options),
+                        "stiff_design_random_options", o);
   });
 }
 

@@ -188,6 +188,36 @@ TEST_F(OptionsInit, NoiseOptions) {
       << stiff_last_error();
 }
 
+TEST_F(OptionsInit, DesignRandomOptions) {
+  const stiff_design_random_options o = filled(stiff_design_random_options_init);
+  const stiff::RandomDesignOptions core;
+  EXPECT_EQ(o.count, static_cast<uint32_t>(core.count));
+  EXPECT_EQ(o.seed, core.seed);
+  EXPECT_EQ(o.range_fraction, core.range_fraction);
+  EXPECT_EQ(o.load_min_N, core.load_min_N);
+  EXPECT_EQ(o.load_max_N, core.load_max_N);
+  EXPECT_EQ(o.load_step_N, core.load_step_N);
+  EXPECT_EQ(o.min_sigma_m, core.min_sigma);
+  EXPECT_EQ(o.q_fixed, nullptr);
+  EXPECT_EQ(o.use_workspace_box, 0u);
+  expect_refuses_bad_arguments(stiff_design_random_options_init, "stiff_design_random_options_init",
+                               sizeof(stiff_design_random_options));
+  stiff_dataset *a = nullptr, *b = nullptr;
+  ASSERT_EQ(stiff_design_random_with_options(&a, robot_, nullptr), STIFF_OK) << stiff_last_error();
+  ASSERT_EQ(stiff_design_random_with_options(&b, robot_, &o), STIFF_OK) << stiff_last_error();
+  for (const stiff_column c : {STIFF_COLUMN_Q, STIFF_COLUMN_FORCE}) {
+    size_t na = 0, nb = 0;
+    stiff_dataset_get(nullptr, 0, &na, a, c);
+    stiff_dataset_get(nullptr, 0, &nb, b, c);
+    std::vector<double> va(na), vb(nb);
+    ASSERT_EQ(stiff_dataset_get(va.data(), na, nullptr, a, c), STIFF_OK);
+    ASSERT_EQ(stiff_dataset_get(vb.data(), nb, nullptr, b, c), STIFF_OK);
+    EXPECT_EQ(va, vb);
+  }
+  stiff_dataset_destroy(a);
+  stiff_dataset_destroy(b);
+}
+
 TEST_F(OptionsInit, IdentifyOptions) {
   const stiff_identify_options o = filled(stiff_identify_options_init);
   const stiff::IdentifyOptions core;

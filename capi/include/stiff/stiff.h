@@ -303,8 +303,10 @@ typedef struct stiff_design_random_options {
   double box_max_m[3];
 } stiff_design_random_options;
 
-/** Fill *options with the library's defaults (libgit2's options_init convention); struct_size
- *  is sizeof the caller's struct. @since 0.3 */
+/** Fill *options with the library's defaults (libgit2's options_init convention) and
+ *  struct_size = the bytes written, at most struct_size = sizeof(stiff_design_random_options)
+ *  as the caller knows it; fields beyond it are not touched. Errors: INVALID_ARGUMENT (NULL,
+ *  a struct_size that is no version of the struct). @since 0.3 */
 STIFF_API stiff_status stiff_design_random_options_init(stiff_design_random_options* options,
                                                         size_t struct_size);
 /** Random design with options (the sampler of the planner's candidate pool: same range,

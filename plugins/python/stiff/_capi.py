@@ -151,6 +151,7 @@ _proto("stiff_design_random", S, HP, H, C.c_size_t, C.c_uint64)
 
 
 class DesignRandomOptions(C.Structure):
+    _init_ = "stiff_design_random_options_init"
     _fields_ = [
         ("struct_size", C.c_uint32),
         ("count", C.c_uint32),

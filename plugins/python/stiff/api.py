@@ -19,7 +19,7 @@ from .errors import InvalidArgumentError
 
 __all__ = ["Robot", "Dataset", "Fit", "Model", "identify", "simulate", "random_design",
            "predict", "effects", "describe_effect", "library_version", "identify_defaults",
-           "noise_defaults"]
+           "noise_defaults", "random_design_defaults"]
 
 
 
@@ -617,7 +617,16 @@ def identify(robot: Robot, data: Dataset, model: Optional[str] = None,
     return Fit(h)
 
 
-def random_design(robot: Robot, count: int = 20, seed: int = 1, *,
+def random_design_defaults() -> dict:
+    """The library's random-design defaults (stiff_design_random_options_init): count, seed,
+    range_fraction, load_range_N, load_step_N, min_sigma_m."""
+    o = _c.defaults(_c.DesignRandomOptions)
+    return {"count": o.count, "seed": o.seed, "range_fraction": o.range_fraction,
+            "load_range_N": (o.load_min_N, o.load_max_N), "load_step_N": o.load_step_N,
+            "min_sigma_m": o.min_sigma_m}
+
+
+def random_design(robot: Robot, count: Optional[int] = None, seed: Optional[int] = None, *,
                   range_fraction: Optional[float] = None, load_range_N=None,
                   load_step_N: Optional[float] = None, min_sigma_m: Optional[float] = None,
                   q_fixed=None, workspace_box_m=None) -> Dataset:
@@ -627,10 +636,11 @@ def random_design(robot: Robot, count: int = 20, seed: int = 1, *,
     `load_step_N` puts the per-axis magnitudes on a grid (0 or None: continuous),
     `workspace_box_m` = (min, max) keeps poses whose measured point lies in the box. An
     argument left at None takes the library's default; the library checks every value."""
-    o = _c.DesignRandomOptions()
-    check(lib.stiff_design_random_options_init(C.byref(o), C.sizeof(o)))
-    o.count = _c.require_count("count", count, 1000000)
-    o.seed = seed
+    o = _c.defaults(_c.DesignRandomOptions)
+    if count is not None:
+        o.count = _c.require_count("count", count, 1000000)
+    if seed is not None:
+        o.seed = seed
     if range_fraction is not None:
         if not range_fraction > 0:  # 0 would read as "default" in C; the library checks the rest
             raise InvalidArgumentError(

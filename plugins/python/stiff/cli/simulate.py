@@ -22,7 +22,8 @@ def register(sub):
                        description=__doc__, epilog=EXAMPLE, formatter_class=Formatter)
     add_robot(p)
     p.add_argument("--plan", help="plan or measurement CSV giving poses and loads")
-    p.add_argument("--count", type=whole, default=20, help="random poses when no --plan (default 20)")
+    p.add_argument("--count", type=whole, help="random poses when no --plan (default "
+                   f"{api.random_design_defaults()['count']})")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--truth", help="truth YAML (stiffness and hidden effects)")
     g.add_argument("--stiffness", help="true joint stiffness, comma-separated [N*m/rad]")
@@ -50,9 +51,8 @@ def run(args):
     from . import UserError
 
     robot = load_robot(args)
-    seed = api.noise_defaults()["seed"] if args.seed is None else args.seed
     design = (api.Dataset.read(builtin_path("paper", args.plan), robot) if args.plan
-              else api.random_design(robot, args.count, seed))
+              else api.random_design(robot, args.count, args.seed))
     # Only what the user gave; simulate() leaves every other noise field at the library's value.
     noise = dict(tracker_sigma_m=None if args.tracker_sigma_um is None else args.tracker_sigma_um * 1e-6,
                  tracker_ppm=args.tracker_ppm, force_relative=args.force_relative,
