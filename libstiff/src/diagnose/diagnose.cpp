@@ -880,11 +880,15 @@ struct Chain {
     return &levels[i + 1];
   }
 
-  /// Is the residual of `q` at the noise floor? With a stated noise: the chi-square test,
+  /// Is the residual of level L at the noise floor? With a stated noise: the chi-square test,
   /// allowing for the uncertainty of the stated level. Without: a model that explains the data
-  /// predicts the validation poses about as well as it fits (F test of the two mean squares);
-  /// with neither there is no evidence against it.
-  bool at_floor(const ModelQuality& q, std::string* why) const {
+  /// predicts the validation poses about as well as it fits (F test of the two mean squares),
+  /// and its residual has no structure left against the covariates of "where it fails"
+  /// (partial F-tests, Holm across them: no sigma needed). A chain of candidates that mimics
+  /// an effect outside the library fits and predicts alike, but leaves the part it cannot
+  /// mimic as a trend in the load torques or directions.
+  bool at_floor(const Level& L, std::string* why) const {
+    const ModelQuality& q = L.a.quality;
     const double alpha = cx->opt->alpha;
     if (cx->noise->known) {
       if (q.floor_p >= alpha) return true;
@@ -893,12 +897,23 @@ struct Chain {
              " % above the stated one, p = " + num(q.floor_p, 2) + ")";
       return false;
     }
-    if (!q.has_validation || q.validation_to_fit_p >= alpha) return true;
-    *why = "it predicts the validation poses " + num(q.validation_to_fit, 3) +
-           " times worse than its fit residual allows (p = " + num(q.validation_to_fit_p, 2) +
-           " allowing " + num(100 * cx->opt->noise_uncertainty, 2) +
-           " % between sessions): structure remains";
-    return false;
+    if (q.has_validation && q.validation_to_fit_p < alpha) {
+      *why = "it predicts the validation poses " + num(q.validation_to_fit, 3) +
+             " times worse than its fit residual allows (p = " + num(q.validation_to_fit_p, 2) +
+             " allowing " + num(100 * cx->opt->noise_uncertainty, 2) +
+             " % between sessions): structure remains";
+      return false;
+    }
+    Diagnosis d;
+    where(*cx, L, d);
+    for (const auto& c : d.covariates)
+      if (c.significant) {
+        *why = "its residual still follows " + c.description +
+               " (partial F = " + num(c.statistic, 3) + ", p_adj = " + num(c.p_adjusted, 2) +
+               "): structure remains that no candidate explains";
+        return false;
+      }
+    return true;
   }
 
   /// Does adding one of level i's significant candidates (the top and the next ones by rank,
@@ -985,7 +1000,7 @@ struct Chain {
     // partial F-tests do not depend on the stated noise, so they also catch a residual that
     // the noise allowance would let pass).
     std::string floor_why;
-    const bool floor = at_floor(nq, &floor_why);
+    const bool floor = at_floor(*n, &floor_why);
     if (floor && !claims(*n)) return true;
     // At the floor with a marginal candidate left (p_adj > alpha/10, the rule of decide()) that
     // does not validate: not structure.

@@ -208,6 +208,7 @@ FitResult identify(const RobotModel& robot,
 
   // ---- identifiability, solve, re-check at the solution (offsets can make c6 visible).
   Identifiability idf;
+  std::vector<bool> left_out;  ///< per parameter: an optional term the data do not support
   std::vector<int> free;
   int iterations = 0;
   const IdentifyOptions* solving = &opt;
@@ -289,6 +290,100 @@ FitResult identify(const RobotModel& robot,
     if (std::find(stat.statistical.begin(), stat.statistical.end(), true) != stat.statistical.end())
       idf = stat;
   };
+  // The free set from idf (held parameters back to their null value) and one more solve.
+  auto resolve_free = [&](const char* what) {
+    free.clear();
+    for (int k = 0; k < p; ++k) {
+      if (!idf.fixed[k])
+        free.push_back(k);
+      else if (!given[k])
+        theta(k) =
+            std::min(std::max(model.spec(k).null_value, model.spec(k).lower), model.spec(k).upper);
+    }
+    if (free.empty())
+      throw NumericalError("identify: no parameter of model '" + model.model_string() + "' " +
+                           what);
+    last = solve(s, free, theta, opt, loss_scale, nullptr);
+    iterations += last.iterations;
+    last_jacobian = weighted_jacobian(s, theta);
+    last_jacobian_theta = theta;
+  };
+  // Optional terms (ParameterSpec::optional_term: members of a family of forms that overlap
+  // each other) stay only when the data support them: backward elimination by the Bayesian
+  // information criterion (Schwarz 1978), BIC = m ln(RSS) + k ln(m) over the m weighted
+  // residual components (no stated noise needed). Each round drops the optional term whose
+  // removal raises the RSS least, while m ln(RSS_without / RSS) < ln(m); the RSS and the other
+  // parameters follow the removal on the linearisation at the solution (exact for a model
+  // linear in its parameters). Terms that overlap are judged one at a time, so that one of
+  // two collinear terms stays when together they matter. The dropped terms are held at their
+  // null value and the rest solved again.
+  left_out.assign(p, false);
+  auto select_terms = [&]() {
+    std::fill(left_out.begin(), left_out.end(), false);
+    if (!opt.select_terms) return;
+    std::vector<int> cur = free;
+    auto optional = [&](int k) { return model.spec(k).optional_term && !given[k]; };
+    if (std::none_of(cur.begin(), cur.end(), optional)) return;
+    const Eigen::MatrixXd& jac = last_jacobian;  // at theta (the last solve's)
+    Eigen::VectorXd e = weighted_residuals(s, theta);
+    Eigen::MatrixXd js(jac.rows(), p);
+    for (int k = 0; k < p; ++k) js.col(k) = jac.col(k) * s.typical(k);
+    // Rows a robust loss down-weights count that much (as in the residual scale above).
+    for (int r = 0; r < n; ++r) {
+      std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
+      if (!loss) continue;
+      double rho[3];
+      loss->Evaluate(e.segment<3>(3 * r).squaredNorm(), rho);
+      const double w = std::sqrt(std::min(1.0, std::max(0.0, rho[1])));
+      e.segment<3>(3 * r) *= w;
+      js.middleRows(3 * r, 3) *= w;
+    }
+    const double m = static_cast<double>(e.size());
+    double rss = e.squaredNorm();
+    Eigen::VectorXd z(p);  // distance from the null value in typical magnitudes
+    for (int k = 0; k < p; ++k) z(k) = (theta(k) - model.spec(k).null_value) / s.typical(k);
+    bool dropped = false;
+    while (cur.size() > 1) {
+      const int nc = static_cast<int>(cur.size());
+      Eigen::MatrixXd g(nc, nc);
+      for (int a = 0; a < nc; ++a)
+        for (int b = 0; b <= a; ++b) g(a, b) = g(b, a) = js.col(cur[a]).dot(js.col(cur[b]));
+      const Eigen::VectorXd d = g.diagonal().cwiseSqrt().cwiseMax(1e-300).cwiseInverse();
+      const Eigen::MatrixXd cov =
+          d.asDiagonal() *
+          (d.asDiagonal() * g * d.asDiagonal()).ldlt().solve(Eigen::MatrixXd::Identity(nc, nc)) *
+          d.asDiagonal();
+      int worst = -1;
+      double rise = INFINITY;
+      for (int a = 0; a < nc; ++a) {
+        if (!optional(cur[a]) || !(cov(a, a) > 0)) continue;
+        const double r = z(cur[a]) * z(cur[a]) / cov(a, a);  // RSS rise when it is dropped
+        if (r < rise) {
+          rise = r;
+          worst = a;
+        }
+      }
+      if (worst < 0 || !(rss > 0) || m * std::log1p(rise / rss) >= std::log(m)) break;
+      const int k = cur[worst];
+      for (int a = 0; a < nc; ++a)
+        if (a != worst) z(cur[a]) -= cov(a, worst) / cov(worst, worst) * z(k);
+      z(k) = 0.0;
+      idf.fixed[k] = true;
+      idf.statistical[k] = true;
+      idf.reason[k] =
+          "the data do not support this optional term: it lowers the residual sum of "
+          "squares by " +
+          num(100.0 * rise / (rss + rise)) +
+          " %, less than the Bayesian information criterion asks of one more "
+          "parameter (" +
+          num(100.0 * (1.0 - std::exp(-std::log(m) / m))) + " %)";
+      left_out[k] = true;
+      rss += rise;
+      cur.erase(cur.begin() + worst);
+      dropped = true;
+    }
+    if (dropped) resolve_free("is left after the optional terms the data do not support");
+  };
   auto fit_passes = [&]() {
     // theta as the solver will see it, (theta / typical) * typical, so that the Jacobian of
     // this check is the one of the solver's first iteration (Evaluations cache).
@@ -355,26 +450,13 @@ FitResult identify(const RobotModel& robot,
             ? apart(last_jacobian, idf, [&](const Eigen::MatrixXd& j) { return check(j, theta); })
             : check(last_jacobian, theta);
     residual_sigma = 0.0;
-    if (absolute ? stat == idf
-                 : std::find(stat.statistical.begin(), stat.statistical.end(), true) ==
-                       stat.statistical.end())
-      return;
-    idf = stat;
-    free.clear();
-    for (int k = 0; k < p; ++k) {
-      if (!idf.fixed[k])
-        free.push_back(k);
-      else if (!given[k])
-        theta(k) =
-            std::min(std::max(model.spec(k).null_value, model.spec(k).lower), model.spec(k).upper);
+    if (!(absolute ? stat == idf
+                   : std::find(stat.statistical.begin(), stat.statistical.end(), true) ==
+                         stat.statistical.end())) {
+      idf = stat;
+      resolve_free("is determined by this data");
     }
-    if (free.empty())
-      throw NumericalError("identify: no parameter of model '" + model.model_string() +
-                           "' is determined by this data");
-    last = solve(s, free, theta, opt, loss_scale, nullptr);
-    iterations += last.iterations;
-    last_jacobian = weighted_jacobian(s, theta);
-    last_jacobian_theta = theta;
+    select_terms();
   };
   // A redescending loss (Tukey) has many local minima and gives zero weight beyond its scale:
   // from the least-squares start, whose residuals carry the outliers' pull, it can stop where it
@@ -524,8 +606,10 @@ FitResult identify(const RobotModel& robot,
     }
     f.parameters.push_back(fp);
     if (!fp.identified) {
-      f.warnings.push_back(qualified(model, k) + " is not identifiable from this data: " +
-                           idf.reason[k] + "; held at " + num(theta(k)) + " " + sp.unit);
+      f.warnings.push_back(
+          qualified(model, k) +
+          (left_out[k] ? " is left out: " : " is not identifiable from this data: ") +
+          idf.reason[k] + "; held at " + num(theta(k)) + " " + sp.unit);
     } else if (sp.lower > -1e299 && sp.lower != sp.null_value &&
                theta(k) <= sp.lower + 1e-9 * s.typical(k)) {
       f.warnings.push_back(qualified(model, k) + " ended at its lower bound " + num(sp.lower) +

@@ -3,6 +3,7 @@
 // new poses sits at the noise floor.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 #include <map>
 
@@ -19,6 +20,10 @@ struct Recovery {
   std::map<std::string, int> unidentified;
   std::map<std::string, double> se_sum;  // sum of reported standard errors
   std::map<std::string, double> truth;
+  // Optional terms (ParameterSpec::optional_term) whose truth is null: how often the fit kept
+  // one, out of how many chances.
+  int null_kept = 0, null_chances = 0;
+  double equations = 0;  ///< weighted residual components of one fit
   double val_ss = 0;
   int val_n = 0;
 };
@@ -53,10 +58,19 @@ Recovery run(const std::string& effect, int seeds) {
       data = again;
       fit = identify(robot, data, truth.effects, IdentifyOptions{});
     }
+    const DeflectionModel model(robot, truth.effects);
+    out.equations = 3.0 * static_cast<double>(data.size());
     for (size_t k = 0; k < fit.parameters.size(); ++k) {
       const auto& p = fit.parameters[k];
       const std::string key = p.effect + "." + p.name;
       out.truth[key] = truth.theta(k);
+      // A null optional term is kept only when its estimate happens to be large: the standard
+      // errors do not cover the selection, so it counts towards the false-inclusion rate.
+      if (model.spec(static_cast<int>(k)).optional_term && truth.theta(k) == nulls(k)) {
+        ++out.null_chances;
+        out.null_kept += p.identified;
+        continue;
+      }
       if (!p.identified) {
         ++out.unidentified[key];
         continue;
@@ -87,6 +101,16 @@ void check(const std::string& effect, int seeds) {
   }
   for (const auto& [key, n] : rec.unidentified)
     std::printf("  %-34s held (unidentifiable) in %d runs\n", key.c_str(), n);
+  // The information criterion keeps a null term when its chi-square (1 dof) exceeds ln(m), m
+  // the residual components: probability erfc(sqrt(ln(m) / 2)) per chance. Binomial count
+  // within four standard deviations of that.
+  if (rec.null_chances > 0) {
+    const double q = std::erfc(std::sqrt(std::log(rec.equations) / 2.0));
+    const double mean = q * rec.null_chances;
+    std::printf("  optional terms with null truth kept in %d of %d chances (expected %.1f)\n",
+                rec.null_kept, rec.null_chances, mean);
+    EXPECT_LE(rec.null_kept, mean + 4.0 * std::sqrt(mean * (1.0 - q)) + 1.0);
+  }
   // Prediction error on new poses: noise plus the estimation error of ~10-20 parameters from
   // 180 equations, sqrt(1 + p/3N) ~ 1.03-1.05 times the noise; within 10 %.
   const double rms = std::sqrt(rec.val_ss / rec.val_n);

@@ -60,6 +60,10 @@ struct IdentifyOptions {
   /// the data: it is held at its null value, named in `warnings`, and the rest solved again
   /// (docs/identifiability.md). 0 turns the statistical test off (structural rank only).
   double max_relative_se = kDefaultMaxRelativeSe;
+  /// Keep an optional term (ParameterSpec::optional_term) only when it lowers the Bayesian
+  /// information criterion of the fit; false keeps every identifiable term
+  /// (docs/identifiability.md).
+  bool select_terms = true;
   /// Called after every Ceres iteration with (iteration, cost); return false to cancel (the
   /// call then throws Cancelled).
   std::function<bool(int, double)> progress;

@@ -46,6 +46,11 @@ struct ParameterSpec {
   double typical = 1.0;     ///< typical magnitude (for scaling and priors)
   double null_value = 0.0;  ///< value at which the effect vanishes
   double start = 0.0;       ///< start value of a fit
+  /// A term of a family of forms (e.g. the second-order terms of a nonlinear reducer) that
+  /// overlaps the others: identification keeps it only when the data support it (backward
+  /// elimination by the Bayesian information criterion, docs/identifiability.md) and holds it
+  /// at its null value otherwise. False: kept whenever the data determine it.
+  bool optional_term = false;
 };
 
 /// Data of one measurement that does not depend on the parameters (computed once).

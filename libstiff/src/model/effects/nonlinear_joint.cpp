@@ -1,27 +1,66 @@
-// nonlinear_joint: hardening torque-torsion curve of strain-wave / cycloidal reducers, measured
-// as a secant about the gravity preload (docs/effects.md).
+// nonlinear_joint: a joint whose torque-torsion curve is not a straight line (strain-wave and
+// cycloidal reducers, docs/effects.md), in a form general enough for the reducers users have:
+// hardening or softening, symmetric or not, about the gravity preload or about the unloaded
+// state. Linear in its parameters, so the score test uses it as it stands; every term is
+// optional (ParameterSpec::optional_term): a fit keeps the sub-form the data support.
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {
 namespace {
 
-/// theta_j(tau) = c_j tau + e_j T1_j tanh(tau / T1_j): below the knee torque T1 the reducer is
-/// softer by e_j (catalogue K1 < K3). The loaded-minus-unloaded reading is a secant about the
-/// gravity preload tau_g, so dtheta_j += e_j [phi(tau_g + tau_F) - phi(tau_g)],
-/// phi = T1 tanh(./T1). T1 is the catalogue knee torque, fixed: 10 N*m for the arm joints and
-/// 2 N*m for the last three (wrist) joints, which is harmonic-drive size 25 / 14 class.
+/// Per joint, with tau_F the load torque and tau_g the gravity preload:
+///   dtheta_j += e_j [phi(tau_g + tau_F) - phi(tau_g)]   soft zone about zero torque, the
+///               catalogue three-segment curve (phi = T1 tanh(./T1), knee T1 fixed: 10 N*m arm,
+///               2 N*m wrist), a secant about the preload; e > 0 hardening, e < 0 softening;
+///             + s_j tau_F |tau_F| / T0                   symmetric change of stiffness with
+///               the load torque (s < 0 hardening, s > 0 softening), about the unloaded state;
+///             + a_j tau_F^2 / T0                         asymmetric curve (stiffer in one
+///               direction of the load than in the other).
+/// T0 = 100 N*m makes s and a the change of compliance at 100 N*m [rad/(N*m)]. s and a are the
+/// second-order Taylor terms of any smooth curve about the unloaded state (odd and even part),
+/// e the saturating soft zone that a Taylor series of low order cannot follow. s and a belong
+/// to the arm joints (all but the last three of a 6-axis arm): a load at the flange moves the
+/// wrist torques by a few N*m only, where a second-order term is noise, and the wrist's soft
+/// zone (2 N*m knee) already covers its reducers. The terms overlap (each other and the linear
+/// compliance): a term the data do not support only adds prediction variance, so all of them
+/// are optional and identification keeps those that pay for themselves (docs/identifiability.md).
 class NonlinearJoint : public EffectT<NonlinearJoint> {
  public:
+  static constexpr double kT0 = 100.0;  ///< N*m
+
   explicit NonlinearJoint(const EffectSetup& s) {
     const int n = s.robot->dof();
+    auto optional = [](ParameterSpec p) {
+      p.optional_term = true;
+      return p;
+    };
     for (int j = 0; j < n; ++j) {
       knee_.push_back(j < n - 3 || n <= 3 ? 10.0 : 2.0);
-      params_.push_back(effects::parameter("e" + std::to_string(j + 1), "rad/(N*m)",
-                                           "extra compliance of joint " + std::to_string(j + 1) +
-                                               " at small torque (soft zone of the reducer, knee " +
-                                               std::to_string(static_cast<int>(knee_.back())) +
-                                               " N*m)",
-                                           0.0, 1e-2, 1e-5, 0.0, 0.0));
+      const std::string jn = std::to_string(j + 1);
+      params_.push_back(optional(effects::parameter(
+          "e" + jn, "rad/(N*m)",
+          "extra compliance of joint " + jn + " in the soft zone about zero torque (knee " +
+              std::to_string(static_cast<int>(knee_.back())) + " N*m; < 0: softening)",
+          -1e-2, 1e-2, 1e-5, 0.0, 0.0)));
+    }
+    arm_ = n > 3 ? n - 3 : n;
+    for (int j = 0; j < arm_; ++j) {
+      const std::string jn = std::to_string(j + 1);
+      params_.push_back(optional(effects::parameter(
+          "s" + jn, "rad/(N*m)",
+          "change of the compliance of joint " + jn +
+              " at 100 N*m of load torque, symmetric (< 0 hardening, > 0 softening)",
+          -1e-2, 1e-2, 1e-6, 0.0, 0.0)));
+    }
+    // Only the arm joints carry the asymmetric term (see above): a parameter without a regressor
+    // would count as a degree of freedom in the F tests and cost them power.
+    for (int j = 0; j < arm_; ++j) {
+      const std::string jn = std::to_string(j + 1);
+      params_.push_back(
+          optional(effects::parameter("a" + jn, "rad/(N*m)",
+                                      "asymmetry of the compliance of joint " + jn +
+                                          " at 100 N*m (positive load torque softer when > 0)",
+                                      -1e-2, 1e-2, 1e-6, 0.0, 0.0)));
     }
   }
   const std::string& name() const override { return name_; }
@@ -34,12 +73,15 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
     return {effects::kHintLoadReversal, effects::kHintLoadLevel, effects::kHintGravityVariety};
   }
   std::string description() const override {
-    return "hardening reducer: dtheta_j += e_j [phi(tau_g+tau_F) - phi(tau_g)], phi = T1 "
-           "tanh(tau/T1); soft near zero torque, stiff when preloaded by gravity";
+    return "nonlinear reducer: dtheta_j += e_j [phi(tau_g+tau_F) - phi(tau_g)] + s_j "
+           "tau_F|tau_F|/T0 + a_j tau_F^2/T0 (arm joints), phi = T1 tanh(tau/T1), T0 = 100 N*m: "
+           "soft zone about zero torque, symmetric and asymmetric hardening or softening; "
+           "a fit keeps the terms the data support";
   }
   std::string reference() const override {
     return "Harmonic Drive AG, engineering data CSF/CSG (three-segment torque-torsion curve); "
-           "Ruderman & Bertram, IFAC 2012 (nonlinear HD compliance)";
+           "Ruderman & Bertram, IFAC 2012 (nonlinear HD compliance); Nabtesco RV hysteresis "
+           "curves";
   }
   unsigned requirements() const override { return kNeedsMasses; }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
@@ -47,18 +89,23 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
 
   template <typename T>
   void joint_t(const T* p, EvalState<T>& s) const {
+    using std::abs;
     using std::tanh;
     const auto& tg = s.context->tau_gravity;
-    for (int j = 0; j < s.dtheta.size(); ++j) {
+    const int n = static_cast<int>(s.dtheta.size());
+    for (int j = 0; j < n; ++j) {
       const double t1 = knee_[j];
-      const T loaded = T(t1) * tanh((T(tg(j)) + s.tau(j)) / T(t1));
+      const T t = s.tau(j);
+      const T loaded = T(t1) * tanh((T(tg(j)) + t) / T(t1));
       const T preload = T(t1 * std::tanh(tg(j) / t1));
       s.dtheta(j) += p[j] * (loaded - preload);
+      if (j < arm_) s.dtheta(j) += (p[n + j] * abs(t) + p[n + arm_ + j] * t) * t / T(kT0);
     }
   }
 
  private:
   std::vector<double> knee_;
+  int arm_ = 0;  ///< joints with second-order terms
   std::string name_ = "nonlinear_joint";
   std::vector<ParameterSpec> params_;
 };
