@@ -75,13 +75,19 @@ class Backlash : public EffectT<Backlash> {
     const auto& tg = s.context->tau_gravity;
     const int n = static_cast<int>(s.dtheta.size());
     for (int j = 0; j < n; ++j) {
-      const T loaded = tanh(((T(1) + p[n + j]) * T(tg(j)) + s.tau(j)) / T(kEps));
+      // s_j enters by its value only: the threshold regression decides it, not a derivative
+      // (a fit holds it at the estimate instead of following tanh's tails near a row).
+      const double sj = scalar(p[n + j]);
+      const T loaded = tanh((T((1 + sj) * tg(j)) + s.tau(j)) / T(kEps));
       const T preload = T(std::tanh(tg(j) / kEps));
       s.dtheta(j) += T(0.5) * p[j] * (loaded - preload);
     }
   }
 
  private:
+  static double scalar(double x) { return x; }
+  static double scalar(const Jet& x) { return x.a; }
+
   /// The preload errors s_j that the data support: coordinate-wise threshold regression of
   /// d = sum_j c_j J_j(P) tau_F,j + b_j/2 [sgn((1+s_j) tau_g + tau_F) - sgn(tau_g)] J_j(P)
   /// (weighted least squares in c, b) over s_j in the band of the mass uncertainty. Between two
