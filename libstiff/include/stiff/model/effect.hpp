@@ -46,6 +46,10 @@ struct ParameterSpec {
   double typical = 1.0;     ///< typical magnitude (for scaling and priors)
   double null_value = 0.0;  ///< value at which the effect vanishes
   double start = 0.0;       ///< start value of a fit
+  /// Decided by the effect from the data it is built on, not fitted: its null and start value
+  /// are that decision, the model has no derivative with respect to it, and a fit holds it
+  /// (backlash's preload errors, found by threshold regression).
+  bool from_data = false;
 };
 
 /// Data of one measurement that does not depend on the parameters (computed once).

@@ -32,12 +32,14 @@ class Backlash : public EffectT<Backlash> {
           "b" + std::to_string(j + 1), "rad",
           "backlash (lost motion) of joint " + std::to_string(j + 1) + ", full gap width", 0.0,
           0.05, 1.5e-4, 0.0, 0.0));
-    for (int j = 0; j < n; ++j)
+    for (int j = 0; j < n; ++j) {
       params_.push_back(effects::parameter("s" + std::to_string(j + 1), "1",
                                            "relative error of the gravity preload of joint " +
                                                std::to_string(j + 1) +
                                                " (where its backlash jumps), from the data",
                                            kScaleLow, kScaleHigh, kMassUncertainty, s0(j), s0(j)));
+      params_.back().from_data = true;
+    }
   }
   const std::string& name() const override { return name_; }
   bool example_parameters(const Eigen::VectorXd& /*c*/, double* p) const override {
@@ -75,16 +77,24 @@ class Backlash : public EffectT<Backlash> {
     const auto& tg = s.context->tau_gravity;
     const int n = static_cast<int>(s.dtheta.size());
     for (int j = 0; j < n; ++j) {
-      // s_j enters by its value only: the threshold regression decides it, not a derivative
-      // (a fit holds it at the estimate instead of following tanh's tails near a row).
-      const double sj = scalar(p[n + j]);
-      const T loaded = tanh((T((1 + sj) * tg(j)) + s.tau(j)) / T(kEps));
+      // s_j by its value only: the threshold regression decides it, not a derivative.
+      const T loaded = tanh((T((1 + scalar(p[n + j])) * tg(j)) + s.tau(j)) / T(kEps));
       const T preload = T(std::tanh(tg(j) / kEps));
       s.dtheta(j) += T(0.5) * p[j] * (loaded - preload);
     }
   }
 
  private:
+  /// Upper quantile of chi2 with one degree of freedom at tail probability p: z^2 with
+  /// erfc(z / sqrt 2) = p (bisection).
+  static double chi2_1_quantile(double p) {
+    double lo = 0, hi = 40;
+    for (int i = 0; i < 100; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      (std::erfc(mid / std::sqrt(2.0)) > p ? lo : hi) = mid;
+    }
+    return lo * lo;
+  }
   static double scalar(double x) { return x; }
   static double scalar(const Jet& x) { return x.a; }
 
@@ -180,7 +190,8 @@ class Backlash : public EffectT<Backlash> {
         std::vector<double> cand = {0.0, 0.5 * (kScaleLow + cut.front())};
         for (size_t k = 0; k + 1 < cut.size(); ++k) cand.push_back(0.5 * (cut[k] + cut[k + 1]));
         cand.push_back(0.5 * (cut.back() + kScaleHigh));
-        double best = gain(s(j)), best_s = s(j);
+        const double at_file = gain(0.0);
+        double best = at_file, best_s = 0.0;
         for (const double sj : cand) {
           const double g = gain(sj);
           // A larger gain wins; on a tie (the same decisions) the smaller correction.
@@ -190,7 +201,13 @@ class Backlash : public EffectT<Backlash> {
             best_s = sj;
           }
         }
-        s(j) = best_s;
+        // The robot file's preload stands unless the data reject it: the drop of the residual
+        // sum of squares from s = 0 to the best threshold, in units of the residual variance,
+        // against the chi2(1) quantile at alpha / (number of thresholds tried) (Bonferroni:
+        // the search picks the best of them; alpha = 5 %).
+        const int dof = 3 * N - rank - 1;
+        const double var = (r0.squaredNorm() - best) / std::max(dof, 1);
+        s(j) = dof > 0 && best - at_file > chi2_1_quantile(0.05 / cand.size()) * var ? best_s : 0.0;
         column(j, best_s, x.col(n + j));
       }
     }
