@@ -51,6 +51,10 @@ struct ParameterSpec {
   /// elimination by the Bayesian information criterion, docs/identifiability.md) and holds it
   /// at its null value otherwise. False: kept whenever the data determine it.
   bool optional_term = false;
+  /// Decided by the effect from the data it is built on, not fitted: its null and start value
+  /// are that decision, the model has no derivative with respect to it, and a fit holds it
+  /// (backlash's preload errors, found by threshold regression).
+  bool from_data = false;
 };
 
 /// Data of one measurement that does not depend on the parameters (computed once).
