@@ -13,6 +13,8 @@
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include "diagnose/noise.hpp"
+#include "diagnose/text.hpp"
 #include "identify/robust.hpp"
 #include "stiff/error.hpp"
 #include "stiff/identify/fit.hpp"
@@ -22,21 +24,13 @@
 namespace stiff {
 namespace {
 
+using diagnose_detail::join;
+using diagnose_detail::Noise;
+using diagnose_detail::noise_of;
+using diagnose_detail::num;
+using diagnose_detail::um;
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
-
-std::string num(double v, int precision = 3) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.*g", precision, v);
-  return b;
-}
-std::string um(double m) { return num(m * 1e6, 3) + " um"; }
-
-std::string join(const std::vector<std::string>& v, const std::string& sep) {
-  std::string s;
-  for (const auto& x : v) s += (s.empty() ? "" : sep) + x;
-  return s;
-}
 
 /// Orthonormal basis of the column space of `a` (columns scaled to unit norm first); columns
 /// whose relative singular value is below `tol` are dropped. `v_null` (optional) receives the
@@ -56,135 +50,6 @@ MatrixXd orthonormal_basis(const MatrixXd& a,
   if (sv) *sv = s;
   if (v_null) *v_null = svd.matrixV().rightCols(s.size() - rank);
   return svd.matrixU().leftCols(rank);
-}
-
-/// Noise level of the data: per-row sigma [m] and where it came from.
-struct Noise {
-  VectorXd sigma;  ///< per row [m]; 1 (unit weights) when unknown
-  bool known = false;
-  double floor_m = 0.0;
-  std::string source = "none";
-  double force_part_m = 0.0;  ///< mean displacement error from the stated force error
-  double tracker_m = 0.0;     ///< stated tracker sigma (median)
-};
-
-Noise noise_of_tracker(const Dataset& data);
-
-double meta_number(const Dataset& data, const std::string& key) {
-  const std::string meta = data.meta(key);
-  if (meta.empty()) return 0.0;
-  char* end = nullptr;
-  const double v = std::strtod(meta.c_str(), &end);
-  return end != meta.c_str() && std::isfinite(v) && v > 0 ? v : 0.0;
-}
-
-/// How the data states its force error: "a + b x" as a linear sum (the default, the convention
-/// of instrument specifications) unless `# force_error_sum: quadrature`.
-bool force_error_sum_is_linear(const Dataset& data) {
-  return data.meta("force_error_sum") != "quadrature";
-}
-
-/// Add the displacement error caused by the stated force-sensor error (metadata
-/// force_relative, force_absolute_N). Instrument specifications written "a + b x" are linear
-/// sums (the convention of force-sensor data sheets and of ISO 10360 / ASME B89.4.19 MPEs):
-/// per force component sigma_k = rel |F_k| + abs. `# force_error_sum: quadrature` states
-/// sqrt((rel F_k)^2 + abs^2) instead. A force error dF moves the measured point by about
-/// |d| |dF| / |F|, so per displacement axis sigma_F^2 = |d|^2 sum_k sigma_k^2 / (3 |F|^2).
-void add_force_noise(const Dataset& data, Noise& n) {
-  const double rel = meta_number(data, "force_relative");
-  const double abs_n = meta_number(data, "force_absolute_N");
-  if (!(rel > 0 || abs_n > 0)) return;
-  const bool linear = force_error_sum_is_linear(data);
-  double sum = 0;
-  for (size_t r = 0; r < data.rows.size(); ++r) {
-    const auto& m = data.rows[r];
-    const double f = m.force.norm();
-    if (!(f > 0) || m.absolute) continue;  // the deflection is not what an absolute row holds
-    double s2 = 0;
-    for (int k = 0; k < 3; ++k) {
-      const double a = rel * std::abs(m.force(k));
-      const double sk = linear ? a + abs_n : std::hypot(a, abs_n);
-      s2 += sk * sk;
-    }
-    const double v = m.displacement.squaredNorm() * s2 / (3 * f * f);
-    n.sigma(r) = std::sqrt(n.sigma(r) * n.sigma(r) + v);
-    sum += std::sqrt(v);
-  }
-  n.force_part_m = sum / std::max<size_t>(1, data.rows.size());
-  n.floor_m = std::sqrt(n.sigma.squaredNorm() / std::max<Eigen::Index>(1, n.sigma.size()));
-}
-
-Noise noise_of(const Dataset& data) {
-  Noise n = noise_of_tracker(data);
-  n.tracker_m = n.floor_m;
-  if (n.known) add_force_noise(data, n);
-  return n;
-}
-
-Noise noise_of_tracker(const Dataset& data) {
-  Noise n;
-  const int rows = static_cast<int>(data.rows.size());
-  n.sigma = VectorXd::Ones(rows);
-  // sigma_d of a displacement row, sigma_p of an absolute one: every row must state one.
-  bool all_sigma = data.has_sigma || data.has_sigma_p;
-  if (all_sigma)
-    for (const auto& m : data.rows)
-      if (!(m.sigma() > 0)) all_sigma = false;
-  if (all_sigma) {
-    for (int r = 0; r < rows; ++r) n.sigma(r) = data.rows[r].sigma();
-    n.known = true;
-    n.source = data.has_sigma_p ? "sigma_p" : "sigma_d";
-    n.floor_m = stated_noise_m(data);
-    return n;
-  }
-  const std::string meta = data.meta("tracker_sigma_m");
-  if (!meta.empty()) {
-    char* end = nullptr;
-    const double v = std::strtod(meta.c_str(), &end);
-    if (end != meta.c_str() && std::isfinite(v) && v > 0) {
-      n.sigma.setConstant(v);
-      n.known = true;
-      n.source = "metadata";
-      n.floor_m = v;
-      return n;
-    }
-  }
-  // Replicated measurements: same pose and load; pooled within-group spread.
-  std::vector<int> group(rows, -1);
-  int groups = 0;
-  for (int a = 0; a < rows; ++a) {
-    if (group[a] >= 0) continue;
-    group[a] = groups;
-    for (int b = a + 1; b < rows; ++b) {
-      const auto& ma = data.rows[a];
-      const auto& mb = data.rows[b];
-      if (group[b] < 0 && ma.session == mb.session && ma.absolute == mb.absolute &&
-          (ma.q - mb.q).norm() < 1e-9 &&
-          (ma.force - mb.force).norm() < 1e-6 * (1.0 + ma.force.norm()) &&
-          (ma.moment - mb.moment).norm() < 1e-6 * (1.0 + ma.moment.norm()))
-        group[b] = groups;
-    }
-    ++groups;
-  }
-  std::vector<Eigen::Vector3d> sum(groups, Eigen::Vector3d::Zero());
-  std::vector<int> count(groups, 0);
-  for (int r = 0; r < rows; ++r) {
-    sum[group[r]] += data.rows[r].observed();
-    ++count[group[r]];
-  }
-  double ss = 0;
-  int dof = 0;
-  for (int r = 0; r < rows; ++r)
-    ss += (data.rows[r].observed() - sum[group[r]] / count[group[r]]).squaredNorm();
-  for (int g = 0; g < groups; ++g) dof += 3 * (count[g] - 1);
-  if (dof >= 3 && ss > 0) {
-    const double s = std::sqrt(ss / dof);
-    n.sigma.setConstant(s);
-    n.known = true;
-    n.source = "replicates";
-    n.floor_m = s;
-  }
-  return n;
 }
 
 /// A fitted model on the calibration rows that are not outliers, with everything the tests need.
@@ -1276,156 +1141,6 @@ Diagnosis diagnose(const RobotModel& robot,
   }
   d.warnings.insert(d.warnings.end(), chain.warnings.begin(), chain.warnings.end());
   return d;
-}
-
-namespace {
-
-nlohmann::json finite(double v) {
-  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-}
-
-nlohmann::json quality_json(const ModelQuality& q) {
-  nlohmann::json j;
-  j["model"] = q.model;
-  j["measurements"] = q.measurements;
-  j["used"] = q.used;
-  j["parameters"] = q.parameters;
-  j["rms_m"] = q.fit_rms_m;
-  j["chi2"] = q.chi2;
-  j["dof"] = q.dof;
-  j["chi2_p"] = q.chi2_p;
-  j["sigma_hat_m"] = q.sigma_hat_m;
-  j["residual_to_floor"] = finite(q.residual_to_floor);
-  j["floor_p"] = q.floor_p;
-  if (q.has_validation) {
-    j["validation_rms_m"] = q.validation_rms_m;
-    j["validation_floor_m"] = q.validation_floor_m;
-    j["validation_error_m"] = q.validation_error_m;
-    j["validation_to_fit"] = finite(q.validation_to_fit);
-    j["validation_to_fit_p"] = q.validation_to_fit_p;
-  }
-  nlohmann::json p = nlohmann::json::object();
-  for (size_t k = 0; k < q.parameter_names.size(); ++k)
-    p[q.parameter_names[k]] = q.parameter_values[k];
-  j["parameter_values"] = p;
-  return j;
-}
-
-}  // namespace
-
-std::string diagnosis_to_json(const Diagnosis& d) {
-  using nlohmann::json;
-  json j;
-  j["format"] = "stiff-diagnosis";
-  j["version"] = 1;
-  j["robot"] = d.robot;
-  j["model"] = join(d.model, "+");
-  j["verdict"] = d.verdict;
-  j["summary"] = d.summary;
-  j["alpha"] = d.alpha;
-  j["noise_floor_m"] = d.noise_floor_m;
-  j["noise_source"] = d.noise_source;
-  json fit = quality_json(d.fit);
-  fit["omnibus_rejects"] = d.omnibus_rejects;
-  j["fit"] = fit;
-  if (d.fit.has_validation) {
-    json v;
-    v["rms_m"] = d.fit.validation_rms_m;
-    v["floor_m"] = d.fit.validation_floor_m;
-    v["error_m"] = d.fit.validation_error_m;
-    if (d.after_valid) v["rms_after_m"] = d.after.validation_rms_m;
-    j["validation"] = v;
-  }
-  j["suggested_model"] = d.suggested_model.empty() ? json(nullptr) : json(d.suggested_model);
-  j["suggested_command"] = d.suggested_command.empty() ? json(nullptr) : json(d.suggested_command);
-  if (d.after_valid) j["after"] = quality_json(d.after);
-  j["ambiguous_group"] = d.ambiguous_group;
-  j["experiment"] = d.experiment.empty() ? json(nullptr) : json(d.experiment);
-  j["unexplained_signature"] =
-      d.unexplained_signature.empty() ? json(nullptr) : json(d.unexplained_signature);
-  json cands = json::array();
-  for (const auto& c : d.candidates) {
-    json x;
-    x["effect"] = c.effect;
-    x["rank"] = c.rank == 0 ? json(nullptr) : json(c.rank);
-    x["testable"] = c.testable;
-    x["reason"] = c.reason;
-    x["parameters"] = c.parameters;
-    x["df"] = c.df;
-    x["identifiable"] = c.identifiable;
-    x["unidentifiable_parameters"] = c.unidentifiable;
-    x["test"] = "partial_F";
-    x["statistic"] = c.testable ? finite(c.statistic) : json(nullptr);
-    x["lm"] = c.testable ? finite(c.lm) : json(nullptr);
-    x["log10_p"] = c.testable ? finite(c.log_p / std::log(10.0)) : json(nullptr);
-    x["p_value"] = c.testable ? json(c.p_value) : json(nullptr);
-    x["p_adjusted"] = c.testable ? json(c.p_adjusted) : json(nullptr);
-    x["significant"] = c.significant;
-    x["expected_rms_drop_m"] = c.testable ? json(c.expected_rms_drop_m) : json(nullptr);
-    x["fit_rms_after_m"] = c.testable ? json(c.fit_rms_after_m) : json(nullptr);
-    x["excess_explained"] = finite(c.excess_explained);
-    x["surviving_fraction"] = c.surviving_fraction;
-    x["max_correlation_with_top"] = c.max_correlation;
-    x["group"] = c.group;
-    x["command"] = c.command;
-    if (!c.av_fitted_m.empty()) {
-      x["added_variable"] = {{"fitted_m", c.av_fitted_m}, {"residual_m", c.av_residual_m}};
-    }
-    cands.push_back(x);
-  }
-  j["candidates"] = cands;
-  json w;
-  json worst = json::array(), res = json::array();
-  auto pose = [](const PoseResidual& p) {
-    return json{{"row", p.row},
-                {"id", p.id},
-                {"residual_m", {p.residual_m[0], p.residual_m[1], p.residual_m[2]}},
-                {"predicted_m", {p.predicted_m[0], p.predicted_m[1], p.predicted_m[2]}},
-                {"norm_m", p.norm_m},
-                {"norm_sigma", finite(p.norm_sigma)},
-                {"outlier", p.outlier}};
-  };
-  for (const auto& p : d.worst) worst.push_back(pose(p));
-  for (const auto& p : d.residuals) res.push_back(pose(p));
-  w["worst_poses"] = worst;
-  json axes = json::array();
-  const char* ax[3] = {"x", "y", "z"};
-  for (int k = 0; k < 3; ++k)
-    axes.push_back({{"axis", ax[k]}, {"rms_m", d.axis_rms_m[k]}, {"chi2_p", d.axis_chi2_p[k]}});
-  w["axes"] = axes;
-  json cov = json::array();
-  for (const auto& c : d.covariates)
-    cov.push_back({{"covariate", c.covariate},
-                   {"description", c.description},
-                   {"test", "partial_F"},
-                   {"statistic", c.statistic},
-                   {"df", c.df},
-                   {"p_value", c.p_value},
-                   {"p_adjusted", c.p_adjusted},
-                   {"significant", c.significant},
-                   {"correlation", {c.correlation[0], c.correlation[1], c.correlation[2]}}});
-  w["covariates"] = cov;
-  w["outliers"] = json::array();
-  for (const auto& p : d.residuals)
-    if (p.outlier) w["outliers"].push_back(pose(p));
-  j["where"] = w;
-  j["residuals"] = res;
-  json steps = json::array();
-  for (const auto& s : d.steps) {
-    json x = quality_json(s.quality);
-    x["step"] = s.step;
-    x["added"] = s.added.empty() ? json(nullptr) : json(s.added);
-    x["verdict"] = s.verdict;
-    x["top"] = s.top.empty() ? json(nullptr) : json(s.top);
-    x["top_p_adjusted"] = s.top_p_adjusted;
-    x["top_expected_rms_drop_m"] = s.top_expected_rms_drop_m;
-    steps.push_back(x);
-  }
-  j["steps"] = steps;
-  j["final_model"] = d.final_model;
-  j["final_verdict"] = d.final_verdict;
-  j["warnings"] = d.warnings;
-  return j.dump(1);
 }
 
 }  // namespace stiff

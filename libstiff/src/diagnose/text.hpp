@@ -1,0 +1,23 @@
+// Number and list formatting of the diagnosis's messages (private to diagnose/).
+#pragma once
+
+#include <cstdio>
+#include <string>
+#include <vector>
+
+namespace stiff::diagnose_detail {
+
+inline std::string num(double v, int precision = 3) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*g", precision, v);
+  return b;
+}
+inline std::string um(double m) { return num(m * 1e6, 3) + " um"; }
+
+inline std::string join(const std::vector<std::string>& v, const std::string& sep) {
+  std::string s;
+  for (const auto& x : v) s += (s.empty() ? "" : sep) + x;
+  return s;
+}
+
+}  // namespace stiff::diagnose_detail
