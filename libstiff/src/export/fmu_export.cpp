@@ -13,6 +13,7 @@
 #include <set>
 #include <sstream>
 
+#include "io/xml.hpp"
 #include "io/zip.hpp"
 #include "stiff/error.hpp"
 #include "stiff/io/robot_io.hpp"
@@ -55,28 +56,7 @@ std::string num(double v) {
   return b;
 }
 
-std::string xml(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    switch (c) {
-      case '&':
-        o += "&amp;";
-        break;
-      case '<':
-        o += "&lt;";
-        break;
-      case '>':
-        o += "&gt;";
-        break;
-      case '"':
-        o += "&quot;";
-        break;
-      default:
-        if (static_cast<unsigned char>(c) >= 0x20 || c == '\t') o += c;
-    }
-  }
-  return o;
-}
+std::string xml(const std::string& s) { return detail::xml_attribute(s); }
 
 // Unit strings of the core ("rad/(N*m)") -> FMI unit names and SI base-unit exponents.
 struct UnitInfo {

@@ -14,12 +14,15 @@
 #include <set>
 #include <sstream>
 
+#include "io/xml.hpp"
 #include "stiff/error.hpp"
 #include "stiff/io/text_io.hpp"
 #include "yaml_load.hpp"
 
 namespace stiff {
 namespace {
+
+using detail::xml_attribute;
 
 constexpr double kPi = 3.141592653589793238462643383279502884;
 
@@ -620,44 +623,6 @@ std::string robot_to_yaml(const RobotModel& robot) {
 
 namespace stiff {
 namespace {
-
-/// An XML attribute value: the five markup characters as entities; tab, newline and carriage
-/// return as character references (an attribute's literal ones are normalised to spaces on
-/// reading); characters XML 1.0 cannot hold at all (other C0 controls) as '_'.
-std::string xml_attribute(const std::string& s) {
-  std::string o;
-  for (const unsigned char c : s) {
-    switch (c) {
-      case '&':
-        o += "&amp;";
-        break;
-      case '<':
-        o += "&lt;";
-        break;
-      case '>':
-        o += "&gt;";
-        break;
-      case '"':
-        o += "&quot;";
-        break;
-      case '\'':
-        o += "&apos;";
-        break;
-      case '\t':
-        o += "&#9;";
-        break;
-      case '\n':
-        o += "&#10;";
-        break;
-      case '\r':
-        o += "&#13;";
-        break;
-      default:
-        o += c < 0x20 ? '_' : static_cast<char>(c);
-    }
-  }
-  return o;
-}
 
 /// Text inside an XML comment: no "--", no trailing '-', no characters XML cannot hold.
 std::string xml_comment_text(const std::string& s) {
