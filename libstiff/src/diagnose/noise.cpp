@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "identify/robust.hpp"
+#include "stiff/identify/fit.hpp"
 
 namespace stiff::diagnose_detail {
 namespace {
