@@ -470,20 +470,27 @@ stiff_status stiff_dataset_id(
   });
 }
 
+namespace {
+/// The noise model's fields into the C struct (all but struct_size).
+void put_noise(const NoiseModel& n, stiff_noise_options& o) {
+  o.tracker_sigma_m = n.tracker_sigma_m;
+  o.tracker_ppm = n.tracker_ppm;
+  for (int k = 0; k < 3; ++k) o.tracker_position_m[k] = n.tracker_position_m(k);
+  o.force_relative = n.force_relative;
+  o.force_absolute_N = n.force_absolute_N;
+  o.joint_sigma_rad = n.joint_sigma_rad;
+  o.outlier_rate = n.outlier_rate;
+  o.outlier_size_m = n.outlier_size_m;
+  o.seed = n.seed;
+}
+}  // namespace
+
 stiff_status stiff_noise_options_init(stiff_noise_options* options, size_t struct_size) {
   return guarded(__func__, [&] {
     // The virtual robot's default noise (NoiseModel{}), the one stiff_simulate uses for NULL.
     const NoiseModel n;
     stiff_noise_options o{};
-    o.tracker_sigma_m = n.tracker_sigma_m;
-    o.tracker_ppm = n.tracker_ppm;
-    for (int k = 0; k < 3; ++k) o.tracker_position_m[k] = n.tracker_position_m(k);
-    o.force_relative = n.force_relative;
-    o.force_absolute_N = n.force_absolute_N;
-    o.joint_sigma_rad = n.joint_sigma_rad;
-    o.outlier_rate = n.outlier_rate;
-    o.outlier_size_m = n.outlier_size_m;
-    o.seed = n.seed;
+    put_noise(n, o);
     return init_options(options, struct_size, sizeof(stiff_noise_options), "stiff_noise_options",
                         o);
   });
@@ -495,15 +502,7 @@ stiff_status stiff_noise_read(stiff_noise_options* noise, const char* path) {
     require_string(path, "path");
     stiff_noise_options o = read_options(noise, true);
     const NoiseModel n = read_noise(path);
-    o.tracker_sigma_m = n.tracker_sigma_m;
-    o.tracker_ppm = n.tracker_ppm;
-    for (int k = 0; k < 3; ++k) o.tracker_position_m[k] = n.tracker_position_m(k);
-    o.force_relative = n.force_relative;
-    o.force_absolute_N = n.force_absolute_N;
-    o.joint_sigma_rad = n.joint_sigma_rad;
-    o.outlier_rate = n.outlier_rate;
-    o.outlier_size_m = n.outlier_size_m;
-    o.seed = n.seed;
+    put_noise(n, o);
     const size_t size = std::min<size_t>(noise->struct_size, sizeof o);
     o.struct_size = noise->struct_size;
     std::memcpy(noise, &o, size);
