@@ -22,27 +22,12 @@ struct Geometry {
   Eigen::Vector3d tool;  ///< target offset, flange frame [m]
 };
 
-/// The frame axis least aligned with a, made orthogonal (u), and v = a x u: the kinematic
-/// effect's directions (docs/effects.md).
-void perpendicular(const Eigen::Vector3d& a, Eigen::Vector3d* u, Eigen::Vector3d* v) {
-  int least = 0;
-  a.cwiseAbs().minCoeff(&least);
-  const Eigen::Vector3d e = Eigen::Vector3d::Unit(least);
-  *u = (e - e.dot(a) * a).normalized();
-  *v = a.cross(*u);
-}
-
 /// The real robot: joint transforms moved by the axis errors, the offsets turned into the
 /// joints' origins, the target moved on the flange, the load point where it was.
 RobotModel real_robot(const RobotModel& nominal, const Geometry& g) {
   RobotModel r = nominal;
   for (int j = 0; j < r.dof(); ++j) {
-    Eigen::Vector3d u, v;
-    perpendicular(r.joints[j].axis, &u, &v);
-    Eigen::Matrix4d e = Eigen::Matrix4d::Identity();
-    const Eigen::Vector3d w = g.axis(2, j) * u + g.axis(3, j) * v;
-    e.topLeftCorner<3, 3>() = Eigen::AngleAxisd(w.norm(), w.normalized()).matrix();
-    e.topRightCorner<3, 1>() = g.axis(0, j) * u + g.axis(1, j) * v;
+    const Eigen::Matrix4d e = test::axis_error_transform(r.joints[j].axis, g.axis.col(j));
     Eigen::Matrix4d z = Eigen::Matrix4d::Identity();
     z.topLeftCorner<3, 3>() = Eigen::AngleAxisd(g.dq(j), r.joints[j].axis).matrix();
     r.joints[j].pre = r.joints[j].pre * e * z;

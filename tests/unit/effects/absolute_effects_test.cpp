@@ -29,29 +29,12 @@ struct Geometry {
   std::vector<Eigen::Vector3d> trans;  ///< per session
 };
 
-/// The directions perpendicular to a joint axis, chosen as docs/effects.md says (the frame
-/// axis least aligned with it, made orthogonal; v = axis x u).
-void perpendicular(const Eigen::Vector3d& a, Eigen::Vector3d* u, Eigen::Vector3d* v) {
-  int least = 0;
-  a.cwiseAbs().minCoeff(&least);
-  const Eigen::Vector3d e = Eigen::Vector3d::Unit(least);
-  *u = (e - e.dot(a) * a).normalized();
-  *v = a.cross(*u);
-}
-
 /// The robot with its joints' `pre` transforms moved as the kinematic effect describes,
 /// evaluated by RobotModel::chain (not by the model's corrected kinematics).
 RobotModel perturbed(const RobotModel& nominal, const Geometry& g) {
   RobotModel r = nominal;
   for (int j = 0; j < r.dof(); ++j) {
-    Eigen::Vector3d u, v;
-    perpendicular(r.joints[j].axis, &u, &v);
-    Eigen::Matrix4d e = Eigen::Matrix4d::Identity();
-    const Eigen::Vector3d w = g.axis(2, j) * u + g.axis(3, j) * v;
-    if (w.norm() > 0)
-      e.topLeftCorner<3, 3>() = Eigen::AngleAxisd(w.norm(), w.normalized()).matrix();
-    e.topRightCorner<3, 1>() = g.axis(0, j) * u + g.axis(1, j) * v;
-    r.joints[j].pre = r.joints[j].pre * e;
+    r.joints[j].pre = r.joints[j].pre * test::axis_error_transform(r.joints[j].axis, g.axis.col(j));
   }
   r.measured_point += g.tool;
   return r;
