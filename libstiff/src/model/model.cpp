@@ -65,6 +65,8 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
       throw InvalidArgument("model: effect '" + name + "' given twice");
     auto e = make_effect(name, setup);
     jet_jacobians_ = jet_jacobians_ || e->reads_jacobians();
+    deflects_ = deflects_ || e->reads_jacobians() ||
+                (e->stages() & (unsigned{kJointStage} | unsigned{kCartesianStage}));
     linear_ = linear_ && e->linear();
     offsets_.push_back(count_);
     count_ += e->size();
@@ -410,11 +412,7 @@ void DeflectionModel::evaluate_into(const T* theta,
   s.p_load = rf * s.r_load + pf;
   if (m.absolute) {
     // A purely geometric model of an absolute row needs no Jacobians and no deflection.
-    bool deflects = false;
-    for (const auto& e : effects_)
-      deflects = deflects || e->reads_jacobians() ||
-                 (e->stages() & (unsigned{kJointStage} | unsigned{kCartesianStage}));
-    if (!deflects) {
+    if (!deflects_) {
       s.tau = VectorX<T>::Zero(n);
       s.dtheta = VectorX<T>::Zero(n);
       s.d.setZero();
@@ -484,12 +482,7 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
   // An absolute row of a purely geometric model takes evaluate_into's short cut (no deflection
   // at all); with a deflection effect it runs here: the deflection as for a displacement row,
   // under the gravity torque too, then the corrected chain by the chain rule.
-  bool deflects = false;
-  if (m.absolute)
-    for (const auto& e : effects_)
-      deflects = deflects || e->reads_jacobians() ||
-                 (e->stages() & (unsigned{kJointStage} | unsigned{kCartesianStage}));
-  if (n > kMax || (m.absolute && !deflects)) {
+  if (n > kMax || (m.absolute && !deflects_)) {
     evaluate_into(theta, m, c, s);
     *d = s.d;
     return;

@@ -133,6 +133,7 @@ class DeflectionModel {
   std::vector<int> offsets_;
   int count_ = 0;
   bool jet_jacobians_ = false;  ///< an effect reads EvalState::jac_meas / jac_load
+  bool deflects_ = false;  ///< an effect acts in the joint or Cartesian stage or reads Jacobians
   bool linear_ = true;
   bool analytic_ = false;
   std::vector<int> jet_parameters_;
