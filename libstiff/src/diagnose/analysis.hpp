@@ -1,0 +1,151 @@
+// The diagnosis's working types, shared by its parts (private to diagnose/): the fitted model
+// on the calibration rows (Analysis), the candidates scored at one model (Level) and the
+// loop of levels that gives the verdict (Chain). docs/diagnosis.md explains the tests.
+#pragma once
+
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "diagnose/noise.hpp"
+#include "stiff/diagnose/diagnose.hpp"
+#include "stiff/identify/fit.hpp"
+#include "stiff/io/dataset.hpp"
+#include "stiff/model/model.hpp"
+
+namespace stiff::diagnose_detail {
+
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+
+struct Context {
+  const RobotModel* robot;
+  const Dataset* calib;  ///< with explicit time
+  const Dataset* validation;
+  const Noise* noise;
+  const Noise* vnoise;
+  const DiagnosisOptions* opt;
+  bool had_time = true;  ///< the calibration data has a `t` column
+};
+
+/// A fitted model on the calibration rows that are not outliers, with everything the tests need.
+struct Analysis {
+  std::vector<std::string> effects;
+  Dataset used;                ///< inlier rows (times kept)
+  std::vector<int> used_rows;  ///< their index in the calibration data
+  std::vector<bool> outlier;   ///< per calibration row
+  std::unique_ptr<DeflectionModel> model;
+  std::vector<MeasurementContext> ctx;  ///< of `used`
+  VectorXd theta;
+  std::vector<bool> identified;
+  VectorXd w;         ///< 1/sigma per used row
+  MatrixXd qx;        ///< orthonormal basis of the weighted Jacobian (3n x p)
+  VectorXd r;         ///< weighted residual of the used rows (3n)
+  MatrixXd pred_all;  ///< predicted d of every calibration row (N x 3)
+  double rss = 0;     ///< ||r||^2
+  int n = 0, p = 0;   ///< equations, rank
+  ModelQuality quality;
+  std::vector<std::string> warnings;
+};
+
+/// Orthonormal basis of the column space of `a` (columns scaled to unit norm first); columns
+/// whose relative singular value is below `tol` are dropped. `v_null` (optional) receives the
+/// right singular vectors of the dropped directions.
+MatrixXd orthonormal_basis(const MatrixXd& a,
+                           double tol,
+                           VectorXd* sv = nullptr,
+                           MatrixXd* v_null = nullptr,
+                           double scale_ref = 0.0);
+
+/// The calibration data with its time axis made explicit (row index when it has no `t`), so
+/// that subsets keep each row's time.
+Dataset with_explicit_time(const Dataset& d);
+
+/// `fixed` (may be null): use these outlier flags instead of detecting them. Otherwise a row
+/// is an outlier only when it is improbable under the current model AND under the current
+/// model plus each candidate (linearised about the current fit): rows that an effect
+/// explains are that effect's evidence, not outliers.
+Analysis analyse(const Context& cx,
+                 const std::vector<std::string>& effects,
+                 const std::vector<bool>* fixed = nullptr,
+                 const std::vector<std::string>& candidates = {});
+
+/// Score of one regressor group Z (weighted, 3n x k) against an analysis.
+struct GroupScore {
+  int columns = 0, df = 0;
+  double drss = 0, f = 0, log_p = 0, surviving = 0;
+  MatrixXd u;                     ///< basis of the projected group
+  std::vector<int> null_columns;  ///< columns with no (surviving) effect
+  VectorXd fitted;                ///< projection of r on the group (weighted)
+};
+
+GroupScore score_group(const Analysis& a, const MatrixXd& z, const VectorXd& typical, double tol);
+
+/// Everything known about the candidates at one model.
+struct Level {
+  Analysis a;
+  std::vector<CandidateScore> scores;  ///< testable by rank, then untestable
+  std::vector<MatrixXd> bases;         ///< projected basis per score (testable)
+  std::vector<std::string> group;      ///< ambiguity set around the top (incl. top)
+  size_t pick = 0;                     ///< the candidate the next level adds (index in scores)
+  std::string rival;      ///< a group member whose chain explains the data as well as the pick
+  bool separable = true;  ///< the top is separable from every group member
+  std::string experiment;
+};
+
+/// The experiments that would separate the effects of an ambiguous group: each effect's own
+/// hints (Effect::experiment_hints), once each, then the planner's model-discriminating design.
+std::string experiment_for(const Context& cx, const std::vector<std::string>& group);
+
+/// Scores every candidate against the analysis `a` (group score / partial-F tests, ambiguity
+/// groups) and picks the one the next level adds.
+Level score_level(const Context& cx, Analysis a, const std::vector<std::string>& candidates);
+
+/// Does level L claim a missing effect (its top candidate is significant)?
+inline bool claims(const Level& L) { return !L.scores.empty() && L.scores[0].significant; }
+
+/// Residual structure against covariates ("where it fails"): per-pose residuals and partial-F
+/// trend tests into `d`.
+void where(const Context& cx, const Level& L, Diagnosis& d);
+
+/// The covariates and axes the residual follows, in one sentence (for `unexplained`).
+std::string signature_of(const Diagnosis& d);
+
+/// The levels of the loop: level 0 is the given model, level i+1 adds level i's top effect.
+struct Chain {
+  const Context* cx;
+  std::vector<std::string> candidates;
+  std::vector<Level> levels;
+  std::vector<std::string> warnings;
+  const std::vector<bool>* fixed = nullptr;  ///< outlier flags shared by every level
+
+  /// Level i+1 (computed on demand), or null when level i claims nothing or the re-fit fails.
+  const Level* next(size_t i);
+
+  /// Is the residual of level L at the noise floor? With a stated noise: the chi-square test,
+  /// allowing for the uncertainty of the stated level. Without: a model that explains the data
+  /// predicts the validation poses about as well as it fits (F test of the two mean squares),
+  /// and its residual has no structure left against the covariates of "where it fails"
+  /// (partial F-tests, Holm across them: no sigma needed). A chain of candidates that mimics
+  /// an effect outside the library fits and predicts alike, but leaves the part it cannot
+  /// mimic as a trend in the load torques or directions.
+  bool at_floor(const Level& L, std::string* why) const;
+
+  /// Does adding one of level i's significant candidates (the top and the next ones by rank,
+  /// kAlternatives in all) and, while the evidence holds, the following ones bring the
+  /// residual to the noise floor, with the validation error falling at every step? The
+  /// calibration data ranks the candidates; when several chains explain it, the one that
+  /// predicts the validation poses best is kept (out-of-sample choice; the first that explains
+  /// without validation data). On success levels[i].pick is its candidate; on failure `why` is
+  /// the top's reason.
+  bool explained_by_chain(size_t i, int depth, std::string* why, std::string* top_why = nullptr);
+
+  /// explained_by_chain for level i's pick.
+  bool explained_by(size_t i, int depth, std::string* why);
+
+  /// Verdict of level i.
+  std::string decide(size_t i, std::string* why);
+};
+
+}  // namespace stiff::diagnose_detail

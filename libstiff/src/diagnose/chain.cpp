@@ -1,0 +1,223 @@
+// The verdict: the loop of levels, the noise-floor check and the chains of candidates that
+// must explain the data (docs/diagnosis.md, section 5).
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+#include "diagnose/analysis.hpp"
+#include "diagnose/text.hpp"
+#include "stiff/error.hpp"
+
+namespace stiff::diagnose_detail {
+
+const Level* Chain::next(size_t i) {
+  if (!claims(levels[i])) return nullptr;
+  if (levels.size() <= i + 1) {
+    std::vector<std::string> eff = levels[i].a.effects;
+    const std::string top = levels[i].scores[levels[i].pick].effect;
+    eff.push_back(top);
+    std::vector<std::string> rest;
+    for (const auto& c : candidates)
+      if (std::find(eff.begin(), eff.end(), c) == eff.end()) rest.push_back(c);
+    try {
+      Analysis a = analyse(*cx, eff, fixed, rest);
+      levels.push_back(score_level(*cx, std::move(a), rest));
+    } catch (const NumericalError& e) {
+      warnings.push_back("re-fit with " + top + " failed: " + e.what());
+      return nullptr;
+    }
+  }
+  return &levels[i + 1];
+}
+
+bool Chain::at_floor(const Level& L, std::string* why) const {
+  const ModelQuality& q = L.a.quality;
+  const double alpha = cx->opt->alpha;
+  if (cx->noise->known) {
+    if (q.floor_p >= alpha) return true;
+    *why = "the residual is " + num(q.residual_to_floor, 3) + " times the stated noise floor (" +
+           "improbable even for a noise " + num(100 * cx->opt->noise_uncertainty, 2) +
+           " % above the stated one, p = " + num(q.floor_p, 2) + ")";
+    return false;
+  }
+  if (q.has_validation && q.validation_to_fit_p < alpha) {
+    *why = "it predicts the validation poses " + num(q.validation_to_fit, 3) +
+           " times worse than its fit residual allows (p = " + num(q.validation_to_fit_p, 2) +
+           " allowing " + num(100 * cx->opt->noise_uncertainty, 2) +
+           " % between sessions): structure remains";
+    return false;
+  }
+  Diagnosis d;
+  where(*cx, L, d);
+  for (const auto& c : d.covariates)
+    if (c.significant) {
+      *why = "its residual still follows " + c.description +
+             " (partial F = " + num(c.statistic, 3) + ", p_adj = " + num(c.p_adjusted, 2) +
+             "): structure remains that no candidate explains";
+      return false;
+    }
+  return true;
+}
+
+bool Chain::explained_by_chain(size_t i, int depth, std::string* why, std::string* top_why) {
+  static constexpr size_t kAlternatives = 3;
+  std::string first;
+  size_t best = SIZE_MAX;
+  double best_rms = INFINITY, top_rms = INFINITY;
+  const size_t tries = std::min(kAlternatives, levels[i].scores.size());
+  const auto& group = levels[i].group;
+  for (size_t k = 0; k < tries; ++k) {
+    if (!levels[i].scores[k].significant) break;
+    // Candidates outside the top's ambiguity group explain another part of the residual:
+    // tried only when nothing in the group explains it.
+    const bool rival =
+        k == 0 || std::find(group.begin(), group.end(), levels[i].scores[k].effect) != group.end();
+    if (!rival && best != SIZE_MAX) break;
+    levels.resize(i + 1);
+    levels[i].pick = k;
+    std::string w;
+    if (explained_by(i, depth, &w)) {
+      const ModelQuality& end = levels.back().a.quality;
+      const double rms = end.has_validation ? end.validation_rms_m : 0.0;
+      if (k == 0) top_rms = end.has_validation ? rms : INFINITY;
+      if (rms < best_rms) {
+        best_rms = rms;
+        best = k;
+      }
+      if (!end.has_validation) break;
+    } else if (k == 0) {
+      first = w;
+    }
+  }
+  levels.resize(i + 1);
+  levels[i].rival.clear();
+  if (best == SIZE_MAX) {
+    levels[i].pick = 0;
+    *why = first;
+    return false;
+  }
+  // The top keeps its place unless a rival chain predicts the validation poses significantly
+  // better (F test of the two validation mean squares, 3m dof each); a rival that is not
+  // significantly better or worse leaves the data unable to choose (ambiguous).
+  if (best != 0 && top_rms < INFINITY) {
+    const double m3 = 3.0 * cx->validation->rows.size();
+    const double ratio = (top_rms * top_rms) / (best_rms * best_rms);
+    if (stats::f_sf(ratio, m3, m3) >= cx->opt->alpha) {
+      levels[i].rival = levels[i].scores[best].effect;
+      best = 0;
+    }
+  }
+  levels[i].pick = best;
+  std::string w;
+  explained_by(i, depth, &w);  // rebuild the chosen chain's levels
+  if (top_why)
+    *top_why = best == 0
+                   ? ""
+                   : (first.empty() ? "predicts the validation poses significantly worse" : first);
+  return true;
+}
+
+bool Chain::explained_by(size_t i, int depth, std::string* why) {
+  const std::string added = levels[i].scores[levels[i].pick].effect;
+  const Level* n = next(i);
+  if (!n) {
+    *why = "the re-fit with " + added + " failed";
+    return false;
+  }
+  const ModelQuality& q = levels[i].a.quality;
+  const ModelQuality& nq = n->a.quality;
+  if (q.has_validation && nq.validation_rms_m >= q.validation_rms_m) {
+    *why = "adding " + added + " does not improve the validation error (" + um(q.validation_rms_m) +
+           " -> " + um(nq.validation_rms_m) + ")";
+    return false;
+  }
+  // Explained: the residual is at the floor and no candidate finds structure in it (the
+  // partial F-tests do not depend on the stated noise, so they also catch a residual that
+  // the noise allowance would let pass).
+  std::string floor_why;
+  const bool floor = at_floor(*n, &floor_why);
+  if (floor && !claims(*n)) return true;
+  // At the floor with a marginal candidate left (p_adj > alpha/10, the rule of decide()) that
+  // does not validate: not structure.
+  const bool marginal = n->scores[0].p_adjusted > cx->opt->alpha / 10;
+  if (claims(*n) && n->separable && depth > 1) {
+    std::string deeper;
+    if (explained_by_chain(i + 1, depth - 1, &deeper)) return true;
+    if (floor && levels[i + 1].scores[0].p_adjusted > cx->opt->alpha / 10) return true;
+    *why = "after adding " + added + ": " + deeper;
+    return false;
+  }
+  if (floor && marginal) return true;
+  n = &levels[i + 1];
+  if (floor)
+    floor_why = "structure remains (" + n->scores[0].effect +
+                " is significant, p_adj = " + num(n->scores[0].p_adjusted, 2) +
+                (n->separable ? "" : ", not separable from " + join(n->group, ", ")) + ")";
+  *why = "after adding " + added + " " + floor_why +
+         (depth > 1 ? " and no further candidate explains the rest" : "");
+  return false;
+}
+
+std::string Chain::decide(size_t i, std::string* why) {
+  const Level& L = levels[i];
+  const double alpha = cx->opt->alpha;
+  const ModelQuality& q = L.a.quality;
+  const bool known = cx->noise->known;
+  const bool omnibus = known && q.floor_p < alpha;
+  const std::string chi = "chi2 = " + num(q.chi2, 4) + " for " + std::to_string(q.dof) +
+                          " dof, residual " + num(q.residual_to_floor, 3) +
+                          " times the floor, p = " + num(q.floor_p, 2) + " allowing " +
+                          num(100 * cx->opt->noise_uncertainty, 2) + " % noise uncertainty";
+  auto nothing = [&](const std::string& extra) {
+    if (omnibus) {
+      *why = "the residual is above the noise floor (" + chi + ") but no candidate effect " +
+             "explains it" + extra;
+      return std::string("unexplained");
+    }
+    *why = known
+               ? "the residuals are at the noise floor (" + chi + ") and no candidate " +
+                     "effect is significant" + extra
+               : "no candidate effect is significant (the noise level is unknown: give "
+                 "sigma_d or sigma_p, # tracker_sigma_m or replicated measurements for an absolute "
+                 "check)" +
+                     extra;
+    return std::string("adequate");
+  };
+  if (!claims(L)) return nothing("");
+  const CandidateScore& top = L.scores[0];
+  if (!L.separable) {
+    *why =
+        "these candidates explain the same part of the residual and this data cannot tell "
+        "them apart: " +
+        join(L.group, ", ");
+    return "ambiguous";
+  }
+  std::string reason, top_reason;
+  if (!explained_by_chain(i, cx->opt->max_steps, &reason, &top_reason)) {
+    // A marginal candidate that does not validate on a model at the noise floor: no claim.
+    if (!omnibus && top.p_adjusted > alpha / 10)
+      return nothing(" (" + top.effect + " reached p_adj = " + num(top.p_adjusted, 2) + " but " +
+                     reason + ")");
+    *why = top.effect + " explains part of the misfit (partial F = " + num(top.statistic, 4) +
+           ", p_adj = " + num(top.p_adjusted, 2) + ") but " + reason +
+           ": the missing effect is probably not in the candidate list";
+    return "unexplained";
+  }
+  if (!L.rival.empty()) {
+    levels[i].group = {top.effect, L.rival};
+    levels[i].experiment = experiment_for(*cx, levels[i].group);
+    *why = top.effect + " and " + L.rival +
+           " each explain the misfit and predict the validation poses equally well: this data "
+           "cannot tell them apart";
+    return "ambiguous";
+  }
+  const CandidateScore& pick = L.scores[L.pick];
+  *why = pick.effect + " is missing (partial F = " + num(pick.statistic, 4) +
+         ", Holm-adjusted p = " + num(pick.p_adjusted, 2) + ", expected RMS drop " +
+         um(pick.expected_rms_drop_m) + ")";
+  if (L.pick > 0)
+    *why += "; " + top.effect + " fits the calibration data as well or better but " + top_reason;
+  return "missing_effect";
+}
+
+}  // namespace stiff::diagnose_detail

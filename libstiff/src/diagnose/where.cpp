@@ -1,0 +1,177 @@
+// Where the model fails: per-pose residuals and trend tests of the residual against the
+// covariates (docs/diagnosis.md, section 4).
+#include <algorithm>
+#include <cmath>
+
+#include "diagnose/analysis.hpp"
+#include "diagnose/text.hpp"
+
+namespace stiff::diagnose_detail {
+
+/// Residual structure against covariates ("where it fails").
+void where(const Context& cx, const Level& L, Diagnosis& d) {
+  const Analysis& a = L.a;
+  const Dataset& calib = *cx.calib;
+  const Noise& noise = *cx.noise;
+  const RobotModel& robot = *cx.robot;
+  const int rows = static_cast<int>(calib.rows.size());
+  // Per-pose residuals.
+  for (int r = 0; r < rows; ++r) {
+    PoseResidual p;
+    p.row = r;
+    p.id = calib.rows[r].id;
+    const Eigen::Vector3d e = calib.rows[r].observed() - a.pred_all.row(r).transpose();
+    for (int k = 0; k < 3; ++k) {
+      p.residual_m[k] = e(k);
+      p.predicted_m[k] = a.pred_all(r, k);
+    }
+    p.norm_m = e.norm();
+    p.norm_sigma = noise.known ? e.norm() / noise.sigma(r) : NAN;
+    p.outlier = a.outlier[r];
+    d.residuals.push_back(p);
+  }
+  std::vector<PoseResidual> sorted = d.residuals;
+  std::stable_sort(sorted.begin(), sorted.end(), [&](const PoseResidual& x, const PoseResidual& y) {
+    const double sx = noise.known ? x.norm_m / noise.sigma(x.row) : x.norm_m;
+    const double sy = noise.known ? y.norm_m / noise.sigma(y.row) : y.norm_m;
+    return sx > sy;
+  });
+  for (int i = 0; i < std::min<int>(cx.opt->worst_poses, rows); ++i) d.worst.push_back(sorted[i]);
+  // Per-axis RMS and chi2 (used rows).
+  const int nu = static_cast<int>(a.used_rows.size());
+  for (int k = 0; k < 3; ++k) {
+    double ss_w = 0, ss_m = 0;
+    for (int i = 0; i < nu; ++i) {
+      ss_w += a.r(3 * i + k) * a.r(3 * i + k);
+      ss_m += std::pow(a.r(3 * i + k) / a.w(i), 2);
+    }
+    d.axis_rms_m[k] = std::sqrt(ss_m / nu);
+    const double dof = nu * static_cast<double>(a.n - a.p) / a.n;
+    d.axis_chi2_p[k] = noise.known && dof > 0 ? stats::chi2_sf(ss_w, dof) : 1.0;
+  }
+  // Covariates per used row.
+  const int dof = robot.dof();
+  std::vector<std::pair<std::string, std::string>> names;
+  std::vector<std::vector<double>> values;
+  auto add = [&](const std::string& n, const std::string& desc, std::vector<double> v) {
+    names.emplace_back(n, desc);
+    values.push_back(std::move(v));
+  };
+  std::vector<std::vector<double>> q(dof), tl(dof), tg(dof);
+  std::vector<double> fx, fy, fz, level, pred, time, ones;
+  bool any_gravity = false;
+  for (int i = 0; i < nu; ++i) {
+    const auto& m = a.used.rows[i];
+    const auto& c = a.ctx[i];
+    const Matrix6X<double> jl =
+        robot.jacobian_at(c.chain, robot.point_position(c.chain, robot.load_point));
+    Eigen::Matrix<double, 6, 1> wr;
+    wr << m.force, m.moment;
+    const VectorXd tau = jl.transpose() * wr;
+    for (int j = 0; j < dof; ++j) {
+      q[j].push_back(m.q(j));
+      tl[j].push_back(tau(j));
+      const double g = c.tau_gravity.size() > j ? c.tau_gravity(j) : 0.0;
+      tg[j].push_back(g);
+      if (std::abs(g) > 1e-9) any_gravity = true;
+    }
+    const double f = m.force.norm();
+    fx.push_back(f > 0 ? m.force.x() / f : 0.0);
+    fy.push_back(f > 0 ? m.force.y() / f : 0.0);
+    fz.push_back(f > 0 ? m.force.z() / f : 0.0);
+    level.push_back(f);
+    pred.push_back(a.pred_all.row(a.used_rows[i]).norm());
+    time.push_back(c.time);
+    ones.push_back(1.0);
+  }
+  add("offset", "constant (mean residual different from zero)", ones);
+  for (int j = 0; j < dof; ++j)
+    add("q" + std::to_string(j + 1), "joint angle " + std::to_string(j + 1), q[j]);
+  for (int j = 0; j < dof; ++j)
+    add("tau_load_" + std::to_string(j + 1),
+        "load torque of joint " + std::to_string(j + 1) + " (J^T W)", tl[j]);
+  if (any_gravity)
+    for (int j = 0; j < dof; ++j)
+      add("tau_gravity_" + std::to_string(j + 1),
+          "gravity torque of joint " + std::to_string(j + 1), tg[j]);
+  add("load_dir_x", "load direction, base x (F_x/|F|)", fx);
+  add("load_dir_y", "load direction, base y (F_y/|F|)", fy);
+  add("load_dir_z", "load direction, base z (F_z/|F|)", fz);
+  add("load_level", "load level |F|", level);
+  add("predicted", "predicted deflection |d|", pred);
+  add("time", cx.had_time ? "measurement time" : "measurement order", time);
+  std::vector<CovariateTest> tests;
+  std::vector<double> lps;
+  for (size_t t = 0; t < names.size(); ++t) {
+    const auto& v = values[t];
+    double mean = 0;
+    for (double x : v) mean += x;
+    mean /= nu;
+    const bool constant = names[t].first == "offset";
+    MatrixXd z = MatrixXd::Zero(a.n, 3);
+    double var = 0;
+    for (int i = 0; i < nu; ++i) {
+      const double c = constant ? 1.0 : v[i] - mean;
+      var += c * c;
+      for (int k = 0; k < 3; ++k) z(3 * i + k, k) = c * a.w(i);
+    }
+    if (!(var > 1e-24)) continue;
+    const GroupScore g = score_group(a, z, VectorXd::Ones(3), 1e-6);
+    CovariateTest ct;
+    ct.covariate = names[t].first;
+    ct.description = names[t].second;
+    ct.df = g.df;
+    if (g.df == 0) continue;
+    ct.statistic = g.f;
+    ct.p_value = std::exp(g.log_p);
+    for (int k = 0; k < 3; ++k) {
+      if (constant) {
+        double s = 0, ss = 0;
+        for (int i = 0; i < nu; ++i) {
+          s += a.r(3 * i + k);
+          ss += a.r(3 * i + k) * a.r(3 * i + k);
+        }
+        ct.correlation[k] = ss > 0 ? s / std::sqrt(nu * ss) : 0.0;
+        continue;
+      }
+      double sxy = 0, syy = 0, sxx = 0, ym = 0;
+      for (int i = 0; i < nu; ++i) ym += a.r(3 * i + k) / a.w(i);
+      ym /= nu;
+      for (int i = 0; i < nu; ++i) {
+        const double y = a.r(3 * i + k) / a.w(i) - ym;
+        const double x = v[i] - mean;
+        sxy += x * y;
+        sxx += x * x;
+        syy += y * y;
+      }
+      ct.correlation[k] = sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : 0.0;
+    }
+    tests.push_back(ct);
+    lps.push_back(g.log_p);
+  }
+  const auto adj = stats::holm_adjust(lps);
+  for (size_t t = 0; t < tests.size(); ++t) {
+    tests[t].p_adjusted = adj[t];
+    tests[t].significant = adj[t] < cx.opt->alpha;
+  }
+  std::stable_sort(tests.begin(), tests.end(), [](const CovariateTest& x, const CovariateTest& y) {
+    return x.p_value < y.p_value;
+  });
+  d.covariates = tests;
+}
+
+std::string signature_of(const Diagnosis& d) {
+  std::vector<std::string> parts;
+  for (const auto& c : d.covariates)
+    if (c.significant && parts.size() < 4)
+      parts.push_back(c.covariate + " (F = " + num(c.statistic, 3) +
+                      ", p_adj = " + num(c.p_adjusted, 2) + ")");
+  const char* ax = "xyz";
+  for (int k = 0; k < 3; ++k)
+    if (d.axis_chi2_p[k] < d.alpha)
+      parts.push_back(std::string("axis ") + ax[k] + " (RMS " + um(d.axis_rms_m[k]) + ")");
+  if (parts.empty()) return "no significant trend against the covariates tested";
+  return "the residual correlates with " + join(parts, ", ");
+}
+
+}  // namespace stiff::diagnose_detail
