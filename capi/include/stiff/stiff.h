@@ -143,7 +143,7 @@ typedef struct stiff_robot_options {
  *  points: base_link and tip_link NULL, set 0) and struct_size = the bytes written, at most
  *  struct_size = sizeof(stiff_robot_options) as the caller knows it; fields beyond it are not
  *  touched. Errors: INVALID_ARGUMENT (NULL, a struct_size that is no version of the struct).
- *  @since 0.3 */
+ *  @since 0.2 */
 STIFF_API stiff_status stiff_robot_options_init(stiff_robot_options* options, size_t struct_size);
 
 /** Load a robot description with options (NULL: as stiff_robot_load). base/tip on a YAML robot
@@ -268,7 +268,7 @@ typedef struct stiff_noise_options {
  *  errors) and
  *  struct_size = the bytes written, at most struct_size = sizeof(stiff_noise_options) as the
  *  caller knows it; fields beyond it are not touched. Errors: INVALID_ARGUMENT (NULL, a
- *  struct_size that is no version of the struct). @since 0.3 */
+ *  struct_size that is no version of the struct). @since 0.2 */
 STIFF_API stiff_status stiff_noise_options_init(stiff_noise_options* options, size_t struct_size);
 
 /** Read a noise file (YAML, docs/formats.md) into *noise (set its struct_size first).
@@ -283,7 +283,7 @@ STIFF_API stiff_status stiff_design_random(stiff_dataset** out,
                                            uint64_t seed);
 /** Options of stiff_design_random_with_options. Fill with stiff_design_random_options_init
  *  and change what you need; zero fields take the defaults in brackets. Pointers are borrowed
- *  for the duration of the call. @since 0.3 */
+ *  for the duration of the call. @since 0.2 */
 typedef struct stiff_design_random_options {
   uint32_t struct_size;
   uint32_t count;        /**< poses [20] */
@@ -306,13 +306,13 @@ typedef struct stiff_design_random_options {
 /** Fill *options with the library's defaults (libgit2's options_init convention) and
  *  struct_size = the bytes written, at most struct_size = sizeof(stiff_design_random_options)
  *  as the caller knows it; fields beyond it are not touched. Errors: INVALID_ARGUMENT (NULL,
- *  a struct_size that is no version of the struct). @since 0.3 */
+ *  a struct_size that is no version of the struct). @since 0.2 */
 STIFF_API stiff_status stiff_design_random_options_init(stiff_design_random_options* options,
                                                         size_t struct_size);
 /** Random design with options (the sampler of the planner's candidate pool: same range,
  *  fixed joints, load grid, workspace box and singularity rejection). NULL options: as
  *  stiff_design_random with count 20, seed 1. Errors: INVALID_ARGUMENT naming the field,
- *  NUMERICAL when almost every pose is rejected. @since 0.3 */
+ *  NUMERICAL when almost every pose is rejected. @since 0.2 */
 STIFF_API stiff_status stiff_design_random_with_options(stiff_dataset** out,
                                                         const stiff_robot* robot,
                                                         const stiff_design_random_options* options);
@@ -361,11 +361,11 @@ typedef struct stiff_identify_options {
    * @since 0.2 */
   double max_relative_se;
   /** A previous fit of the same robot (not owned; may be NULL): every parameter of the model
-   *  that it holds (same effect and name) starts from its value. @since 0.3 */
+   *  that it holds (same effect and name) starts from its value. @since 0.2 */
   const stiff_result* start;
   /** With `start`: the effects to fit, joined by '+' (e.g. "registration" for a new placement
    *  of the instrument); every other parameter is given by `start` and kept. NULL or "": fit
-   *  everything. @since 0.3 */
+   *  everything. @since 0.2 */
   const char* refit;
 } stiff_identify_options;
 /* Every field spelled out: a bare {sizeof(...)} trips -Wmissing-field-initializers. All zero:
@@ -379,7 +379,7 @@ typedef struct stiff_identify_options {
  *  max_relative_se, no start) and struct_size = the bytes written, at most struct_size =
  *  sizeof(stiff_identify_options) as the caller knows it; fields beyond it are not touched.
  *  Errors: INVALID_ARGUMENT (NULL, a struct_size smaller than the first released struct or
- *  not the end of one of its versions). @since 0.3 */
+ *  not the end of one of its versions). @since 0.2 */
 STIFF_API stiff_status stiff_identify_options_init(stiff_identify_options* options,
                                                    size_t struct_size);
 
@@ -396,7 +396,7 @@ STIFF_API stiff_status stiff_identify(stiff_result** out,
  *  description (stiff_robot_to_yaml writes it). Effects that depend on the pose or the load,
  *  and the registration, are not part of a description: stiff_robot_notes names them.
  *  INVALID_ARGUMENT if the fit is not of this robot. Release with stiff_robot_destroy.
- *  @since 0.3 */
+ *  @since 0.2 */
 STIFF_API stiff_status stiff_robot_calibrated(stiff_robot** out,
                                               const stiff_robot* robot,
                                               const stiff_result* fit);
@@ -404,7 +404,7 @@ STIFF_API stiff_status stiff_robot_calibrated(stiff_robot** out,
  *  instrument frame, a 4 x 4 homogeneous transform, row-major, translation in m (p_instrument
  *  = R p_base + t). session NULL or "": the fit's only session. INVALID_ARGUMENT when the fit
  *  has no registration, when a fit of several sessions names none or when the session is not
- *  the fit's (the message lists its sessions). @since 0.3 */
+ *  the fit's (the message lists its sessions). @since 0.2 */
 STIFF_API stiff_status stiff_result_registration(double pose[16],
                                                  const stiff_result* fit,
                                                  const char* session);
@@ -414,7 +414,7 @@ STIFF_API stiff_status stiff_result_registration(double pose[16],
  *  XML-escaped. world_pose (row-major 4 x 4, may be NULL): the base's pose in a `world` link
  *  joined by a fixed joint (e.g. stiff_result_registration). For a calibrated robot
  *  (stiff_robot_calibrated) the joint offsets and kinematic errors are in the joint origins.
- *  Write it with stiff_file_write. @since 0.3 */
+ *  Write it with stiff_file_write. @since 0.2 */
 STIFF_API stiff_status stiff_robot_to_urdf(char* text,
                                            size_t capacity,
                                            size_t* needed,

@@ -185,7 +185,7 @@ typedef struct stiff_path_options {
  *  orientation (used only once flags has STIFF_PATH_TOOL_RPY), flags 0, segment_m 0; and
  *  struct_size = the bytes written, at most struct_size = sizeof(stiff_path_options) as the
  *  caller knows it; fields beyond it are not touched. Errors: INVALID_ARGUMENT (NULL, a
- *  struct_size that is no version of the struct). @since 0.3 */
+ *  struct_size that is no version of the struct). @since 0.2 */
 STIFF_API stiff_status stiff_path_options_init(stiff_path_options* options, size_t struct_size);
 
 /** Read a path file: .csv (columns x, y, z with _m/_mm/_um, orientation rx, ry, rz with

@@ -43,7 +43,7 @@ typedef struct stiff_diagnose_options {
   const char* command_prefix;
   /** Non-zero: walk the loop even when auto_steps is 0, then with the library's number of steps
    *  (auto_steps > 0 still walks the loop with that many). A caller whose struct_size ends
-   *  before this field: no such request. @since 0.3 */
+   *  before this field: no such request. @since 0.2 */
   uint32_t auto_loop;
 } stiff_diagnose_options;
 
@@ -53,7 +53,7 @@ typedef struct stiff_diagnose_options {
  * struct_size = the bytes written, at most struct_size = sizeof(stiff_diagnose_options) as the
  * caller knows it; fields beyond it are not touched. Errors: STIFF_E_INVALID_ARGUMENT (NULL, a
  * struct_size smaller than the first released struct or not the end of one of its versions).
- * @since 0.3
+ * @since 0.2
  */
 STIFF_API stiff_status stiff_diagnose_options_init(stiff_diagnose_options* options,
                                                    size_t struct_size);

@@ -52,7 +52,7 @@ typedef struct stiff_fmu_options {
  * struct_size = sizeof(stiff_fmu_options) as the caller knows it; fields beyond it are not
  * touched. Errors: STIFF_E_INVALID_ARGUMENT (NULL, a struct_size smaller than the first
  * released struct or not the end of one of its versions).
- * @since 0.3
+ * @since 0.2
  */
 STIFF_API stiff_status stiff_fmu_options_init(stiff_fmu_options* options, size_t struct_size);
 

@@ -1,5 +1,6 @@
 // link: link compliance by the virtual joint method (VJM), reduced to the rotational springs
 // the joint compliances cannot absorb (docs/effects.md).
+#include "stiff/kinematics/joint_torque.hpp"
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {
@@ -95,8 +96,7 @@ class LinkCompliance : public EffectT<LinkCompliance> {
         const Eigen::Vector3d a = f.cross(u);
         tk = effects::dot(s.p_load, a) + (m.dot(u) - o.dot(a));
       } else {
-        tk = cross(u, s.p_load, o).dot(s.force) +
-             (s.moment(0) * u(0) + s.moment(1) * u(1) + s.moment(2) * u(2));
+        tk = joint_torque(cross(u, s.p_load, o), u, s.force, s.moment);
       }
       const T angle = p[k] * tk;
       effects::add_scaled(w, angle, u);
@@ -117,20 +117,20 @@ class LinkCompliance : public EffectT<LinkCompliance> {
     u = chain.link[i].block<3, 3>(0, 0) * springs_[k].axis;
     o = chain.origin.col(i);
   }
-  // Torque (u x (L - o)) . F + u . M about the spring's axis [N*m].
+  // Torque about the spring's axis u through o of the wrench (F at L, M) [N*m].
   static double torque(const Eigen::Vector3d& u,
                        const Eigen::Vector3d& o,
                        const Eigen::Vector3d& l,
                        const Eigen::Vector3d& f,
                        const Eigen::Vector3d& m) {
-    return cross(u, l, o).dot(f) + m.dot(u);
+    return joint_torque(cross(u, l, o), u, f, m);
   }
-  // u x (p - o) with a constant axis u and origin o.
+  // The lever arm u x (p - o) of p about the spring's (constant) axis.
   template <typename T>
   static Vector3<T> cross(const Eigen::Vector3d& u, const Vector3<T>& p, const Eigen::Vector3d& o) {
-    const Vector3<T> r(p(0) - o(0), p(1) - o(1), p(2) - o(2));
-    return Vector3<T>(u(1) * r(2) - u(2) * r(1), u(2) * r(0) - u(0) * r(2),
-                      u(0) * r(1) - u(1) * r(0));
+    Vector3<T> w;
+    lever_arm(u, o, p, w);
+    return w;
   }
   struct Spring {
     int link;              ///< 0-based link index
