@@ -260,6 +260,31 @@ stiff_status stiff_robot_jacobian(double* jacobian,
   });
 }
 
+stiff_status stiff_robot_jacobians(double* jacobians,
+                                   size_t capacity,
+                                   size_t* needed,
+                                   const stiff_robot* robot,
+                                   const double* q,
+                                   size_t rows,
+                                   size_t n) {
+  return guarded(__func__, [&] {
+    require(robot, "robot");
+    const RobotModel& r = robot->model;
+    if (n != static_cast<size_t>(r.dof()))
+      throw InvalidArgument("q has " + std::to_string(n) + " values per row, the robot has " +
+                            std::to_string(r.dof()) + " joints");
+    require_capacity(values_of(rows, 6 * n, "jacobians"), jacobians, capacity, needed);
+    require(q, "q");
+    require_finite(q, values_of(rows, n, "q"), "q");
+    for (size_t i = 0; i < rows; ++i) {
+      const Eigen::Matrix<double, 6, Eigen::Dynamic, Eigen::RowMajor> j =
+          r.jacobian(Eigen::Map<const Eigen::VectorXd>(q + i * n, static_cast<Eigen::Index>(n)));
+      std::copy(j.data(), j.data() + j.size(), jacobians + i * 6 * n);
+    }
+    return STIFF_OK;
+  });
+}
+
 stiff_status stiff_dataset_read_csv(stiff_dataset** out,
                                     const stiff_robot* robot,
                                     const char* path) {

@@ -116,6 +116,16 @@ STIFF_API stiff_status stiff_robot_jacobian(double* jacobian,
                                             const stiff_robot* robot,
                                             const double* q,
                                             size_t n);
+/** stiff_robot_jacobian at rows joint vectors q (rows x n [rad], n the robot's dof, else
+ *  INVALID_ARGUMENT): jacobians rows x 6 x n, each row-major as stiff_robot_jacobian's.
+ *  *needed = 6 n rows. @since 0.2 */
+STIFF_API stiff_status stiff_robot_jacobians(double* jacobians,
+                                             size_t capacity,
+                                             size_t* needed,
+                                             const stiff_robot* robot,
+                                             const double* q,
+                                             size_t rows,
+                                             size_t n);
 
 /** Which fields of stiff_robot_options replace the file's values (bits of `set`). @since 0.1 */
 #define STIFF_ROBOT_SET_MEASURED_POINT 1u

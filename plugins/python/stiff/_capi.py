@@ -132,6 +132,8 @@ _proto("stiff_robot_name", S, C.c_char_p, C.c_size_t, c_size_p, H)
 _proto("stiff_robot_limits", S, c_double_p, c_double_p, C.c_size_t, c_size_p, H)
 _proto("stiff_robot_tool_pose", S, c_double_p, H, c_double_p, C.c_size_t)
 _proto("stiff_robot_jacobian", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, C.c_size_t)
+_proto("stiff_robot_jacobians", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, C.c_size_t,
+       C.c_size_t)
 _proto("stiff_dataset_read_csv", S, HP, H, C.c_char_p)
 _proto("stiff_dataset_write_csv", S, H, C.c_char_p)
 _proto("stiff_file_write", S, C.c_char_p, C.c_void_p, C.c_size_t)

@@ -212,8 +212,12 @@ class Robot(_Handle):
         values), (N, 6, n) for N poses (N x n)."""
         qa = np.asarray(q, dtype=np.float64)
         if qa.ndim == 2:
-            return np.stack([self.jacobian(row) for row in qa]) if len(qa) else \
-                np.empty((0, 6, self.dof))
+            qa = np.ascontiguousarray(qa)
+            out = np.empty((qa.shape[0], 6, self.dof))
+            needed = C.c_size_t()
+            check(lib.stiff_robot_jacobians(_c.ptr(out), out.size, C.byref(needed), self,
+                                            _c.ptr(qa), qa.shape[0], qa.shape[1]))
+            return out
         if qa.ndim != 1:
             raise ValueError(f"q must be n or N x n joint values, got shape {qa.shape}")
         qa = _c.as_array(q)

@@ -64,6 +64,9 @@ def test_tool_pose_and_jacobian_take_a_batch(rokae_path):
     assert robot.tool_pose(q[:0]).shape == (0, 4, 4)
     with pytest.raises(stiff.InvalidArgumentError, match="5 values per row"):
         robot.tool_pose(q[:, :5])  # wrong width: named, not read past
+    with pytest.raises(stiff.InvalidArgumentError, match="5 values per row"):
+        robot.jacobian(q[:, :5])
+    assert robot.jacobian(q[:0]).shape == (0, 6, robot.dof)
     with pytest.raises(ValueError):
         robot.tool_pose(q[None])
 
