@@ -105,10 +105,7 @@ stiff_status stiff_tool_poses(double* poses,
                               size_t n) {
   return guarded(__func__, [&] {
     require(robot, "robot");
-    const size_t dof = static_cast<size_t>(robot->model.dof());
-    if (n != dof)
-      throw InvalidArgument("q has " + std::to_string(n) + " values per row, the robot has " +
-                            std::to_string(dof) + " joints");
+    stiff::capi::require_joint_width(n, robot);
     tool_poses_into(poses, capacity, needed, robot, q, rows);
     return STIFF_OK;
   });

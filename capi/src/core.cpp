@@ -270,9 +270,7 @@ stiff_status stiff_robot_jacobians(double* jacobians,
   return guarded(__func__, [&] {
     require(robot, "robot");
     const RobotModel& r = robot->model;
-    if (n != static_cast<size_t>(r.dof()))
-      throw InvalidArgument("q has " + std::to_string(n) + " values per row, the robot has " +
-                            std::to_string(r.dof()) + " joints");
+    stiff::capi::require_joint_width(n, robot);
     require_capacity(values_of(rows, 6 * n, "jacobians"), jacobians, capacity, needed);
     require(q, "q");
     require_finite(q, values_of(rows, n, "q"), "q");

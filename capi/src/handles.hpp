@@ -2,7 +2,9 @@
 #pragma once
 
 #include <memory>
+#include <string>
 
+#include "stiff/error.hpp"
 #include "stiff/identify/fit.hpp"
 #include "stiff/io/dataset.hpp"
 #include "stiff/io/robot_io.hpp"
@@ -29,3 +31,16 @@ struct stiff_model {
   std::unique_ptr<stiff::DeflectionModel> model;
   Eigen::VectorXd theta;
 };
+
+namespace stiff::capi {
+
+/// Rows of joint values must be as wide as the robot has joints: a caller's array of the wrong
+/// shape is refused, not read misaligned.
+inline void require_joint_width(size_t n, const stiff_robot* robot) {
+  const size_t dof = static_cast<size_t>(robot->model.dof());
+  if (n != dof)
+    throw InvalidArgument("q has " + std::to_string(n) + " values per row, the robot has " +
+                          std::to_string(dof) + " joints");
+}
+
+}  // namespace stiff::capi
