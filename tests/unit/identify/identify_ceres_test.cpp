@@ -178,6 +178,27 @@ TEST(IdentifyCeres, LeastSquaresListsGrossResidualsToo) {
   for (const auto& o : f.outliers) EXPECT_NE(o.reason.find("robust loss"), std::string::npos);
 }
 
+// A stated noise that the model does not reach (here a tenth of the real one) makes most rows
+// exceed five of its sigmas: that is a misfit or an understated noise, not outliers. Least
+// squares judges rows against the residuals' own robust scale and says why; the gross rows
+// stay flagged and the clean rows (a 5-sigma norm of 3 components: P = 2e-5 each) do not.
+TEST(IdentifyCeres, OutliersAreJudgedAgainstTheResidualsWhenTheStatedNoiseIsTooSmall) {
+  std::vector<int> bad;
+  Dataset data = simulated(joint_truth(test::paper_stiffness()), 6, 0.05, &bad, 120);
+  ASSERT_FALSE(bad.empty());
+  data.has_sigma = true;
+  for (auto& m : data.rows) m.sigma_d = 0.1 * kNoise;
+  const FitResult f = identify(test::rokae(), data, {"joint"});
+  EXPECT_TRUE(has_warning(f, "times the stated noise"));
+  std::set<int> flagged;
+  for (const auto& o : f.outliers) flagged.insert(o.row);
+  for (int r : bad) EXPECT_TRUE(flagged.count(r)) << "gross row " << r << " not flagged";
+  EXPECT_LE(flagged.size(), bad.size() + 1) << "clean rows flagged as outliers";
+  // With the true noise stated, no such warning: the residuals are at the stated level.
+  for (auto& m : data.rows) m.sigma_d = kNoise;
+  EXPECT_FALSE(has_warning(identify(test::rokae(), data, {"joint"}), "times the stated noise"));
+}
+
 TEST(IdentifyCeres, ClearErrors) {
   const RobotModel robot = test::rokae();
   const Dataset data = simulated(joint_truth(test::paper_stiffness()), 6);

@@ -26,6 +26,8 @@ effects, which are fitted to this data: e.g. the registration of a new placement
 (a new session) to a robot calibrated before, from a few poses. The model is the start fit's
 unless --model is given."""
 
+MAX_OUTLIERS_SHOWN = 10  # outliers printed; the fit file lists them all
+
 
 def register(sub):
     p = sub.add_parser("identify", help="identify joint stiffness (and effects) from measurements",
@@ -98,9 +100,14 @@ def print_fit(fit: api.Fit, truth_stiffness=None) -> None:
     if bad:
         print(f"not identifiable from this data: joint{'s' if len(bad) > 1 else ''} "
               f"{', '.join(map(str, bad))}")
-    for o in fit.outliers:
+    # The largest first; a long list buries the summary (the fit file keeps every one).
+    shown = sorted(fit.outliers, key=lambda o: -o["residual_m"])[:MAX_OUTLIERS_SHOWN]
+    for o in shown:
         print(f"outlier: measurement {o['id']} (row {o['row'] + 1}): residual "
               f"{o['residual_m'] * 1e6:.1f} um, weight {o['weight']:.2f} - {o['reason']}")
+    if len(fit.outliers) > len(shown):
+        print(f"outlier: ... and {len(fit.outliers) - len(shown)} more, smaller (all of them are "
+              f"in the fit file's \"outliers\")")
     for w in fit.warnings:
         print(f"warning: {w}")
 
