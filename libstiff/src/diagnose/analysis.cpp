@@ -229,11 +229,8 @@ Analysis analyse(const Context& cx,
   }
   if (cx.validation) {
     const Dataset& v = *cx.validation;
-    const auto vctx = a.model->contexts(v);
     double ss = 0;
-    for (size_t r = 0; r < v.rows.size(); ++r) {
-      const Eigen::Vector3d e =
-          v.rows[r].observed() - a.model->predict(a.theta, v.rows[r], vctx[r]).head<3>();
+    for (const Eigen::Vector3d& e : validation_errors(*a.model, a.theta, *cx.split)) {
       q.validation_error_m.push_back(e.norm());
       ss += e.squaredNorm();
     }

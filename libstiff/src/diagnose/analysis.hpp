@@ -19,14 +19,41 @@ namespace stiff::diagnose_detail {
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
 
+/// The validation data as the diagnosis scores it. Rows of a set-up the calibration has not
+/// seen (a session it does not have, with `registration` in the model) split into the rows
+/// that register the new instrument placement and the rows scored; other rows are scored as
+/// they are.
+struct ValidationSplit {
+  Dataset scored;
+  Dataset registering;             ///< rows of new sessions that register them; may be empty
+  std::vector<std::string> notes;  ///< one per new session: how it was registered
+};
+
+/// Splits `validation` for the model `model` fitted to `calibration`: a new session's rows,
+/// in file order, register it at an even spacing (row i when floor((i + 1) f) > floor(i f),
+/// f = `fraction`; at least 6 rows), the others are scored. Throws InvalidArgument naming a
+/// new session with too few rows to register and score (9).
+ValidationSplit split_validation(const Dataset& calibration,
+                                 const Dataset& validation,
+                                 const std::vector<std::string>& model,
+                                 double fraction);
+
+/// Prediction errors (observed - predicted position) [m] of `split.scored`'s rows under
+/// `model` at `theta`, each new session first registered by the rigid motion that best maps
+/// its registering rows' predictions onto their measurements (least squares).
+std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
+                                               const VectorXd& theta,
+                                               const ValidationSplit& split);
+
 struct Context {
   const RobotModel* robot;
-  const Dataset* calib;  ///< with explicit time
-  const Dataset* validation;
+  const Dataset* calib;       ///< with explicit time
+  const Dataset* validation;  ///< the rows scored (ValidationSplit::scored)
   const Noise* noise;
   const Noise* vnoise;
   const DiagnosisOptions* opt;
-  bool had_time = true;  ///< the calibration data has a `t` column
+  bool had_time = true;                    ///< the calibration data has a `t` column
+  const ValidationSplit* split = nullptr;  ///< with `validation`
 };
 
 /// A fitted model on the calibration rows that are not outliers, with everything the tests need.

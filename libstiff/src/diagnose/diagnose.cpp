@@ -25,7 +25,9 @@ using diagnose_detail::noise_of;
 using diagnose_detail::num;
 using diagnose_detail::score_level;
 using diagnose_detail::signature_of;
+using diagnose_detail::split_validation;
 using diagnose_detail::um;
+using diagnose_detail::ValidationSplit;
 using diagnose_detail::where;
 using diagnose_detail::with_explicit_time;
 
@@ -44,6 +46,9 @@ Diagnosis diagnose(const RobotModel& robot,
     throw InvalidArgument("diagnose: outlier_alpha must be in [0, 1)");
   if (!(options.noise_uncertainty >= 0 && options.noise_uncertainty < 1))
     throw InvalidArgument("diagnose: noise_uncertainty must be in [0, 1)");
+  if (!(options.validation_registration_fraction > 0 &&
+        options.validation_registration_fraction < 1))
+    throw InvalidArgument("diagnose: validation_registration_fraction must be in (0, 1)");
   if (options.max_steps < 0 || options.max_steps > 20)
     throw InvalidArgument("diagnose: max_steps must be in [0, 20]");
   if (model.empty()) throw InvalidArgument("diagnose: the model has no effect (e.g. 'joint')");
@@ -75,10 +80,17 @@ Diagnosis diagnose(const RobotModel& robot,
 
   Dataset calib = with_explicit_time(calibration);
   const Noise noise = noise_of(calibration);
-  const Noise vnoise = validation ? noise_of(*validation) : Noise{};
-  Context cx{&robot, &calib, validation, &noise, &vnoise, &options, calibration.has_time};
+  // A validation set-up the calibration has not seen is registered from part of its rows.
+  ValidationSplit split;
+  if (validation)
+    split =
+        split_validation(calibration, *validation, model, options.validation_registration_fraction);
+  const Dataset* scored = validation ? &split.scored : nullptr;
+  const Noise vnoise = validation ? noise_of(split.scored) : Noise{};
+  Context cx{&robot, &calib, scored, &noise, &vnoise, &options, calibration.has_time, &split};
 
   Diagnosis d;
+  d.notes = split.notes;
   d.robot = robot.name;
   d.model = model;
   d.alpha = options.alpha;

@@ -155,6 +155,7 @@ std::string diagnosis_to_json(const Diagnosis& d) {
   j["steps"] = steps;
   j["final_model"] = d.final_model;
   j["final_verdict"] = d.final_verdict;
+  j["notes"] = d.notes;
   j["warnings"] = d.warnings;
   return j.dump(1);
 }

@@ -221,6 +221,42 @@ TEST(AbsoluteDiagnosis, LoopAddsWhatTheHeldOutPosesConfirm) {
   EXPECT_NE(d.final_verdict, "adequate") << d.summary;
 }
 
+// Validation poses measured from another placement of the instrument (a session the
+// calibration does not have): the diagnosis registers that placement from a fifth of its rows
+// and scores the model on the rest, so the validation error is the model's, at the tracker
+// noise, not the metres between the two placements.
+TEST(AbsoluteDiagnosis, ValidationFromANewSetUpIsRegisteredFromPartOfItsRows) {
+  const RobotModel robot = ur5();
+  std::mt19937_64 rng(33);
+  const Geometry g = random_geometry(robot.dof(), 2, rng);
+  Geometry g0 = g, g1 = g;
+  g0.rot.resize(1);
+  g0.trans.resize(1);
+  g1.rot.erase(g1.rot.begin());
+  g1.trans.erase(g1.trans.begin());
+  const double sigma = 20e-6;
+  const Dataset calib = measure(robot, g0, 150, sigma, rng);
+  Dataset valid = measure(robot, g1, 60, sigma, rng);
+  for (auto& m : valid.rows) m.session = "S1";
+  DiagnosisOptions o;
+  o.candidates = {"harmonic"};
+  const Diagnosis d = diagnose(robot, calib, &valid, kGeometric, o);
+  ASSERT_EQ(d.notes.size(), 1u);
+  EXPECT_NE(d.notes[0].find("'S1'"), std::string::npos) << d.notes[0];
+  EXPECT_EQ(d.fit.validation_error_m.size(), 48u);  // 12 of 60 rows register S1
+  // Per-axis RMS of a right model on new poses: the noise, inflated by the geometry's and the
+  // 12-row registration's estimation error (about sqrt(1 + 6/12) at most).
+  EXPECT_LT(d.fit.validation_rms_m, 1.6 * sigma) << d.summary;
+  // Too few rows to register a new placement and score the model: named.
+  valid.rows.resize(8);
+  try {
+    diagnose(robot, calib, &valid, kGeometric, o);
+    ADD_FAILURE() << "8 rows of a new set-up accepted";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("'S1'"), std::string::npos) << e.what();
+  }
+}
+
 /// Zero the truth of every parameter the fit held (the data see only combinations there).
 void zero_held(const DeflectionModel& m, const FitResult& f, Geometry* g) {
   const int n = m.robot().dof();

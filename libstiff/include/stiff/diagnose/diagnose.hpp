@@ -65,6 +65,11 @@ struct DiagnosisOptions {
   /// force error is itself known to 10-25 %): the checks that the residual is at the noise
   /// floor reject only when it is improbably large for a noise (1 + u) times the stated one.
   double noise_uncertainty = 0.1;
+  /// Validation rows from a set-up the calibration has not seen (absolute rows of a session
+  /// the calibration data do not have, with `registration` in the model): the new placement of
+  /// the instrument is registered from this fraction of its rows (spread evenly over the file)
+  /// and the model is scored on the others, as a calibrated robot is used in a new cell.
+  double validation_registration_fraction = 0.2;
   /// Number of worst poses listed.
   int worst_poses = 5;
   /// Flag rows whose residual is improbable under chi2_3 at this family-wise level (after a
@@ -192,6 +197,7 @@ struct Diagnosis {
   std::vector<DiagnosisStep> steps;  ///< the loop (auto), step 0 = the given model
   std::string final_model;           ///< auto: model at the end of the loop
   std::string final_verdict;
+  std::vector<std::string> notes;  ///< how the data were used (e.g. a new set-up registered)
   std::vector<std::string> warnings;
 };
 

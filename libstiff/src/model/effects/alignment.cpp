@@ -1,9 +1,9 @@
 // First alignment of absolute measurements with the nominal robot (start values of the
 // registration and tool effects).
 #include <Eigen/QR>
-#include <Eigen/SVD>
 #include <map>
 
+#include "stiff/kinematics/rigid_fit.hpp"
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff::effects {
@@ -39,30 +39,19 @@ Alignment compute(const RobotModel& robot, const Dataset& data) {
   for (int iter = 0; iter < 50; ++iter) {
     // Rotations and translations per session for the current point (Arun et al.).
     for (int k = 0; k < ns; ++k) {
-      Eigen::Vector3d cx = Eigen::Vector3d::Zero(), cy = Eigen::Vector3d::Zero();
-      int count = 0;
+      std::vector<int> rows;
       for (int i = 0; i < n; ++i)
-        if (row_session[i] == k) {
-          cx += rf[i] * (r0 + delta) + pf[i];
-          cy += y[i];
-          ++count;
-        }
-      if (count == 0) continue;
-      cx /= count;
-      cy /= count;
-      Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
-      for (int i = 0; i < n; ++i)
-        if (row_session[i] == k) h += (rf[i] * (r0 + delta) + pf[i] - cx) * (y[i] - cy).transpose();
-      Eigen::JacobiSVD<Eigen::Matrix3d> svd(h, Eigen::ComputeFullU | Eigen::ComputeFullV);
-      const Eigen::Vector3d sv = svd.singularValues();
-      if (!(sv(1) > 1e-8 * std::max(sv(0), 1e-300)))
+        if (row_session[i] == k) rows.push_back(i);
+      if (rows.empty()) continue;
+      Eigen::Matrix3Xd from(3, rows.size()), to(3, rows.size());
+      for (size_t c = 0; c < rows.size(); ++c) {
+        from.col(c) = rf[rows[c]] * (r0 + delta) + pf[rows[c]];
+        to.col(c) = y[rows[c]];
+      }
+      if (!fit_rigid_motion(from, to, &a.rotation[k], &a.translation[k]))
         throw InvalidArgument("session '" + a.sessions[k] +
                               "': its target positions are (nearly) collinear; registering the "
                               "instrument needs points spread in a plane at least");
-      Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
-      d(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
-      a.rotation[k] = svd.matrixV() * d * svd.matrixU().transpose();
-      a.translation[k] = cy - a.rotation[k] * cx;
     }
     // Point offset and translations jointly for these rotations (linear least squares).
     // Normal equations: the unknowns are few (3 + 3 sessions) and the columns well scaled.

@@ -111,6 +111,8 @@ def print_text(d) -> None:
                       um(s.get("validation_rms_m")), s["verdict"]] for s in d["steps"]],
                     [">", "<", "<", ">", ">", "<"]))
         print(f"final model: {d['final_model']} ({d['final_verdict']})")
+    for note in d.get("notes", []):
+        print(f"note: {note}")
     for wmsg in d["warnings"]:
         print(f"warning: {wmsg}")
 

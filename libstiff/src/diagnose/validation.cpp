@@ -1,0 +1,118 @@
+// Validation on a set-up the calibration has not seen: the new placement of the instrument is
+// registered from part of its rows, the model is scored on the others (docs/diagnosis.md,
+// section 1).
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+
+#include "diagnose/analysis.hpp"
+#include "stiff/error.hpp"
+#include "stiff/kinematics/rigid_fit.hpp"
+
+namespace stiff::diagnose_detail {
+
+namespace {
+constexpr int kMinRegistering = 6;  // a rigid motion from 6 points: 12 redundant equations
+constexpr int kMinScored = 3;
+}  // namespace
+
+ValidationSplit split_validation(const Dataset& calibration,
+                                 const Dataset& validation,
+                                 const std::vector<std::string>& model,
+                                 double fraction) {
+  ValidationSplit out;
+  out.scored = validation;
+  out.scored.rows.clear();
+  out.registering = out.scored;
+  const bool registered = std::find(model.begin(), model.end(), "registration") != model.end();
+  std::set<std::string> known;
+  for (const auto& m : calibration.rows) known.insert(m.session);
+  std::map<std::string, std::vector<int>> fresh;  // new session -> its rows, in file order
+  std::vector<std::string> order;
+  for (size_t r = 0; r < validation.rows.size(); ++r) {
+    const Measurement& m = validation.rows[r];
+    if (registered && m.absolute && !known.count(m.session)) {
+      if (!fresh.count(m.session)) order.push_back(m.session);
+      fresh[m.session].push_back(static_cast<int>(r));
+    } else {
+      out.scored.rows.push_back(m);
+    }
+  }
+  for (const auto& label : order) {
+    const std::vector<int>& rows = fresh[label];
+    const int n = static_cast<int>(rows.size());
+    if (n < kMinRegistering + kMinScored)
+      throw InvalidArgument("diagnose: validation session '" + label +
+                            "' is a set-up the calibration data do not have: it is registered "
+                            "from part of its rows and scored on the others, which needs at "
+                            "least " +
+                            std::to_string(kMinRegistering + kMinScored) + " rows (it has " +
+                            std::to_string(n) + ")");
+    // Evenly spread, at least kMinRegistering, at least kMinScored left to score.
+    const double f = std::clamp(fraction, static_cast<double>(kMinRegistering) / n,
+                                1.0 - static_cast<double>(kMinScored) / n);
+    int registering = 0;
+    for (int i = 0; i < n; ++i) {
+      const Measurement& m = validation.rows[rows[i]];
+      if (std::floor((i + 1) * f) > std::floor(i * f)) {
+        out.registering.rows.push_back(m);
+        ++registering;
+      } else {
+        out.scored.rows.push_back(m);
+      }
+    }
+    out.notes.push_back("validation session '" + label + "' is a new set-up: registered from " +
+                        std::to_string(registering) + " of its " + std::to_string(n) +
+                        " rows (spread evenly), scored on the other " +
+                        std::to_string(n - registering));
+  }
+  return out;
+}
+
+std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
+                                               const VectorXd& theta,
+                                               const ValidationSplit& split) {
+  // A new session is predicted with some other session's registration; the rigid motion
+  // fitted on its registering rows replaces it (a composition of rigid motions is one).
+  auto predicted = [&](const Dataset& d) {
+    const auto ctx = model.contexts(d);
+    std::vector<Eigen::Vector3d> p(d.rows.size());
+    for (size_t r = 0; r < d.rows.size(); ++r)
+      p[r] = model.predict(theta, d.rows[r], ctx[r]).head<3>();
+    return p;
+  };
+  std::map<std::string, std::pair<Eigen::Matrix3d, Eigen::Vector3d>> motion;
+  if (!split.registering.rows.empty()) {
+    const auto p = predicted(split.registering);
+    std::map<std::string, std::vector<int>> rows;
+    for (size_t r = 0; r < split.registering.rows.size(); ++r)
+      rows[split.registering.rows[r].session].push_back(static_cast<int>(r));
+    for (const auto& [label, idx] : rows) {
+      Eigen::Matrix3Xd x(3, idx.size()), y(3, idx.size());
+      for (size_t c = 0; c < idx.size(); ++c) {
+        x.col(static_cast<Eigen::Index>(c)) = p[idx[c]];
+        y.col(static_cast<Eigen::Index>(c)) = split.registering.rows[idx[c]].observed();
+      }
+      Eigen::Matrix3d r;
+      Eigen::Vector3d t;
+      if (!fit_rigid_motion(x, y, &r, &t))
+        throw InvalidArgument("diagnose: validation session '" + label +
+                              "': the rows that register it are (nearly) collinear; a new "
+                              "set-up needs validation poses spread in space");
+      motion[label] = {r, t};
+    }
+  }
+  const auto p = predicted(split.scored);
+  std::vector<Eigen::Vector3d> e(p.size());
+  for (size_t r = 0; r < p.size(); ++r) {
+    const Measurement& m = split.scored.rows[r];
+    const auto it = motion.find(m.session);
+    const Eigen::Vector3d q =
+        it == motion.end() ? p[r] : it->second.first * p[r] + it->second.second;
+    e[r] = m.observed() - q;
+  }
+  return e;
+}
+
+}  // namespace stiff::diagnose_detail
