@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <set>
 
 #include "diagnose/analysis.hpp"
@@ -171,17 +172,18 @@ Diagnosis diagnose(const RobotModel& robot,
   if (options.auto_loop) {
     // On absolute data the loop is also a calibration: a residual that no candidate explains
     // completely (unexplained), or that two candidates explain equally well (ambiguous, e.g. a
-    // joint offset and a tilt of the same axis), still gets the top candidate when the held-out
-    // poses confirm it, i.e. their squared errors fall (paired one-sided t test at alpha): the
-    // model grows while the evidence holds, and the last step says what is left. Displacement
-    // data stop there: their verdicts name a physical effect, not an accuracy.
+    // joint offset and a tilt of the same axis), still gets a candidate when the held-out poses
+    // confirm it, i.e. their squared errors fall (paired one-sided t test at alpha). Which one,
+    // the held-out poses decide: of the significant candidates, the one whose refit predicts
+    // them best (the calibration's own ranking favours terms that fit its poses, e.g.
+    // harmonics, which may not carry over). The model grows while the evidence holds, and the
+    // last step says what is left. Displacement data stop at rule 4: their verdicts name a
+    // physical effect, not an accuracy.
     const bool absolute = std::any_of(calibration.rows.begin(), calibration.rows.end(),
                                       [](const Measurement& m) { return m.absolute; });
-    auto validates = [&](size_t i) {
-      const Level* n = claims(chain.levels[i]) ? chain.next(i) : nullptr;
-      if (!n || !validation) return false;
-      const std::vector<double>& a = chain.levels[i].a.quality.validation_error_m;
-      const std::vector<double>& b = n->a.quality.validation_error_m;
+    auto confirms = [&](const Level& from, const Level& to) {
+      const std::vector<double>& a = from.a.quality.validation_error_m;
+      const std::vector<double>& b = to.a.quality.validation_error_m;
       const size_t m = a.size();
       if (m < 3 || b.size() != m) return false;
       double mean = 0, sq = 0;
@@ -196,13 +198,38 @@ Diagnosis diagnose(const RobotModel& robot,
       const double t = mean / se;
       return 0.5 * stats::f_sf(t * t, 1.0, static_cast<double>(m - 1)) < options.alpha;
     };
+    // Level i's pick becomes the confirmed candidate that predicts the held-out poses best, its
+    // level i + 1 built; false (pick unchanged) when none is confirmed.
+    auto choose_by_validation = [&](size_t i) {
+      if (!validation || !claims(chain.levels[i])) return false;
+      const size_t original = chain.levels[i].pick;
+      size_t best = SIZE_MAX;
+      double best_rms = INFINITY;
+      std::vector<Level> kept;  // the best level so far (moved out, not refitted)
+      for (size_t k = 0; k < chain.levels[i].scores.size(); ++k) {
+        if (!chain.levels[i].scores[k].significant) continue;
+        chain.levels.resize(i + 1);
+        chain.levels[i].pick = k;
+        const Level* n = chain.next(i);
+        if (!n || !confirms(chain.levels[i], *n) || !(n->a.quality.validation_rms_m < best_rms))
+          continue;
+        best = k;
+        best_rms = n->a.quality.validation_rms_m;
+        kept.clear();
+        kept.push_back(std::move(chain.levels[i + 1]));
+      }
+      chain.levels.resize(i + 1);
+      chain.levels[i].pick = best == SIZE_MAX ? original : best;
+      if (best == SIZE_MAX) return false;
+      chain.levels.push_back(std::move(kept[0]));
+      return true;
+    };
     std::string verdict = d.verdict;
-    for (size_t i = 0;
-         (verdict == "missing_effect" ||
-          (absolute && (verdict == "unexplained" || verdict == "ambiguous") && validates(i))) &&
-         static_cast<int>(i) < options.max_steps;
-         ++i) {
-      if (!chain.next(i)) break;
+    for (size_t i = 0; static_cast<int>(i) < options.max_steps; ++i) {
+      const bool go = verdict == "missing_effect" ||
+                      (absolute && (verdict == "unexplained" || verdict == "ambiguous") &&
+                       choose_by_validation(i));
+      if (!go || !chain.next(i)) break;
       const std::string added = chain.levels[i].scores[chain.levels[i].pick].effect;
       std::string w2;
       verdict = chain.decide(i + 1, &w2);
