@@ -404,6 +404,39 @@ def defaults(struct):
     return o
 
 
+def put_sampling(o, who: str, continuous_step: float, *, range_fraction=None, load_range_N=None,
+                 load_step_N=None, min_sigma_m=None, q_fixed=None, workspace_box_m=None) -> list:
+    """The random poses and loads of the one sampler, in an options struct that has its fields
+    (stiff_plan_options, stiff_design_random_options): only what the caller gave is set, the
+    library checks every value. `continuous_step` is how the struct spells "no load grid"
+    (0 or negative by release). Returns the arrays the struct points to: keep them alive for
+    the call."""
+    keep = []
+    if range_fraction is not None:
+        if not range_fraction > 0:  # 0 would read as "default" in C; the library checks the rest
+            from .errors import InvalidArgumentError
+
+            raise InvalidArgumentError(
+                f"{who}: range_fraction must be in (0, 1] (got {range_fraction})", -1)
+        o.range_fraction = range_fraction
+    if load_range_N is not None:
+        o.load_min_N, o.load_max_N = float(load_range_N[0]), float(load_range_N[1])
+    if load_step_N is not None:
+        o.load_step_N = float(load_step_N) if load_step_N > 0 else continuous_step
+    if min_sigma_m is not None:
+        o.min_sigma_m = float(min_sigma_m)
+    if q_fixed is not None:
+        # The library checks the count and every value against the joint limits.
+        qf = as_array(q_fixed).ravel()
+        keep.append(qf)
+        o.q_fixed, o.q_fixed_count = ptr(qf), qf.size
+    if workspace_box_m is not None:
+        lo, hi = (list(map(float, v)) for v in workspace_box_m)
+        o.use_workspace_box = 1
+        o.box_min_m[:], o.box_max_m[:] = lo, hi
+    return keep
+
+
 def text(value) -> "str | None":
     """A C string field of an options struct as text (None for NULL)."""
     return None if value is None else value.decode("utf-8")

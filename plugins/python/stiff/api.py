@@ -645,25 +645,10 @@ def random_design(robot: Robot, count: Optional[int] = None, seed: Optional[int]
         o.count = _c.require_count("count", count, 1000000)
     if seed is not None:
         o.seed = seed
-    if range_fraction is not None:
-        if not range_fraction > 0:  # 0 would read as "default" in C; the library checks the rest
-            raise InvalidArgumentError(
-                f"random design: range fraction must be in (0, 1] (got {range_fraction})")
-        o.range_fraction = range_fraction
-    if load_range_N is not None:
-        o.load_min_N, o.load_max_N = float(load_range_N[0]), float(load_range_N[1])
-    if load_step_N is not None:
-        o.load_step_N = float(load_step_N)
-    if min_sigma_m is not None:
-        o.min_sigma_m = float(min_sigma_m)
-    keep = None
-    if q_fixed is not None:
-        keep = _c.as_array(q_fixed).ravel()
-        o.q_fixed, o.q_fixed_count = _c.ptr(keep), keep.size
-    if workspace_box_m is not None:
-        lo, hi = (list(map(float, v)) for v in workspace_box_m)
-        o.use_workspace_box = 1
-        o.box_min_m[:], o.box_max_m[:] = lo, hi
+    keep = _c.put_sampling(o, "random design", 0.0, range_fraction=range_fraction,
+                           load_range_N=load_range_N, load_step_N=load_step_N,
+                           min_sigma_m=min_sigma_m, q_fixed=q_fixed,
+                           workspace_box_m=workspace_box_m)
     h = C.c_void_p()
     check(lib.stiff_design_random_with_options(C.byref(h), robot, C.byref(o)))
     del keep

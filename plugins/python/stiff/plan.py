@@ -125,18 +125,12 @@ def plan(robot: Robot, count: Optional[int] = None, criterion: Optional[str] = N
         o.pool_poses = _c.require_count("pool_poses", pool_poses)
     if pool_loads is not None:
         o.pool_loads = _c.require_count("pool_loads", pool_loads)
-    if range_fraction is not None:
-        if not range_fraction > 0:  # 0 would read as "default" in C; the library checks the rest
-            raise InvalidArgumentError(f"plan: range_fraction must be in (0, 1] (got {range_fraction})")
-        o.range_fraction = range_fraction
-    if load_range_N is not None:
-        o.load_min_N, o.load_max_N = float(load_range_N[0]), float(load_range_N[1])
-    if load_step_N is not None:
-        o.load_step_N = load_step_N if load_step_N > 0 else -1.0
+    keep = _c.put_sampling(o, "plan", -1.0, range_fraction=range_fraction,
+                           load_range_N=load_range_N, load_step_N=load_step_N,
+                           min_sigma_m=min_sigma_m, q_fixed=q_fixed,
+                           workspace_box_m=workspace_box_m)
     if load_max_magnitude_N is not None:
         o.load_max_magnitude_N = load_max_magnitude_N
-    if min_sigma_m is not None:
-        o.min_sigma_m = min_sigma_m
     if annealing_iterations is not None:
         o.annealing_iterations = _c.require_count("annealing_iterations", annealing_iterations)
     if annealing_t0 is not None:
@@ -150,12 +144,6 @@ def plan(robot: Robot, count: Optional[int] = None, criterion: Optional[str] = N
         o.tracker_sigma_m = tracker_sigma_m
     if tracker_ppm is not None:
         o.tracker_ppm = tracker_ppm
-    keep = []
-    if q_fixed is not None:
-        # The library checks the count and every value against the joint limits.
-        qf = _c.as_array(q_fixed).ravel()
-        keep.append(qf)
-        o.q_fixed, o.q_fixed_count = _c.ptr(qf), qf.size
     if optimizers is not None:
         mask = 0
         for name in optimizers:
@@ -168,10 +156,6 @@ def plan(robot: Robot, count: Optional[int] = None, criterion: Optional[str] = N
         o.candidate_file = _c.encode(os.fspath(candidate_file))
     if task is not None:
         o.task = task._h
-    if workspace_box_m is not None:
-        lo, hi = (list(map(float, v)) for v in workspace_box_m)
-        o.use_workspace_box = 1
-        o.box_min_m[:], o.box_max_m[:] = lo, hi
     if fixture_directions is not None:
         if fixture_forces_N is None:
             raise ValueError("fixture_directions need fixture_forces_N")
