@@ -47,6 +47,12 @@ MODELS = {"geometry": GEOMETRY, "geometry+gravity": GEOMETRY + "+gravity_lumped"
           "geometry+gravity+harmonics": GEOMETRY + "+gravity_lumped+harmonic"}
 
 
+def ur10_model(name):
+    """The UR10's T-Mac gives the probe's orientation: the full tool frame (tool +
+    tool_orientation), and the orientation residuals enter the fit."""
+    return MODELS[name].replace("+tool+", "+tool+tool_orientation+", 1)
+
+
 # ----------------------------------------------------------------------------- product
 
 def stiff_exe():
@@ -94,21 +100,29 @@ def library_seconds(robot, train, model):
     return best
 
 
-def predicted_errors(robot, fit, test, pred):
+def predicted_errors(robot, fit, test, pred, degrees=False):
     """`stiff predict` of the absolute file `test` with `fit` (into `pred`): the per-pose
-    distances [mm] between the predicted and the measured positions."""
+    distances [mm] between the predicted and the measured positions; with `degrees`, also the
+    per-pose angles [deg] between the predicted and the measured orientations."""
     _run([stiff_exe(), "predict", "--robot", robot, "--fit", fit, "--data", str(test),
           "-o", pred])
     with open(pred) as f:
-        P = {r["id"]: np.array([float(r["x_m"]), float(r["y_m"]), float(r["z_m"])])
-             for r in csv.DictReader(f)}
+        rows = list(csv.DictReader(f))
+    P = {r["id"]: np.array([float(r["x_m"]), float(r["y_m"]), float(r["z_m"])]) for r in rows}
     d = ref.read_absolute(test)
-    return np.array([np.linalg.norm(P[i] - p) for i, p in zip(d["ids"], d["p"])]) * 1e3
+    e = np.array([np.linalg.norm(P[i] - p) for i, p in zip(d["ids"], d["p"])]) * 1e3
+    if not degrees:
+        return e
+    from scipy.spatial.transform import Rotation
+    W = {r["id"]: [float(r[k]) for k in ("rx_rad", "ry_rad", "rz_rad")] for r in rows}
+    Rp = Rotation.from_rotvec([W[i] for i in d["ids"]]).as_matrix()
+    return e, np.degrees(np.linalg.norm(ref.rotation_error(d["R"], Rp), axis=1))
 
 
-def product_errors(robot, train, test, model, tmp):
-    """Calibrate with stiff on `train`, predict `test`: per-pose position errors [mm],
-    the number of identified parameters, calibration RMS [mm] and the identify time [s]."""
+def product_errors(robot, train, test, model, tmp, degrees=False):
+    """Calibrate with stiff on `train`, predict `test`: per-pose position errors [mm] (with
+    `degrees`, and orientation errors [deg]), the number of identified parameters,
+    calibration RMS [mm] (and [deg] per axis) and the identify time [s]."""
     exe = stiff_exe()
     fit = os.path.join(tmp, "fit.json")
     pred = os.path.join(tmp, "pred.csv")
@@ -117,11 +131,14 @@ def product_errors(robot, train, test, model, tmp):
           "-o", fit])
     seconds = time.perf_counter() - t
     library = library_seconds(robot, train, model)
-    e = predicted_errors(robot, fit, test, pred)
+    e = predicted_errors(robot, fit, test, pred, degrees)
     fitstats = json.loads(Path(fit).read_text()).get("fit", {})
-    return e, {"parameters": fitstats.get("rank"),
-               "rms_mm": (fitstats.get("rms_m") or float("nan")) * 1e3 * math.sqrt(3),
-               "seconds": seconds, "library_seconds": library}
+    st = {"parameters": fitstats.get("rank"),
+          "rms_mm": (fitstats.get("rms_m") or float("nan")) * 1e3 * math.sqrt(3),
+          "seconds": seconds, "library_seconds": library}
+    if fitstats.get("oriented_rows"):
+        st["rms_deg"] = math.degrees(fitstats["orientation_rms_rad"]) * math.sqrt(3)
+    return e, st
 
 
 def pooled_ur10(path):
@@ -217,11 +234,18 @@ def write_loop(w, lp, what):
 
 
 def summary(e):
+    """Position errors [mm] or (position [mm], orientation [deg]) per pose."""
+    a = None
+    if isinstance(e, tuple):
+        e, a = e
     e = np.asarray(e)
-    return {"mean_mm": float(e.mean()), "max_mm": float(e.max()),
-            "rms_mm": float(np.sqrt(np.mean(e ** 2))), "n": int(e.size),
-            "ci95_mean_mm": float(1.96 * e.std(ddof=1) / math.sqrt(e.size)),
-            "per_pose_mm": [round(float(v), 5) for v in e]}
+    out = {"mean_mm": float(e.mean()), "max_mm": float(e.max()),
+           "rms_mm": float(np.sqrt(np.mean(e ** 2))), "n": int(e.size),
+           "ci95_mean_mm": float(1.96 * e.std(ddof=1) / math.sqrt(e.size)),
+           "per_pose_mm": [round(float(v), 5) for v in e]}
+    if a is not None:
+        out.update({"mean_deg": float(np.mean(a)), "max_deg": float(np.max(a))})
+    return out
 
 
 def product_ur5(folds=5, seed=0):
@@ -258,9 +282,9 @@ def product_ur10(seed=0):
         write_rows(C, tr, os.path.join(tmp, "tr.csv"))
         write_rows(C, te, os.path.join(tmp, "te.csv"))
         for name in ref.UR10_MODELS:
-            model = MODELS[name]
+            model = ur10_model(name)
             e, st = product_errors("ur10", os.path.join(tmp, "tr.csv"),
-                                   os.path.join(tmp, "te.csv"), model, tmp)
+                                   os.path.join(tmp, "te.csv"), model, tmp, degrees=True)
             out[name] = {"half_C": {"calibration": st, "validation": summary(e)}}
             out[name].update(product_transfer(C, model, seed, tmp))
     return out
@@ -289,7 +313,7 @@ def product_transfer(C, model, seed, tmp):
             fit, pred = os.path.join(tmp, "reg.json"), os.path.join(tmp, "ev_pred.csv")
             _run([exe, "identify", "--robot", "ur10", "--data", rp, "--start", cfit,
                   "--refit", "registration", "-o", fit])
-            out[f"{k} ({label})"] = summary(predicted_errors("ur10", fit, ep, pred))
+            out[f"{k} ({label})"] = summary(predicted_errors("ur10", fit, ep, pred, True))
             out[f"{k} ({label})"].pop("per_pose_mm")  # thousands of poses: the summary only
     return out
 
@@ -508,7 +532,9 @@ def write_doc(res):
         w("Four series, each its own tracker set-up (session), with the T-Mac's 6-D pose: C "
           f"random poses ({rows.get('C')} rows), B joint configurations ({rows.get('B')}), "
           f"D ISO cubes ({rows.get('D')}), A a grid ({rows.get('A')} rows shipped: every 5th "
-          "of 11911). Orientation residuals weigh 1 mm per mrad.")
+          "of 11911). The reference weighs orientation residuals 1 mm per mrad; stiff fits the "
+          "probe's frame on the flange (`tool_orientation`) and estimates the weight from the "
+          "residuals (docs/identifiability.md), about 0.5 mm per mrad here.")
         w("")
         if res.get("loop", {}).get("ur10"):
             write_loop(w, res["loop"]["ur10"],
@@ -529,13 +555,17 @@ def write_doc(res):
         w("")
         if "ur10" in prod and "skipped" not in prod["ur10"]:
             p = prod["ur10"]
+            w("stiff fits the same models with `tool_orientation` (`stiff identify --model "
+              "registration+tool+tool_orientation+...`), on the positions and the orientations:")
+            w("")
             w("| model (stiff) | parameters | calibration RMS [mm] | validation mean [mm] | "
-              "max [mm] | RMS [mm] | identify time [s] |")
-            w("| --- | --- | --- | --- | --- | --- | --- |")
+              "max [mm] | RMS [mm] | mean [deg] | identify time [s] |")
+            w("| --- | --- | --- | --- | --- | --- | --- | --- |")
             for n in ref.UR10_MODELS:
                 c, v = p[n]["half_C"]["calibration"], p[n]["half_C"]["validation"]
                 w(f"| {n} | {c['parameters']} | {_f(c['rms_mm'])} | {_ci(v)} | "
-                  f"{_f(v['max_mm'])} | {_f(v['rms_mm'])} | {_f(c['seconds'], '.3f')} |")
+                  f"{_f(v['max_mm'])} | {_f(v['rms_mm'])} | {_f(v.get('mean_deg'))} | "
+                  f"{_f(c['seconds'], '.3f')} |")
             w("")
         elif "ur10" in prod:
             w(f"stiff: not run ({_clean(prod['ur10']['skipped'])}).")
@@ -546,11 +576,12 @@ def write_doc(res):
         transfer_table(w, "reference", r, degrees=True)
         pr = prod.get("ur10", {})
         if all(n in pr and "B (20%)" in pr[n] for n in ref.UR10_MODELS):
-            w("stiff: calibrated on all of C (`stiff identify`), then each series registered "
+            w("stiff (the models above with `tool_orientation`: positions and orientations): "
+              "calibrated on all of C (`stiff identify`), then each series registered "
               "to it with `stiff identify --start C.json --refit registration` on the same "
-              "rows as the reference, evaluated on the same rest (positions only):")
+              "rows as the reference, evaluated on the same rest:")
             w("")
-            transfer_table(w, "stiff", pr, degrees=False)
+            transfer_table(w, "stiff", pr, degrees=True)
         if all(n in r for n in ref.UR10_MODELS):
             hv = lambda n: r[n]["half_C"]["validation"]["mean_mm"]
             tr = lambda n: [r[n][f"{k} (20%)"]["mean_mm"] for k in "BDA" if f"{k} (20%)" in r[n]]

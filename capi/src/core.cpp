@@ -1,4 +1,5 @@
 // Version, errors, robots, datasets.
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -399,6 +400,8 @@ bool column_present(const Dataset& d, int column) {
       return d.has_sigma_p;
     case STIFF_COLUMN_TEMPERATURE:
       return d.has_temperature;
+    case STIFF_COLUMN_ORIENTATION:
+      return d.has_orientation;
   }
   throw InvalidArgument("unknown column " + std::to_string(static_cast<int>(column)));
 }
@@ -459,6 +462,12 @@ stiff_status stiff_dataset_get(double* values,
         case STIFF_COLUMN_TEMPERATURE:
           v.push_back(m.temperature);
           break;
+        case STIFF_COLUMN_ORIENTATION: {
+          const Eigen::AngleAxisd aa(m.orientation);
+          const Eigen::Vector3d w = aa.angle() * aa.axis();
+          for (int k = 0; k < 3; ++k) v.push_back(m.has_orientation ? w(k) : NAN);
+          break;
+        }
       }
     }
     return copy_out(v.data(), v.size(), values, capacity, needed);

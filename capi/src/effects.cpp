@@ -57,6 +57,7 @@ stiff_status stiff_effect_describe(
     if (e->requirements() & kNeedsSessions) needs.push_back("sessions");
     if (e->requirements() & kNeedsAbsolute) needs.push_back("absolute");
     if (e->requirements() & kNeedsTemperature) needs.push_back("temperature");
+    if (e->requirements() & kNeedsOrientation) needs.push_back("orientation");
     j["needs"] = needs;
     j["parameters"] = nlohmann::json::array();
     for (const auto& p : e->parameters())

@@ -18,6 +18,29 @@ const FitResult& fit_of(const stiff_result* r) {
   return r->fit;
 }
 
+/// stiff_predict_dataset and stiff_predict_dataset_orientation: the checks, then
+/// DeflectionModel::predict of every row into `out(row, values)`.
+template <typename Out>
+void predict_rows(const stiff_model* model, const stiff_dataset* dataset, Out&& out) {
+  require(model, "model");
+  require(dataset, "dataset");
+  const Dataset& data = dataset->data;
+  const DeflectionModel& dm = *model->model;
+  validate_dataset(data, model->robot.dof(), false);
+  for (const auto& m : data.rows)
+    if (m.absolute && dm.find("registration") >= 0 && !dm.has_session(m.session))
+      throw InvalidArgument("measurement '" + m.id + "': session '" + m.session +
+                            "' was not registered by this fit; identify with its rows, or "
+                            "refit the registration of this set-up");
+  const std::vector<MeasurementContext> ctx = dm.contexts(data);
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    const Eigen::Matrix<double, 6, 1> d = dm.predict(model->theta, data.rows[r], ctx[r]);
+    if (!d.allFinite())
+      throw NumericalError("row " + std::to_string(r) + ": the prediction is not finite");
+    out(r, d);
+  }
+}
+
 }  // namespace
 
 extern "C" {
@@ -33,6 +56,7 @@ stiff_status stiff_identify_options_init(stiff_identify_options* options, size_t
     o.max_iterations = static_cast<uint32_t>(io.max_iterations);
     o.method = STIFF_METHOD_AUTO;
     o.max_relative_se = io.max_relative_se;
+    o.orientation_length_m = io.orientation_length_m;
     return init_options(options, struct_size, offsetof(stiff_identify_options, max_relative_se),
                         "stiff_identify_options", o);
   });
@@ -58,6 +82,8 @@ stiff_status stiff_identify(stiff_result** out,
     io.loss_scale_m = o.loss_scale_m;
     if (o.max_relative_se != 0.0)
       io.max_relative_se = o.max_relative_se < 0.0 ? 0.0 : o.max_relative_se;
+    if (o.orientation_length_m < 0.0) io.use_orientation = false;
+    if (o.orientation_length_m > 0.0) io.orientation_length_m = o.orientation_length_m;
     if (o.max_iterations)
       io.max_iterations =
           static_cast<int>(std::min<uint32_t>(o.max_iterations, std::numeric_limits<int>::max()));
@@ -247,6 +273,16 @@ stiff_status stiff_result_residuals(double* residuals,
   });
 }
 
+stiff_status stiff_result_orientation_residuals(double* residuals,
+                                                size_t capacity,
+                                                size_t* needed,
+                                                const stiff_result* result) {
+  return guarded(__func__, [&] {
+    const Eigen::VectorXd& r = fit_of(result).orientation_residuals;
+    return copy_out(r.data(), static_cast<size_t>(r.size()), residuals, capacity, needed);
+  });
+}
+
 stiff_status stiff_result_statistics(stiff_fit_statistics* statistics, const stiff_result* result) {
   return guarded(__func__, [&] {
     require(statistics, "statistics");
@@ -262,6 +298,11 @@ stiff_status stiff_result_statistics(stiff_fit_statistics* statistics, const sti
     s.condition_number = f.condition_number;
     s.outliers = static_cast<uint32_t>(f.outliers.size());
     s.warnings = static_cast<uint32_t>(f.warnings.size());
+    s.oriented_rows = static_cast<uint32_t>(f.oriented_rows);
+    s.orientation_rms_rad = f.orientation_rms_rad;
+    s.orientation_mean_rad = f.orientation_mean_rad;
+    s.orientation_max_rad = f.orientation_max_rad;
+    s.orientation_length_m = f.orientation_length_m;
     // Write back only the caller's part of the struct.
     const size_t n = std::min<size_t>(statistics->struct_size, sizeof s);
     s.struct_size = statistics->struct_size;
@@ -351,22 +392,27 @@ stiff_status stiff_predict_dataset(double* predicted,
   return guarded(__func__, [&] {
     require(model, "model");
     require(dataset, "dataset");
-    const Dataset& data = dataset->data;
-    const DeflectionModel& dm = *model->model;
-    validate_dataset(data, model->robot.dof(), false);
-    for (const auto& m : data.rows)
-      if (m.absolute && dm.find("registration") >= 0 && !dm.has_session(m.session))
-        throw InvalidArgument("measurement '" + m.id + "': session '" + m.session +
-                              "' was not registered by this fit; identify with its rows, or "
-                              "refit the registration of this set-up");
-    require_capacity(3 * data.rows.size(), predicted, capacity, needed);
-    const std::vector<MeasurementContext> ctx = dm.contexts(data);
-    for (size_t r = 0; r < data.rows.size(); ++r) {
-      const Eigen::Matrix<double, 6, 1> d = dm.predict(model->theta, data.rows[r], ctx[r]);
-      if (!d.allFinite())
-        throw NumericalError("row " + std::to_string(r) + ": the prediction is not finite");
+    require_capacity(3 * dataset->data.rows.size(), predicted, capacity, needed);
+    predict_rows(model, dataset, [&](size_t r, const Eigen::Matrix<double, 6, 1>& d) {
       for (int k = 0; k < 3; ++k) predicted[3 * r + k] = d(k);
-    }
+    });
+    return STIFF_OK;
+  });
+}
+
+stiff_status stiff_predict_dataset_orientation(double* rotation_vectors,
+                                               size_t capacity,
+                                               size_t* needed,
+                                               const stiff_model* model,
+                                               const stiff_dataset* dataset) {
+  return guarded(__func__, [&] {
+    require(model, "model");
+    require(dataset, "dataset");
+    require_capacity(3 * dataset->data.rows.size(), rotation_vectors, capacity, needed);
+    predict_rows(model, dataset, [&](size_t r, const Eigen::Matrix<double, 6, 1>& d) {
+      const bool absolute = dataset->data.rows[r].absolute;
+      for (int k = 0; k < 3; ++k) rotation_vectors[3 * r + k] = absolute ? d(3 + k) : NAN;
+    });
     return STIFF_OK;
   });
 }

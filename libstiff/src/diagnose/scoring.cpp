@@ -130,6 +130,13 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
       untestable.push_back(c);
       continue;
     }
+    if ((eg.requirements() & kNeedsOrientation) && !a.used.has_orientation) {
+      c.testable = false;
+      c.identifiable = false;
+      c.reason = "untestable: it is identified from measured orientations and the data have none";
+      untestable.push_back(c);
+      continue;
+    }
     VectorXd typical;
     const MatrixXd z = candidate_regressors(a, *mg, &typical);
     GroupScore g = score_group(a, z, typical, opt.rank_tolerance);

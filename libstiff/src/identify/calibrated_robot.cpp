@@ -19,6 +19,7 @@ struct Contribution {
   Eigen::VectorXd dq;
   Eigen::Matrix<double, 6, Eigen::Dynamic> joint_error;
   Eigen::Vector3d r_meas, r_load, force, moment;
+  Eigen::Matrix3d probe;  ///< a 6-D probe's rotation on the flange
 };
 
 Contribution contribution(const Effect& e,
@@ -37,9 +38,12 @@ Contribution contribution(const Effect& e,
   s.r_load = robot.load_point;
   s.dq = Eigen::VectorXd::Zero(n);
   s.joint_error = Eigen::MatrixXd::Zero(6, n);
+  s.probe.setIdentity();
+  s.orientation.setIdentity();
+  s.oriented = true;
   e.wrench(p, s);
   e.geometry(p, s);
-  return {s.dq, s.joint_error, s.r_meas, s.r_load, s.force, s.moment};
+  return {s.dq, s.joint_error, s.r_meas, s.r_load, s.force, s.moment, s.probe};
 }
 
 bool same(const Contribution& a, const Contribution& b) {
@@ -93,6 +97,11 @@ RobotModel calibrated_robot(const RobotModel& robot,
     const bool fixed_geometry = chain_only && same(a, b) &&
                                 (a.r_load - robot.load_point).norm() == 0 && a.force.norm() == 0 &&
                                 a.moment.norm() == 0;
+    if (fixed_geometry && !a.probe.isIdentity(0.0)) {
+      // The robot description has a measured point, not a measured frame.
+      out.push_back(eff.name() + ": the 6-D probe's frame on the flange, the instrument's");
+      continue;
+    }
     if (!fixed_geometry) {
       out.push_back(eff.name() + (eff.name() == "registration"
                                       ? ": the instrument's placement, not the robot's"

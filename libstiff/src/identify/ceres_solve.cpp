@@ -42,7 +42,8 @@ struct ResidualSetup {
 /// rho on |e_r|^2 = s, the scaled residual sqrt(rho(s) / s) e_r, so that 1/2 |residuals|^2 is
 /// the robust cost 1/2 sum_r rho(s_r) with the exact derivative (Gauss-Newton on the scaled
 /// residuals instead of Ceres's per-block Triggs correction; the cost and hence the minimum
-/// are the same). Writes r (3 count) and, when `jac` is not null, their derivatives (3 count x
+/// are the same). Each row has D = Setup::dim components (position, and orientation with
+/// 6-D data). Writes r (D count) and, when `jac` is not null, their derivatives (D count x
 /// free, row-major). Model values and derivatives from the cached Evaluations. False when a
 /// value is not finite.
 bool chunk_residuals(
@@ -55,16 +56,20 @@ bool chunk_residuals(
   theta.assign(rs.held->data(), rs.held->data() + p);
   for (int f = 0; f < nf; ++f) theta[free[f]] = z[f] * s.typical(free[f]);
   const Evaluations::Key key = s.eval.key(theta.data());
+  const int dim = s.dim;
   for (int i = 0; i < count; ++i) {
     const int row = first + i;
-    const Measurement& m = s.data->rows[row];
-    const double w = s.row_weight(row);
+    double w[6];
+    for (int k = 0; k < dim; ++k) w[k] = s.weight(row, k);
     const double *d = nullptr, *jrow = nullptr;
     const std::vector<int>* jcols = nullptr;
     s.eval.get(row, key, jac ? &free : nullptr, &d, &jrow, &jcols);
-    double* ri = r + 3 * i;
-    for (int k = 0; k < 3; ++k) ri[k] = (m.observed()(k) - d[k]) * w;
-    const double sq = ri[0] * ri[0] + ri[1] * ri[1] + ri[2] * ri[2];
+    double* ri = r + dim * i;
+    double sq = 0.0;
+    for (int k = 0; k < dim; ++k) {
+      ri[k] = (s.observed(row, k) - d[k]) * w[k];
+      sq += ri[k] * ri[k];
+    }
     // Non-finite values make Ceres log to stderr; returning false rejects the point quietly.
     if (!std::isfinite(sq)) return false;
     // Robust scaling a = sqrt(rho(s) / s) and da/ds (limits at s = 0).
@@ -81,28 +86,34 @@ bool chunk_residuals(
         da = a > 0 ? 0.25 * rho[2] / a : 0.0;
       }
     }
-    double* ji = jac ? jac + 3 * i * nf : nullptr;
+    double* ji = jac ? jac + dim * i * nf : nullptr;
     if (ji) {
       const bool every = jcols == &s.eval.all();
       for (int f = 0; f < nf; ++f) {
-        const double* col = jrow + 3 * (every ? free[f] : f);
-        const double scale = -w * (*rs.free_typical)[f];
-        for (int k = 0; k < 3; ++k) ji[k * nf + f] = col[k] * scale;
+        const double* col = jrow + dim * (every ? free[f] : f);
+        const double scale = -(*rs.free_typical)[f];
+        for (int k = 0; k < dim; ++k) ji[k * nf + f] = col[k] * w[k] * scale;
       }
       if (a != 1.0 || da != 0.0) {
         // d(a e) = a de + e (da/ds) 2 e^T de
         for (int f = 0; f < nf; ++f) {
-          const double g = 2.0 * da * (ri[0] * ji[f] + ri[1] * ji[nf + f] + ri[2] * ji[2 * nf + f]);
-          for (int k = 0; k < 3; ++k) ji[k * nf + f] = a * ji[k * nf + f] + ri[k] * g;
+          double g = 0.0;
+          for (int k = 0; k < dim; ++k) g += ri[k] * ji[k * nf + f];
+          g *= 2.0 * da;
+          for (int k = 0; k < dim; ++k) ji[k * nf + f] = a * ji[k * nf + f] + ri[k] * g;
         }
       }
       double nan_if_not_finite = 0.0;  // 0 * x is NaN for an infinite or NaN x
-      for (int k = 0; k < 3 * nf; ++k) nan_if_not_finite += 0.0 * ji[k];
+      for (int k = 0; k < dim * nf; ++k) nan_if_not_finite += 0.0 * ji[k];
       if (nan_if_not_finite != 0.0) return false;
     }
     if (loss) {
-      for (int k = 0; k < 3; ++k) ri[k] *= a;
-      if (!std::isfinite(ri[0] * ri[0] + ri[1] * ri[1] + ri[2] * ri[2])) return false;
+      double sa = 0.0;
+      for (int k = 0; k < dim; ++k) {
+        ri[k] *= a;
+        sa += ri[k] * ri[k];
+      }
+      if (!std::isfinite(sa)) return false;
     }
   }
   return true;
@@ -114,7 +125,7 @@ bool chunk_residuals(
 class Residual final : public ceres::CostFunction {
  public:
   Residual(const ResidualSetup& rs, int first, int count) : rs_(rs), first_(first), count_(count) {
-    set_num_residuals(3 * count);
+    set_num_residuals(rs.setup->dim * count);
     mutable_parameter_block_sizes()->push_back(static_cast<int>(rs.free->size()));
   }
   bool Evaluate(double const* const* z, double* r, double** jacobians) const override {
@@ -128,7 +139,7 @@ class Residual final : public ceres::CostFunction {
 };
 
 /// Every measurement as one block of nf + 1 residuals r' with Jacobian J' (nf + 1 x nf) such
-/// that J'^T J' = J^T J, J'^T r' = J^T r and |r'|^2 = |r|^2 for the 3N residuals r and their
+/// that J'^T J' = J^T J, J'^T r' = J^T r and |r'|^2 = |r|^2 for the D N residuals r and their
 /// Jacobian J of chunk_residuals: the cost, its gradient and the Gauss-Newton model of every
 /// Levenberg-Marquardt step are those of the full problem, so the iterates are the same, but
 /// Ceres's passes over the tall Jacobian (copies, validity checks, column scaling, products)
@@ -143,8 +154,8 @@ class CompressedResidual final : public ceres::CostFunction {
     const int nf = static_cast<int>(rs.free->size());
     set_num_residuals(nf + 1);
     mutable_parameter_block_sizes()->push_back(nf);
-    r_.resize(3 * kChunk);
-    j_.resize(3 * kChunk, nf);
+    r_.resize(rs.setup->dim * kChunk);
+    j_.resize(rs.setup->dim * kChunk, nf);
   }
   bool Evaluate(double const* const* z, double* r, double** jacobians) const override {
     const int nf = static_cast<int>(rs_.free->size());
@@ -156,10 +167,10 @@ class CompressedResidual final : public ceres::CostFunction {
       const int count = std::min(kChunk, rows_ - first);
       if (!chunk_residuals(rs_, first, count, z[0], r_.data(), jac ? j_.data() : nullptr))
         return false;
-      const auto rc = r_.head(3 * count);
+      const auto rc = r_.head(rs_.setup->dim * count);
       sq += rc.squaredNorm();
       if (!jac) continue;
-      const auto jc = j_.topRows(3 * count);
+      const auto jc = j_.topRows(rs_.setup->dim * count);
       gram.selfadjointView<Eigen::Lower>().rankUpdate(jc.transpose());
       grad.noalias() += jc.transpose() * rc;
     }
@@ -315,7 +326,7 @@ SolveOutcome solve_once(const Setup& s,
   const ResidualSetup rs{&s, &free, &theta, &free_typical, &losses};
   // Tall problems as one compressed block (Ceres would take the normal equations anyway);
   // else chunks of 64 measurements, solved by QR.
-  const bool tall = 3 * n >= 10 * nf;
+  const bool tall = s.dim * n >= 10 * nf;
   if (tall) {
     problem.AddResidualBlock(new CompressedResidual(rs, n), nullptr, z.data());
   } else {
@@ -400,16 +411,20 @@ Eigen::VectorXd cost_gradient(const Setup& s,
   std::vector<double> scale(nc);
   for (int i = 0; i < nc; ++i) scale[i] = s.typical(cols[i]);
   Eigen::VectorXd g = Eigen::VectorXd::Zero(nc);
-  Eigen::Matrix<double, 3, Eigen::Dynamic> blk(3, nc);
-  Eigen::Vector3d d;
+  const int dim = s.dim;
+  Eigen::MatrixXd blk(dim, nc);
+  double d[6];
   for (int r = 0; r < static_cast<int>(s.data->rows.size()); ++r) {
     displacement_and_jacobian(s, r, theta.data(), cols, scale.data(), false, d, blk.data());
-    const double w = s.row_weight(r);
-    const Eigen::Vector3d e = (s.data->rows[r].observed() - d) * w;
+    Eigen::VectorXd e(dim), w(dim);
+    for (int k = 0; k < dim; ++k) {
+      w(k) = s.weight(r, k);
+      e(k) = (s.observed(r, k) - d[k]) * w(k);
+    }
     double rho[3] = {0, 1, 0};
     std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
     if (loss) loss->Evaluate(e.squaredNorm(), rho);
-    g -= rho[1] * w * (blk.transpose() * e);
+    g -= rho[1] * (blk.transpose() * w.cwiseProduct(e));
   }
   return g;
 }

@@ -11,30 +11,37 @@ void displacement_and_jacobian(const Setup& s,
                                const std::vector<int>& cols,
                                const double* scale,
                                bool every,
-                               Eigen::Vector3d& d,
+                               double* d,
                                double* out) {
+  const int dim = s.dim;
   const DeflectionModel& model = *s.model;
   const int p = model.parameter_count();
   auto& t = s.theta_jet;
   t.resize(p);
   for (int k = 0; k < p; ++k) t[k] = Jet(theta[k]);
-  const bool analytic = every && model.analytic();
+  const bool analytic = every && model.analytic() && dim == 3;
   const std::vector<int>& jc = analytic ? model.jet_parameters() : cols;
   const int nc = static_cast<int>(jc.size());
   const Measurement& m = s.data->rows[row];
-  Vector3<Jet> dj;
-  if (nc == 0) model.evaluate_jet(t.data(), m, s.ctx[row], s.scratch, &dj);
+  Vector3<Jet> dj, oj;
+  Vector3<Jet>* op = dim == 6 ? &oj : nullptr;
+  if (nc == 0) model.evaluate_jet(t.data(), m, s.ctx[row], s.scratch, &dj, op);
   for (int first = 0; first < nc; first += kJetStride) {
     const int last = std::min(nc, first + kJetStride);
     for (int i = first; i < last; ++i) t[jc[i]].v(i - first) = scale ? scale[i] : 1.0;
-    model.evaluate_jet(t.data(), m, s.ctx[row], s.scratch, &dj);
+    model.evaluate_jet(t.data(), m, s.ctx[row], s.scratch, &dj, op);
     for (int i = first; i < last; ++i) {
       t[jc[i]].v(i - first) = 0.0;
-      double* o = out + 3 * (analytic ? jc[i] : i);
+      double* o = out + dim * (analytic ? jc[i] : i);
       for (int k = 0; k < 3; ++k) o[k] = dj(k).v(i - first);
+      if (op)
+        for (int k = 0; k < 3; ++k) o[3 + k] = oj(k).v(i - first);
     }
   }
-  for (int k = 0; k < 3; ++k) d(k) = dj(k).a;
+  for (int k = 0; k < 3; ++k) d[k] = dj(k).a;
+  if (op)
+    for (int k = 0; k < 3; ++k) d[3 + k] = oj(k).a;
+  // Analytic columns (displacement models of linear effects) have dim 3.
   if (analytic) model.analytic_columns(s.scratch, s.dscratch, out);
 }
 
@@ -46,8 +53,9 @@ void Evaluations::init(const Setup* s, int rows, int p, bool linear) {
   for (int k = 0; k < p; ++k) all_[k] = k;
   keys_.assign(static_cast<size_t>(kKeys) * p, 0.0);
   next_ = 1;
-  d_.assign(6 * static_cast<size_t>(rows), 0.0);
-  jac_.assign(6 * static_cast<size_t>(rows) * p, 0.0);
+  dim_ = s->dim;
+  d_.assign(2 * static_cast<size_t>(dim_) * rows, 0.0);
+  jac_.assign(2 * static_cast<size_t>(dim_) * rows * p, 0.0);
   id_.assign(2 * static_cast<size_t>(rows), 0);
   used_.assign(2 * static_cast<size_t>(rows), 0);
   cols_.assign(2 * static_cast<size_t>(rows), nullptr);
@@ -90,17 +98,19 @@ void Evaluations::get(int row,
     else
       slot = used_[r2] <= used_[r2 + 1] ? 0 : 1;
     const size_t i = r2 + slot;
-    double* dd = d_.data() + 3 * i;
-    double* jj = jac_.data() + 3 * i * p_;
-    Eigen::Vector3d dv;
+    const int dim = dim_;
+    double* dd = d_.data() + dim * i;
+    double* jj = jac_.data() + dim * i * p_;
+    double dv[6];
     if (linear_ && ref_[row]) {
       // d = d0 + J (theta - theta0), exact for a model affine in theta.
       const double* t0 = ref_theta_.data() + static_cast<size_t>(row) * p_;
       const double* j0 = ref_jac_.data() + 3 * static_cast<size_t>(row) * p_;
-      dv = Eigen::Map<const Eigen::Vector3d>(ref_d_.data() + 3 * static_cast<size_t>(row));
+      Eigen::Map<Eigen::Vector3d> d3(dv);
+      d3 = Eigen::Map<const Eigen::Vector3d>(ref_d_.data() + 3 * static_cast<size_t>(row));
       for (int k = 0; k < p_; ++k)
         if (theta[k] != t0[k])
-          dv += Eigen::Map<const Eigen::Vector3d>(j0 + 3 * k) * (theta[k] - t0[k]);
+          d3 += Eigen::Map<const Eigen::Vector3d>(j0 + 3 * k) * (theta[k] - t0[k]);
       std::copy(j0, j0 + 3 * p_, jj);
       cols_[i] = &all_;
     } else if (cols || linear_) {
@@ -114,35 +124,38 @@ void Evaluations::get(int row,
       if (linear_) {
         ref_[row] = 1;
         std::copy(theta, theta + p_, ref_theta_.data() + static_cast<size_t>(row) * p_);
-        std::copy(dv.data(), dv.data() + 3, ref_d_.data() + 3 * static_cast<size_t>(row));
+        std::copy(dv, dv + 3, ref_d_.data() + 3 * static_cast<size_t>(row));
         std::copy(jj, jj + 3 * p_, ref_jac_.data() + 3 * static_cast<size_t>(row) * p_);
       }
     } else {
-      Vector3<double> v;
-      s_->model->evaluate_double(theta, s_->data->rows[row], s_->ctx[row], s_->dscratch, &v);
-      dv = v;
+      Vector3<double> v, o;
+      s_->model->evaluate_double(theta, s_->data->rows[row], s_->ctx[row], s_->dscratch, &v,
+                                 dim == 6 ? &o : nullptr);
+      for (int k = 0; k < 3; ++k) dv[k] = v(k);
+      if (dim == 6)
+        for (int k = 0; k < 3; ++k) dv[3 + k] = o(k);
       cols_[i] = nullptr;
     }
-    std::copy(dv.data(), dv.data() + 3, dd);
+    std::copy(dv, dv + dim, dd);
     id_[i] = key.id;
   }
   const size_t i = r2 + slot;
   used_[i] = 2;
   used_[r2 + (1 - slot)] = used_[r2 + (1 - slot)] ? 1 : 0;
-  *d = d_.data() + 3 * i;
-  if (jac) *jac = jac_.data() + 3 * i * p_;
+  *d = d_.data() + dim_ * i;
+  if (jac) *jac = jac_.data() + dim_ * i * p_;
   if (jcols) *jcols = cols_[i];
 }
 
 Eigen::VectorXd weighted_residuals(const Setup& s, const Eigen::VectorXd& theta) {
   const int n = static_cast<int>(s.data->rows.size());
-  Eigen::VectorXd e(3 * n);
+  const int dim = s.dim;
+  Eigen::VectorXd e(dim * n);
   const Evaluations::Key key = s.eval.key(theta.data());
   for (int r = 0; r < n; ++r) {
     const double* d = nullptr;
     s.eval.get(r, key, nullptr, &d, nullptr, nullptr);
-    e.segment<3>(3 * r) =
-        (s.data->rows[r].observed() - Eigen::Map<const Eigen::Vector3d>(d)) * s.row_weight(r);
+    for (int k = 0; k < dim; ++k) e(dim * r + k) = (s.observed(r, k) - d[k]) * s.weight(r, k);
   }
   return e;
 }
@@ -150,13 +163,14 @@ Eigen::VectorXd weighted_residuals(const Setup& s, const Eigen::VectorXd& theta)
 Eigen::MatrixXd weighted_jacobian(const Setup& s, const Eigen::VectorXd& theta) {
   const int n = static_cast<int>(s.data->rows.size());
   const int p = s.model->parameter_count();
-  Eigen::MatrixXd j(3 * n, p);
+  const int dim = s.dim;
+  Eigen::MatrixXd j(dim * n, p);
   const Evaluations::Key key = s.eval.key(theta.data());
   for (int r = 0; r < n; ++r) {
     const double *d = nullptr, *jac = nullptr;
     s.eval.get(r, key, &s.eval.all(), &d, &jac, nullptr);
-    j.middleRows(3 * r, 3) =
-        Eigen::Map<const Eigen::Matrix<double, 3, Eigen::Dynamic>>(jac, 3, p) * s.row_weight(r);
+    const Eigen::Map<const Eigen::MatrixXd> jr(jac, dim, p);
+    for (int k = 0; k < dim; ++k) j.row(dim * r + k) = jr.row(k) * s.weight(r, k);
   }
   return j;
 }
@@ -169,11 +183,13 @@ bool held_has_effect(const Setup& s, const Eigen::VectorXd& theta, const std::ve
   for (int r = 0; r < static_cast<int>(s.data->rows.size()); ++r) {
     const double *d = nullptr, *jac = nullptr;
     s.eval.get(r, key, &s.eval.all(), &d, &jac, nullptr);
-    const double w2 = s.row_weight(r) * s.row_weight(r);
+    const int dim = s.dim;
     for (int k = 0; k < p; ++k)
       if (held[k])
-        sq(k) += w2 * (jac[3 * k] * jac[3 * k] + jac[3 * k + 1] * jac[3 * k + 1] +
-                       jac[3 * k + 2] * jac[3 * k + 2]);
+        for (int i = 0; i < dim; ++i) {
+          const double v = jac[dim * k + i] * s.weight(r, i);
+          sq(k) += v * v;
+        }
   }
   for (int k = 0; k < p; ++k)
     if (held[k] && std::sqrt(sq(k)) * s.typical(k) > 1e-9) return true;

@@ -18,7 +18,8 @@ struct Setup;
 /// in between, and the identifiability check and the statistics want the Jacobian at the
 /// solution, where the minimizer last evaluated it. Each row keeps its last two evaluations
 /// (d and, when asked for, dd/dtheta for every parameter or for one column set), tagged with
-/// the key of their theta: the recent distinct thetas get keys (key()), so that a row stores
+/// the key of their theta (Setup::dim values and dim x P derivatives per entry): the recent
+/// distinct thetas get keys (key()), so that a row stores
 /// and compares one number instead of a copy of theta (rows then stream less memory). A model
 /// made only of linear effects (Effect::linear) predicts d affine in theta: after one Jacobian
 /// evaluation per row, d and its derivatives follow without the model.
@@ -48,6 +49,7 @@ class Evaluations {
   static constexpr int kKeys = 16;
   const Setup* s_ = nullptr;
   int p_ = 0;
+  int dim_ = 3;  ///< Setup::dim
   bool linear_ = false;
   std::vector<int> all_;
   std::vector<double> keys_;  ///< kKeys thetas, slot id % kKeys holds key id
@@ -61,12 +63,24 @@ class Evaluations {
 };
 
 /// Everything the residuals need, fixed for one call.
+/// Each row has `dim` residual components: its position or displacement (3) and, when the
+/// data hold absolute rows with orientation (dim 6), the orientation residual (3, zero with
+/// zero weight on rows without one): Log(R_measured R_predicted^T) [rad]
+/// (orientation_discrepancy, observed as zero).
 struct Setup {
   const DeflectionModel* model = nullptr;
   const Dataset* data = nullptr;
   std::vector<MeasurementContext> ctx;
-  Eigen::VectorXd row_weight;  ///< 1 / (sigma of the row) [1/m]
-  Eigen::VectorXd typical;     ///< parameter scaling: theta_k = typical_k * z_k
+  int dim = 3;                    ///< residual components per row: 3, or 6 with orientation
+  Eigen::VectorXd row_weight;     ///< 1 / (sigma of the row) [1/m]
+  Eigen::VectorXd orient_weight;  ///< 1 / (sigma of the row's orientation) [1/rad]; 0: none
+  /// Weight of component k of row r.
+  double weight(int r, int k) const { return k < 3 ? row_weight(r) : orient_weight(r); }
+  /// Observed value of component k of row r (the orientation's is zero).
+  double observed(int r, int k) const { return k < 3 ? data->rows[r].observed()(k) : 0.0; }
+  /// Residual components that carry data in row r: 3, or 6 for a row with orientation.
+  int components(int r) const { return dim == 6 && orient_weight(r) > 0 ? 6 : 3; }
+  Eigen::VectorXd typical;  ///< parameter scaling: theta_k = typical_k * z_k
   /// Scratch of the evaluations (Ceres runs single-threaded here: num_threads = 1).
   mutable EvalState<Jet> scratch;
   mutable EvalState<double> dscratch;
@@ -75,10 +89,11 @@ struct Setup {
   mutable Evaluations eval;
 };
 
-/// Derivatives of the predicted displacement of measurement `row` with respect to
-/// theta(cols[i]) * scale[i] (scale null: ones), by kJetStride parameters per pass of
-/// DeflectionModel::evaluate_jet; `theta` is the full parameter vector. Writes d (3) and the
-/// 3 x cols.size() derivatives (column-major, leading dimension 3) into `out`. With `every`
+/// Derivatives of the predicted displacement (and orientation discrepancy when s.dim is 6) of
+/// measurement `row` with respect to theta(cols[i]) * scale[i] (scale null: ones), by
+/// kJetStride parameters per pass of DeflectionModel::evaluate_jet; `theta` is the full
+/// parameter vector. Writes d (s.dim) and the s.dim x cols.size() derivatives (column-major,
+/// leading dimension s.dim) into `out`. With `every`
 /// (cols lists every parameter, no scale) of an analytic model, the passes differentiate only
 /// its jet_parameters() and the other columns come from DeflectionModel::analytic_columns.
 void displacement_and_jacobian(const Setup& s,
@@ -87,13 +102,13 @@ void displacement_and_jacobian(const Setup& s,
                                const std::vector<int>& cols,
                                const double* scale,
                                bool every,
-                               Eigen::Vector3d& d,
+                               double* d,
                                double* out);
 
-/// Weighted residuals e (3N, sigma units) at theta.
+/// Weighted residuals e (dim N, sigma units) at theta.
 Eigen::VectorXd weighted_residuals(const Setup& s, const Eigen::VectorXd& theta);
 
-/// Jacobian of the predicted, weighted displacement with respect to theta (3N x P).
+/// Jacobian of the predicted, weighted displacement with respect to theta (dim N x P).
 Eigen::MatrixXd weighted_jacobian(const Setup& s, const Eigen::VectorXd& theta);
 
 /// Whether any parameter marked in `held` moves the weighted predictions at theta (column

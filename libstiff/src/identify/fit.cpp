@@ -85,6 +85,13 @@ std::string fit_to_json(const FitResult& f) {
               {"sigma_hat_m", number_or_null(f.sigma_hat_m)},
               {"noise_floor_m", f.noise_floor_m},
               {"chi2", f.chi2}};
+  if (f.oriented_rows > 0) {
+    j["fit"]["oriented_rows"] = f.oriented_rows;
+    j["fit"]["orientation_rms_rad"] = f.orientation_rms_rad;
+    j["fit"]["orientation_mean_rad"] = f.orientation_mean_rad;
+    j["fit"]["orientation_max_rad"] = f.orientation_max_rad;
+    j["fit"]["orientation_length_m"] = f.orientation_length_m;
+  }
   json cov = json::array();
   for (int r = 0; r < f.covariance.rows(); ++r) {
     json row = json::array();
@@ -158,6 +165,11 @@ FitResult fit_from_json(const std::string& text, const std::string& file) {
       f.sigma_hat_m = s.contains("sigma_hat_m") ? number_from(s["sigma_hat_m"]) : NAN;
       f.noise_floor_m = s.value("noise_floor_m", 0.0);
       f.chi2 = s.value("chi2", 0.0);
+      f.oriented_rows = s.value("oriented_rows", 0);
+      f.orientation_rms_rad = s.value("orientation_rms_rad", 0.0);
+      f.orientation_mean_rad = s.value("orientation_mean_rad", 0.0);
+      f.orientation_max_rad = s.value("orientation_max_rad", 0.0);
+      f.orientation_length_m = s.value("orientation_length_m", 0.0);
     }
     const int p = static_cast<int>(f.parameters.size());
     f.covariance = Eigen::MatrixXd::Constant(p, p, NAN);

@@ -72,6 +72,9 @@ void check_identify_options(const IdentifyOptions& opt) {
     throw InvalidArgument("identify: rank_tolerance must be in (0, 0.1)");
   if (!(opt.max_relative_se >= 0) || !std::isfinite(opt.max_relative_se))
     throw InvalidArgument("identify: max_relative_se must be a finite value >= 0");
+  if (!(opt.orientation_length_m >= 0) || !std::isfinite(opt.orientation_length_m))
+    throw InvalidArgument(
+        "identify: orientation_length_m must be a finite length >= 0 [m] (0: estimated)");
 }
 
 FitResult identify(const RobotModel& robot,
@@ -94,6 +97,31 @@ FitResult identify(const RobotModel& robot,
                               (data.rows[r].absolute ? "sigma_p" : "sigma_d") +
                               " = 0; give every row a standard deviation > 0 "
                               "or identify without sigma weighting");
+  // Orientation residuals: absolute rows with a measured orientation (options permitting).
+  int oriented = 0;
+  for (const auto& m : data.rows) oriented += m.absolute && m.has_orientation;
+  std::string unused_orientation;
+  if (oriented > 0 && !model.predicts_orientation())
+    unused_orientation = "the data hold " + std::to_string(oriented) +
+                         " measured orientations, which this model does not use: it does not "
+                         "model the probe's frame on the flange (add tool_orientation)";
+  if (!model.predicts_orientation() || !opt.use_orientation) oriented = 0;
+  // A refit from a start fit (a new placement registered to a calibrated robot) weighs the
+  // orientations as the calibration did: its estimate comes from the full model and many rows,
+  // and the two fits then minimise the same error model.
+  const double given_length =
+      opt.orientation_length_m > 0
+          ? opt.orientation_length_m
+          : (opt.start && !opt.refit.empty() ? opt.start->orientation_length_m : 0.0);
+  const bool estimate_o = !(given_length > 0);
+  const bool weighted_o = weighted && data.has_sigma_o && estimate_o;
+  if (weighted_o && oriented > 0)
+    for (int r = 0; r < n; ++r)
+      if (data.rows[r].absolute && data.rows[r].has_orientation && !(data.rows[r].sigma_o > 0))
+        throw InvalidArgument("identify: measurement " + std::to_string(r + 1) + " (id '" +
+                              data.rows[r].id +
+                              "') has sigma_o = 0; give every row with an orientation a "
+                              "standard deviation > 0 or identify without sigma weighting");
   const bool absolute = data.absolute_rows() > 0;
   if (absolute) check_absolute_data(robot, data, model.find("registration") >= 0);
   for (int k = 0; k < p; ++k) {
@@ -139,16 +167,20 @@ FitResult identify(const RobotModel& robot,
   }
 
   FitResult f;
+  if (!unused_orientation.empty()) f.warnings.push_back(unused_orientation);
   Setup s;
   s.model = &model;
   s.data = &data;
   s.ctx = model.contexts(data);
+  s.dim = oriented > 0 ? 6 : 3;
   s.typical.resize(p);
   for (int k = 0; k < p; ++k) {
     const double t = std::abs(model.spec(k).typical);
     s.typical(k) = t > 0 && std::isfinite(t) ? t : 1.0;
   }
-  s.eval.init(&s, n, p, model.linear());
+  // The orientation residual is not affine in theta: the linear model's shortcut is for d.
+  s.eval.init(&s, n, p, model.linear() && s.dim == 3);
+  const int dim = s.dim;
 
   // ---- start: linear least squares for the joint compliances, spec start for the rest.
   Eigen::VectorXd theta = model.start_parameters();
@@ -181,10 +213,12 @@ FitResult identify(const RobotModel& robot,
   for (int k = 0; k < p; ++k)
     theta(k) = std::min(std::max(theta(k), model.spec(k).lower), model.spec(k).upper);
 
+  const Eigen::VectorXd theta_start = theta;  // (a re-weighted fit starts again from here)
+
   // ---- noise scale and row weights.
   const double stated = stated_noise_m(data);
   s.row_weight.resize(n);
-  Eigen::VectorXd raw(3 * n);
+  Eigen::VectorXd raw(3 * n);  // positions or displacements [m]: the noise scale
   const Evaluations::Key start_key = s.eval.key(theta.data());
   for (int r = 0; r < n; ++r) {
     const double* d = nullptr;
@@ -195,16 +229,31 @@ FitResult identify(const RobotModel& robot,
   { robust_sigma = robust::mad_sigma(std::vector<double>(raw.data(), raw.data() + raw.size())); }
   const double noise = stated > 0 ? stated : (robust_sigma > 0 ? robust_sigma : 1e-6);
   for (int r = 0; r < n; ++r) s.row_weight(r) = 1.0 / (weighted ? data.rows[r].sigma() : noise);
+  // Orientation: the position weight of the error an orientation error makes at
+  // orientation_length_m from the probe; estimated (below) from 1/sigma_o when stated and
+  // weighted, else from 1 m.
+  s.orient_weight = Eigen::VectorXd::Zero(n);
+  if (dim == 6)
+    for (int r = 0; r < n; ++r)
+      if (data.rows[r].absolute && data.rows[r].has_orientation)
+        s.orient_weight(r) = weighted_o ? 1.0 / data.rows[r].sigma_o
+                                        : (estimate_o ? 1.0 : given_length) * s.row_weight(r);
+  int components = 0;  // residual components that carry data
+  for (int r = 0; r < n; ++r) components += s.components(r);
   // Robust threshold on each row's residual norm, in that row's sigma units: 3 sigma for the
   // monotone losses. Tukey's biweight gets the same Gaussian efficiency as Huber's: the classical
   // constants for 95 % are 1.345 sigma (Huber) and 4.685 sigma (Tukey) (Holland & Welsch 1977),
   // so 3 * 4.685 / 1.345 = 10.4 sigma; at 3 sigma it gives clean rows weights below one half.
   const double c_sigma = opt.loss == "tukey" ? 3.0 * 4.685 / 1.345 : 3.0;
   const double scale_m = opt.loss_scale_m > 0 ? opt.loss_scale_m : c_sigma * noise;
+  // A row with orientation has 6 components: its clean norm grows by sqrt(2), and so does its
+  // threshold (the same rate of clean rows down-weighted).
   Eigen::VectorXd loss_scale(n);
   for (int r = 0; r < n; ++r)
-    loss_scale(r) = opt.loss_scale_m > 0 ? opt.loss_scale_m * s.row_weight(r)
-                                         : (weighted ? c_sigma : c_sigma * noise * s.row_weight(r));
+    loss_scale(r) =
+        (opt.loss_scale_m > 0 ? opt.loss_scale_m * s.row_weight(r)
+                              : (weighted ? c_sigma : c_sigma * noise * s.row_weight(r))) *
+        std::sqrt(s.components(r) / 3.0);
 
   // ---- identifiability, solve, re-check at the solution (offsets can make c6 visible).
   Identifiability idf;
@@ -263,11 +312,11 @@ FitResult identify(const RobotModel& robot,
       std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
       if (loss) {
         double rho[3];
-        loss->Evaluate(e.segment<3>(3 * r).squaredNorm(), rho);
+        loss->Evaluate(e.segment(dim * r, dim).squaredNorm(), rho);
         w = std::min(1.0, std::max(0.0, rho[1]));
       }
-      wsum += 3.0 * w;
-      wrss += w * w * e.segment<3>(3 * r).squaredNorm();
+      wsum += s.components(r) * w;
+      wrss += w * w * e.segment(dim * r, dim).squaredNorm();
     }
     const double dof_left = wsum - static_cast<double>(free.size());
     return dof_left > 0 ? std::sqrt(wrss / dof_left) : 1.0;
@@ -333,12 +382,12 @@ FitResult identify(const RobotModel& robot,
       std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
       if (!loss) continue;
       double rho[3];
-      loss->Evaluate(e.segment<3>(3 * r).squaredNorm(), rho);
+      loss->Evaluate(e.segment(dim * r, dim).squaredNorm(), rho);
       const double w = std::sqrt(std::min(1.0, std::max(0.0, rho[1])));
-      e.segment<3>(3 * r) *= w;
-      js.middleRows(3 * r, 3) *= w;
+      e.segment(dim * r, dim) *= w;
+      js.middleRows(dim * r, dim) *= w;
     }
-    const double m = static_cast<double>(e.size());
+    const double m = static_cast<double>(components);
     double rss = e.squaredNorm();
     Eigen::VectorXd z(p);  // distance from the null value in typical magnitudes
     for (int k = 0; k < p; ++k) z(k) = (theta(k) - model.spec(k).null_value) / s.typical(k);
@@ -405,9 +454,9 @@ FitResult identify(const RobotModel& robot,
       if (free.empty())
         throw NumericalError("identify: no parameter of model '" + model.model_string() +
                              "' is identifiable from this data (are there loads?)");
-      if (3 * n <= static_cast<int>(free.size()))
+      if (components <= static_cast<int>(free.size()))
         throw InvalidArgument("identify: " + std::to_string(n) + " measurements give " +
-                              std::to_string(3 * n) + " equations for " +
+                              std::to_string(components) + " equations for " +
                               std::to_string(free.size()) + " parameters; at least " +
                               std::to_string(free.size() / 3 + 1) + " measurements are needed");
       // Watch for a held parameter becoming identifiable while solving (not in the last pass,
@@ -461,28 +510,72 @@ FitResult identify(const RobotModel& robot,
   // A redescending loss (Tukey) has many local minima and gives zero weight beyond its scale:
   // from the least-squares start, whose residuals carry the outliers' pull, it can stop where it
   // started with every row rejected. Start it from the Huber fit (convex: one minimum).
-  if (opt.loss == "tukey") {
-    IdentifyOptions huber = opt;
-    huber.loss = "huber";
-    const Eigen::VectorXd tukey_scale = loss_scale;
-    loss_scale *= 1.345 / 4.685;
-    solving = &huber;
+  auto fit_from_start = [&]() {
+    if (opt.loss == "tukey") {
+      IdentifyOptions huber = opt;
+      huber.loss = "huber";
+      const Eigen::VectorXd tukey_scale = loss_scale;
+      loss_scale *= 1.345 / 4.685;
+      solving = &huber;
+      fit_passes();
+      solving = &opt;
+      loss_scale = tukey_scale;
+    }
     fit_passes();
-    solving = &opt;
-    loss_scale = tukey_scale;
-  }
-  fit_passes();
+  };
+  fit_from_start();
   // Without a stated noise the robust scale comes from the residuals; the start's residuals
   // are inflated by the outliers' pull, so re-estimate it from the robust fit (MAD) and refit.
   double scale_used_m = scale_m;
   if (opt.loss != "none" && opt.loss_scale_m == 0 && stated == 0) {
     for (int round = 0; round < 3; ++round) {
       const Eigen::VectorXd e = weighted_residuals(s, theta) * noise;  // metres
-      const double sigma = robust::mad_sigma(std::vector<double>(e.data(), e.data() + e.size()));
+      std::vector<double> position;  // the noise scale is the positions' (as at the start)
+      for (int r = 0; r < n; ++r)
+        for (int k = 0; k < 3; ++k) position.push_back(e(dim * r + k));
+      const double sigma = robust::mad_sigma(position);
       if (!(sigma > 0) || std::abs(c_sigma * sigma - scale_used_m) < 0.05 * scale_used_m) break;
       scale_used_m = c_sigma * sigma;
-      for (int r = 0; r < n; ++r) loss_scale(r) = scale_used_m * s.row_weight(r);
+      for (int r = 0; r < n; ++r)
+        loss_scale(r) = scale_used_m * s.row_weight(r) * std::sqrt(s.components(r) / 3.0);
       fit_passes();
+    }
+  }
+  // The orientation weight as a variance component (Helmert; Koch, Parameter Estimation and
+  // Hypothesis Testing in Linear Models, 1999, ch. 3.6): the position and the orientation
+  // residuals are two groups whose scales the data estimate. Where the model's errors, not the
+  // instrument's noise, make the residuals, a stated sigma_o or a fixed length weighs one group
+  // against the other by a ratio the residuals do not have, and the fit trades orientation for
+  // position (or the reverse) in the directions both see, e.g. the registration's rotation on
+  // a small set of poses. The orientation weights are scaled until both groups' weighted mean
+  // squares agree (to 5 %), each time fitted again from the start (so that the identifiable set
+  // is decided, as in any fit, on the linearised start with the final weights); the
+  // redundancy of each group is taken as its count (first order in parameters / residuals),
+  // rows a robust loss down-weights count that much.
+  if (dim == 6 && estimate_o) {
+    for (int round = 0; round < 4; ++round) {
+      const Eigen::VectorXd e = weighted_residuals(s, theta);
+      double sp = 0, np = 0, so = 0, no = 0;
+      for (int r = 0; r < n; ++r) {
+        double w = 1.0;
+        std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
+        if (loss) {
+          double rho[3];
+          loss->Evaluate(e.segment(dim * r, dim).squaredNorm(), rho);
+          w = std::min(1.0, std::max(0.0, rho[1]));
+        }
+        sp += w * e.segment<3>(dim * r).squaredNorm();
+        np += 3.0 * w;
+        if (s.orient_weight(r) > 0) {
+          so += w * e.segment<3>(dim * r + 3).squaredNorm();
+          no += 3.0 * w;
+        }
+      }
+      const double kappa = std::sqrt((sp / np) / (so / no));
+      if (!std::isfinite(kappa) || !(kappa > 0) || std::abs(kappa - 1.0) < 0.05) break;
+      s.orient_weight *= kappa;
+      theta = theta_start;
+      fit_from_start();
     }
   }
   for (int k = 0; k < p; ++k)
@@ -495,7 +588,7 @@ FitResult identify(const RobotModel& robot,
     std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
     if (!loss) continue;
     double rho[3];
-    loss->Evaluate(e.segment<3>(3 * r).squaredNorm(), rho);
+    loss->Evaluate(e.segment(dim * r, dim).squaredNorm(), rho);
     f.weights(r) = std::min(1.0, std::max(0.0, rho[1]));
   }
   const int nf = static_cast<int>(free.size());
@@ -505,16 +598,16 @@ FitResult identify(const RobotModel& robot,
       last_jacobian_theta.size() == theta.size() && last_jacobian_theta == theta
           ? std::move(last_jacobian)
           : weighted_jacobian(s, theta);
-  Eigen::MatrixXd jf(3 * n, nf);
+  Eigen::MatrixXd jf(dim * n, nf);
   for (int i = 0; i < nf; ++i) jf.col(i) = jall.col(free[i]);
   // Residual variance of the (robustly) weighted problem: sum w^2 |e|^2 / (sum 3 w - p), which
   // is the usual RSS / (3N - p) without a loss and bounded for down-weighted rows.
   double wsum = 0, wrss = 0;
   for (int r = 0; r < n; ++r) {
     const double w = f.weights(r);
-    jf.middleRows(3 * r, 3) *= std::sqrt(w);
-    wsum += 3.0 * w;
-    wrss += w * w * e.segment<3>(3 * r).squaredNorm();
+    jf.middleRows(dim * r, dim) *= std::sqrt(w);
+    wsum += s.components(r) * w;
+    wrss += w * w * e.segment(dim * r, dim).squaredNorm();
   }
   const double s2 = wsum > nf ? wrss / (wsum - nf) : NAN;
   Eigen::VectorXd norms = jf.colwise().norm().transpose();
@@ -580,7 +673,7 @@ FitResult identify(const RobotModel& robot,
   f.loss_scale_m = opt.loss == "none" ? 0.0 : scale_used_m;
   f.measurements = n;
   f.rank = rank;
-  f.dof = 3 * n - rank;
+  f.dof = components - rank;
   f.condition_number = rank > 0 ? sv(0) / sv(rank - 1) : INFINITY;
   f.covariance = Eigen::MatrixXd::Constant(p, p, NAN);
   for (int a = 0; a < nf; ++a)
@@ -629,8 +722,29 @@ FitResult identify(const RobotModel& robot,
                          std::to_string(iterations) + " iterations: " + last.message);
 
   f.residuals.resize(3 * n);
-  for (int r = 0; r < n; ++r) f.residuals.segment<3>(3 * r) = e.segment<3>(3 * r) / s.row_weight(r);
+  for (int r = 0; r < n; ++r)
+    f.residuals.segment<3>(3 * r) = e.segment<3>(dim * r) / s.row_weight(r);
   f.rms_m = std::sqrt(f.residuals.squaredNorm() / (3 * n));
+  if (dim == 6) {
+    f.oriented_rows = oriented;
+    f.orientation_residuals = Eigen::VectorXd::Constant(3 * n, NAN);
+    double sq = 0, sum = 0, worst = 0;
+    for (int r = 0; r < n; ++r) {
+      if (!(s.orient_weight(r) > 0)) continue;
+      const Eigen::Vector3d o = e.segment<3>(dim * r + 3) / s.orient_weight(r);
+      f.orientation_residuals.segment<3>(3 * r) = o;
+      sq += o.squaredNorm();
+      sum += o.norm();
+      worst = std::max(worst, o.norm());
+    }
+    f.orientation_rms_rad = std::sqrt(sq / (3.0 * oriented));
+    f.orientation_mean_rad = sum / oriented;
+    f.orientation_max_rad = worst;
+    std::vector<double> length;
+    for (int r = 0; r < n; ++r)
+      if (s.orient_weight(r) > 0) length.push_back(s.orient_weight(r) / s.row_weight(r));
+    f.orientation_length_m = robust::median(length);
+  }
   f.noise_floor_m = stated;
   const double resid_scale = weighted ? stated : noise;  // metres per residual unit (typical)
   f.sigma_hat_m = std::sqrt(std::max(0.0, s2)) * resid_scale;
@@ -644,7 +758,10 @@ FitResult identify(const RobotModel& robot,
   // stated noise: when the model does not reach the stated noise, most rows exceed a few of its
   // sigmas, and that is a missing effect or an understated noise, not outliers.
   const bool stated_unit = weighted || stated > 0;
-  const double bulk = robust::mad_sigma(std::vector<double>(e.data(), e.data() + e.size()));
+  std::vector<double> carried;  // the components that carry data (not a missing orientation)
+  for (int r = 0; r < n; ++r)
+    for (int k = 0; k < s.components(r); ++k) carried.push_back(e(dim * r + k));
+  const double bulk = robust::mad_sigma(carried);
   const double unit_scale = stated_unit ? std::max(1.0, bulk) : (bulk > 0 ? bulk : 1.0);
   if (stated_unit && 3 * n >= 30 && bulk > 2.0)
     f.warnings.push_back(
@@ -658,7 +775,10 @@ FitResult identify(const RobotModel& robot,
     o.residual_m = f.residuals.segment<3>(3 * r).norm();
     o.weight = f.weights(r);
     const bool robust_unit = opt.loss == "none" && !(stated_unit && unit_scale == 1.0);
-    const double norm_sigma = e.segment<3>(3 * r).norm() / (opt.loss == "none" ? unit_scale : 1.0);
+    const double norm_sigma =
+        e.segment(dim * r, dim).norm() / (opt.loss == "none" ? unit_scale : 1.0);
+    // A row with orientation has 6 components: its clean norm is sqrt(2) larger.
+    const double limit = 5.0 * std::sqrt(s.components(r) / 3.0);
     const std::string unit = robust_unit || !stated_unit ? " robust sigma" : " sigma";
     if (opt.loss != "none") {
       if (o.weight >= opt.outlier_weight) continue;
@@ -666,9 +786,10 @@ FitResult identify(const RobotModel& robot,
                  ": residual " + num(o.residual_m * 1e6) + " um = " + num(norm_sigma) + unit +
                  " (clean rows stay below ~3.4)";
     } else {
-      if (norm_sigma <= 5.0) continue;
+      if (norm_sigma <= limit) continue;
       o.reason = "residual " + num(o.residual_m * 1e6) + " um = " + num(norm_sigma) + unit +
-                 " (> 5); least squares does not down-weight it: use a robust loss";
+                 " (> " + num(limit, 2) +
+                 "); least squares does not down-weight it: use a robust loss";
     }
     f.outliers.push_back(o);
   }

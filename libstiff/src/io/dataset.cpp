@@ -674,10 +674,18 @@ void validate_dataset(const Dataset& data, int dof, bool need_displacement) {
     if (m.q.size() != dof)
       throw InvalidArgument(where + ": " + std::to_string(m.q.size()) + " joint values for a " +
                             std::to_string(dof) + "-joint robot");
+    if (!m.orientation.allFinite())
+      throw InvalidArgument(where + ": the orientation (a, b, c) is not finite");
+    // A rotation: orthonormal and right-handed (a matrix set in code, not read from Euler
+    // angles, may be neither).
+    if (m.has_orientation &&
+        ((m.orientation.transpose() * m.orientation - Eigen::Matrix3d::Identity()).norm() > 1e-6 ||
+         m.orientation.determinant() < 0))
+      throw InvalidArgument(where + ": the orientation is not a rotation matrix");
     if (!m.q.allFinite() || !m.force.allFinite() || !m.moment.allFinite() ||
         !m.displacement.allFinite() || !m.rotation.allFinite() || !std::isfinite(m.sigma_d) ||
-        !std::isfinite(m.time) || !m.position.allFinite() || !m.orientation.allFinite() ||
-        !std::isfinite(m.temperature) || !std::isfinite(m.sigma_p) || !std::isfinite(m.sigma_o))
+        !std::isfinite(m.time) || !m.position.allFinite() || !std::isfinite(m.temperature) ||
+        !std::isfinite(m.sigma_p) || !std::isfinite(m.sigma_o))
       throw InvalidArgument(where + ": a value is not finite");
     if (m.sigma_d < 0) throw InvalidArgument(where + ": sigma_d must be >= 0");
     if (m.sigma_p < 0 || m.sigma_o < 0)

@@ -10,6 +10,7 @@
 #include "kinematics/fast_chain.hpp"
 #include "stiff/error.hpp"
 #include "stiff/kinematics/joint_torque.hpp"
+#include "stiff/model/effects/common.hpp"
 
 namespace stiff {
 
@@ -193,23 +194,30 @@ void DeflectionModel::evaluate(const T* theta,
                                const Measurement& m,
                                const MeasurementContext& c,
                                Vector3<T>* d,
-                               Vector3<T>* rot) const {
+                               Vector3<T>* rot,
+                               Vector3<T>* o) const {
   EvalState<T> s;
-  evaluate_into(theta, m, c, s);
+  const bool orient = o && m.absolute && m.has_orientation;
+  evaluate_into(theta, m, c, s, true, orient);
   *d = s.d;
   if (rot) *rot = s.rot;
+  if (o) *o = orient ? orientation_discrepancy(s.orientation, m.orientation) : Vector3<T>::Zero();
 }
 
 void DeflectionModel::evaluate_double(const double* theta,
                                       const Measurement& m,
                                       const MeasurementContext& c,
                                       EvalState<double>& s,
-                                      Vector3<double>* d) const {
+                                      Vector3<double>* d,
+                                      Vector3<double>* o) const {
   constexpr int kMax = 32;
   const int n = robot_.dof();
+  if (o) o->setZero();
   if (n > kMax || jet_jacobians_ || m.absolute) {
-    evaluate_into(theta, m, c, s);
+    const bool orient = o && m.absolute && m.has_orientation;
+    evaluate_into(theta, m, c, s, true, orient);
     *d = s.d;
+    if (orient) *o = orientation_discrepancy(s.orientation, m.orientation);
     return;
   }
   // evaluate_into without the 6 x n Jacobians that no effect of this model reads.
@@ -300,15 +308,19 @@ void corrected_flange(const RobotModel& robot,
   }
 }
 
+/// The corrected chain's position of the flange point r and, with `flange`, its flange
+/// rotation (base frame).
 template <typename T>
 Vector3<T> corrected_point(const RobotModel& robot,
                            const Eigen::VectorXd& q,
                            const VectorX<T>& dq,
                            const Matrix6X<T>& joint_error,
-                           const Vector3<T>& r) {
+                           const Vector3<T>& r,
+                           Matrix3<T>* flange = nullptr) {
   Matrix3<T> rot;
   Vector3<T> pos;
   corrected_flange(robot, q, dq, joint_error, rot, pos);
+  if (flange) *flange = rot;
   return rot * r + pos;
 }
 
@@ -323,14 +335,17 @@ Vector3<T> corrected_point(const RobotModel& robot,
 ///  - w_j turns it about R_E J_r(w) dw through p_E (R(w + dw) = R(w) Exp(J_r(w) dw), J_r the
 ///    right Jacobian of SO(3)): dP = (R_E J_r dw) x (P - p_E);
 ///  - r moves P by R_T dr (R_T the final rotation).
+/// The same turns, summed as a rotation vector phi (base frame), turn the flange rotation:
+/// R_T(theta + dtheta) = Exp(phi) R_T, so its derivatives are [phi]x R_T.
 Vector3<Jet> corrected_point(const RobotModel& robot,
                              const Eigen::VectorXd& q,
                              const VectorX<Jet>& dq,
                              const Matrix6X<Jet>& joint_error,
-                             const Vector3<Jet>& r) {
+                             const Vector3<Jet>& r,
+                             Matrix3<Jet>* flange = nullptr) {
   const int n = robot.dof();
   constexpr int kMax = 32;
-  if (n > kMax) return corrected_point<Jet>(robot, q, dq, joint_error, r);
+  if (n > kMax) return corrected_point<Jet>(robot, q, dq, joint_error, r, flange);
   Eigen::Matrix3d rb[kMax], re[kMax], jr[kMax];
   Eigen::Vector3d pb[kMax], pe[kMax], ze[kMax];
   Eigen::Matrix3d rot = Eigen::Matrix3d::Identity();
@@ -384,7 +399,31 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
   for (int i = 0; i < 3; ++i) add(rot.col(i), r(i).v);
   Vector3<Jet> out;
   for (int k = 0; k < 3; ++k) out(k) = Jet(p(k), v[k]);
+  if (flange) {
+    Vec phi[3] = {Vec::Zero(), Vec::Zero(), Vec::Zero()};
+    for (int j = 0; j < n; ++j) {
+      const Eigen::Matrix3d turn = re[j] * jr[j];
+      for (int k = 0; k < 3; ++k) {
+        phi[k] += ze[j](k) * dq(j).v;
+        for (int i = 0; i < 3; ++i) phi[k] += turn(k, i) * joint_error(3 + i, j).v;
+      }
+    }
+    for (int u = 0; u < 3; ++u) {
+      const int u1 = (u + 1) % 3, u2 = (u + 2) % 3;
+      for (int c = 0; c < 3; ++c)
+        (*flange)(u, c) = Jet(rot(u, c), phi[u1] * rot(u2, c) - phi[u2] * rot(u1, c));
+    }
+  }
   return out;
+}
+
+/// The predicted probe rotation (base frame) of an absolute row: the corrected chain's flange
+/// rotation times the probe's rotation on the flange, turned by the deflection's small
+/// rotation (exact rotation of its rotation vector).
+template <typename T>
+void probe_orientation(EvalState<T>& s, const Matrix3<T>& flange, bool deflected) {
+  s.orientation = flange * s.probe;
+  if (deflected) s.orientation = (effects::rotation_matrix(s.rot.data()) * s.orientation).eval();
 }
 
 }  // namespace
@@ -394,8 +433,14 @@ void DeflectionModel::evaluate_into(const T* theta,
                                     const Measurement& m,
                                     const MeasurementContext& c,
                                     EvalState<T>& s,
-                                    bool instrument) const {
+                                    bool instrument,
+                                    bool orient) const {
   const int n = robot_.dof();
+  s.oriented = orient && m.absolute;
+  if (m.absolute) {
+    s.probe.setIdentity();
+    s.orientation.setIdentity();
+  }
   s.robot = &robot_;
   s.measurement = &m;
   s.context = &c;
@@ -420,7 +465,10 @@ void DeflectionModel::evaluate_into(const T* theta,
       s.dq = VectorX<T>::Zero(n);
       s.joint_error = Matrix6X<T>::Zero(6, n);
       for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
-      s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas);
+      Matrix3<T> fr;
+      s.d +=
+          corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, s.oriented ? &fr : nullptr);
+      if (s.oriented) probe_orientation(s, fr, false);
       if (instrument)
         for (size_t e = 0; e < effects_.size(); ++e)
           effects_[e]->measurement(theta + offsets_[e], s);
@@ -456,7 +504,9 @@ void DeflectionModel::evaluate_into(const T* theta,
     s.dq = VectorX<T>::Zero(n);
     s.joint_error = Matrix6X<T>::Zero(6, n);
     for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
-    s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas);
+    Matrix3<T> fr;
+    s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, s.oriented ? &fr : nullptr);
+    if (s.oriented) probe_orientation(s, fr, true);
   }
   if (instrument)
     for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
@@ -466,15 +516,21 @@ template void DeflectionModel::evaluate<double>(const double*,
                                                 const Measurement&,
                                                 const MeasurementContext&,
                                                 Vector3<double>*,
+                                                Vector3<double>*,
                                                 Vector3<double>*) const;
-template void DeflectionModel::evaluate<Jet>(
-    const Jet*, const Measurement&, const MeasurementContext&, Vector3<Jet>*, Vector3<Jet>*) const;
+template void DeflectionModel::evaluate<Jet>(const Jet*,
+                                             const Measurement&,
+                                             const MeasurementContext&,
+                                             Vector3<Jet>*,
+                                             Vector3<Jet>*,
+                                             Vector3<Jet>*) const;
 
 void DeflectionModel::evaluate_jet(const Jet* theta,
                                    const Measurement& m,
                                    const MeasurementContext& c,
                                    EvalState<Jet>& s,
-                                   Vector3<Jet>* d) const {
+                                   Vector3<Jet>* d,
+                                   Vector3<Jet>* o) const {
   constexpr int S = kJetStride;
   constexpr int kMax = 32;  // joints held in fixed-capacity buffers (no allocation)
   using Vec = Eigen::Matrix<double, S, 1>;
@@ -482,10 +538,18 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
   // An absolute row of a purely geometric model takes evaluate_into's short cut (no deflection
   // at all); with a deflection effect it runs here: the deflection as for a displacement row,
   // under the gravity torque too, then the corrected chain by the chain rule.
+  const bool orient = o && m.absolute && m.has_orientation;
   if (n > kMax || (m.absolute && !deflects_)) {
-    evaluate_into(theta, m, c, s);
+    evaluate_into(theta, m, c, s, true, orient);
     *d = s.d;
+    if (o)
+      *o = orient ? orientation_discrepancy(s.orientation, m.orientation) : Vector3<Jet>::Zero();
     return;
+  }
+  s.oriented = orient;
+  if (m.absolute) {
+    s.probe.setIdentity();
+    s.orientation.setIdentity();
   }
   const bool gravity = m.absolute && c.tau_gravity.size() == n;
   s.robot = &robot_;
@@ -620,10 +684,13 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
     s.dq = VectorX<Jet>::Zero(n);
     s.joint_error = Matrix6X<Jet>::Zero(6, n);
     for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
-    s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas);
+    Matrix3<Jet> fr;
+    s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, orient ? &fr : nullptr);
+    if (orient) probe_orientation(s, fr, true);
   }
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
   *d = s.d;
+  if (o) *o = orient ? orientation_discrepancy(s.orientation, m.orientation) : Vector3<Jet>::Zero();
 }
 
 void DeflectionModel::analytic_columns(const EvalState<Jet>& js,
@@ -656,11 +723,22 @@ Eigen::Matrix<double, 6, 1> DeflectionModel::predict(const Eigen::VectorXd& thet
   if (theta.size() != count_)
     throw InvalidArgument("predict: " + std::to_string(theta.size()) +
                           " parameters for a model with " + std::to_string(count_));
-  Vector3<double> d, rot;
-  evaluate<double>(theta.data(), m, c, &d, &rot);
+  EvalState<double> s;
+  evaluate_into(theta.data(), m, c, s, true, m.absolute);
   Eigen::Matrix<double, 6, 1> out;
-  out << d, rot;
+  out << s.d, s.rot;
+  if (m.absolute) {
+    // The probe's orientation in the instrument frame as a rotation vector.
+    const Eigen::AngleAxisd aa(s.orientation);
+    out.tail<3>() = aa.angle() * aa.axis();
+  }
   return out;
+}
+
+bool DeflectionModel::predicts_orientation() const {
+  for (const auto& e : effects_)
+    if (e->requirements() & unsigned{kNeedsOrientation}) return true;
+  return false;
 }
 
 bool DeflectionModel::absolute_accuracy() const {

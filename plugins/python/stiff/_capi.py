@@ -83,6 +83,7 @@ class IdentifyOptions(C.Structure):
         ("max_relative_se", C.c_double),
         ("start", C.c_void_p),
         ("refit", C.c_char_p),
+        ("orientation_length_m", C.c_double),
     ]
 
 
@@ -99,6 +100,11 @@ class FitStatistics(C.Structure):
         ("condition_number", C.c_double),
         ("outliers", C.c_uint32),
         ("warnings", C.c_uint32),
+        ("oriented_rows", C.c_uint32),
+        ("orientation_rms_rad", C.c_double),
+        ("orientation_mean_rad", C.c_double),
+        ("orientation_max_rad", C.c_double),
+        ("orientation_length_m", C.c_double),
     ]
 
 
@@ -190,6 +196,8 @@ _proto("stiff_model_create", S, HP, H, H)
 _proto("stiff_model_destroy", None, H)
 _proto("stiff_predict", S, c_double_p, H, c_double_p, C.c_size_t, c_double_p)
 _proto("stiff_predict_dataset", S, c_double_p, C.c_size_t, c_size_p, H, H)
+_proto("stiff_predict_dataset_orientation", S, c_double_p, C.c_size_t, c_size_p, H, H)
+_proto("stiff_result_orientation_residuals", S, c_double_p, C.c_size_t, c_size_p, H)
 _proto("stiff_predict_batch", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, c_double_p,
        C.c_size_t, C.c_size_t)
 _proto("stiff_effect_count", C.c_size_t)

@@ -320,6 +320,12 @@ class Dataset(_Handle):
         return self._get(8, 3)
 
     @property
+    def orientation(self) -> Optional[np.ndarray]:
+        """N x 3 measured probe orientations as rotation vectors [rad], instrument frame (NaN on
+        rows without one), or None when the file has no a, b, c columns."""
+        return self._get(11, 3)
+
+    @property
     def temperature(self) -> Optional[np.ndarray]:
         """N temperatures [deg C], or None without a temp column."""
         return self._get(10, 1)
@@ -375,6 +381,11 @@ class FitStatistics:
     condition_number: float
     outliers: int
     warnings: int
+    oriented_rows: int = 0  # absolute rows whose measured orientation the fit used
+    orientation_rms_rad: float = 0.0
+    orientation_mean_rad: float = 0.0
+    orientation_max_rad: float = 0.0
+    orientation_length_m: float = 0.0  # 1 rad of orientation error weighed as this many m
 
 
 class Fit(_Handle):
@@ -483,6 +494,14 @@ class Fit(_Handle):
         return _c.get_doubles(lib.stiff_result_residuals, self).reshape(-1, 3)
 
     @property
+    def orientation_residuals(self) -> Optional[np.ndarray]:
+        """N x 3 orientation residuals Log(R_measured R_predicted^T) [rad] (NaN on rows without
+        a measured orientation), or None when the fit used no orientation."""
+        if not self.statistics.oriented_rows:
+            return None
+        return _c.get_doubles(lib.stiff_result_orientation_residuals, self).reshape(-1, 3)
+
+    @property
     def statistics(self) -> FitStatistics:
         s = _c.FitStatistics()
         s.struct_size = C.sizeof(s)
@@ -555,6 +574,12 @@ class Model(_Handle):
         registration of its session, which the fit must have identified)."""
         return _c.get_doubles(lib.stiff_predict_dataset, self, data).reshape(-1, 3)
 
+    def predict_orientation(self, data: "Dataset") -> np.ndarray:
+        """The probe orientation the model predicts for every absolute row of `data`, N x 3
+        rotation vectors [rad] in the instrument frame (the flange's, turned by
+        tool_orientation, the deflection and the registration); NaN on displacement rows."""
+        return _c.get_doubles(lib.stiff_predict_dataset_orientation, self, data).reshape(-1, 3)
+
 
 METHODS = {"auto": 0, "linear": 1, "ceres": 2}  # stiff_method
 
@@ -565,14 +590,17 @@ def identify_defaults() -> dict:
     o = _c.defaults(_c.IdentifyOptions)
     return {"model": _c.text(o.model), "loss": _c.text(o.loss), "loss_scale_m": o.loss_scale_m,
             "method": next(k for k, v in METHODS.items() if v == o.method),
-            "max_iterations": o.max_iterations, "max_relative_se": o.max_relative_se}
+            "max_iterations": o.max_iterations, "max_relative_se": o.max_relative_se,
+            "orientation_length_m": o.orientation_length_m or None}
 
 
 def identify(robot: Robot, data: Dataset, model: Optional[str] = None,
              loss: Optional[str] = None, loss_scale_m: Optional[float] = None,
              method: Optional[str] = None, max_iterations: Optional[int] = None,
              max_relative_se: Optional[float] = None, start: Optional["Fit"] = None,
-             refit: Optional[str] = None) -> Fit:
+             refit: Optional[str] = None,
+             orientation_length_m: Optional[float] = None,
+             use_orientation: bool = True) -> Fit:
     """Identify the model (effects joined by '+') from measured displacements and/or absolute
     positions (e.g. model='registration+tool+joint_offset+kinematic' on absolute data).
     An argument left at None takes the library's default (identify_defaults()); the library
@@ -582,7 +610,10 @@ def identify(robot: Robot, data: Dataset, model: Optional[str] = None,
     only the structural rank test. `start`: a previous fit of the robot whose parameters start
     this one; with `refit` (effects joined by '+', e.g. 'registration'), only those effects are
     fitted and every other parameter is kept from `start` (a new placement of the instrument
-    registered to a calibrated robot)."""
+    registered to a calibrated robot). Absolute rows with a measured orientation add the
+    orientation residual when the model has the probe's frame (tool_orientation);
+    `orientation_length_m` > 0 weighs it as the position error it makes this far from the probe
+    (None: estimated from the residuals); `use_orientation=False` fits the positions alone."""
     o = _c.defaults(_c.IdentifyOptions)
     for name, v in (("model", model), ("loss", loss), ("refit", refit)):
         if v is not None and not isinstance(v, str):  # ctypes would take bytes or a pointer
@@ -616,6 +647,14 @@ def identify(robot: Robot, data: Dataset, model: Optional[str] = None,
         o.start = start._as_parameter_
     if refit:
         o.refit = _c.encode(refit)
+    if orientation_length_m is not None:
+        # The C field reads 0 as "estimated" and a negative value as "positions only".
+        if not (math.isfinite(orientation_length_m) and orientation_length_m > 0):
+            raise InvalidArgumentError("identify: orientation_length_m must be a finite length "
+                                       f"> 0 [m] (got {orientation_length_m})", -1)
+        o.orientation_length_m = orientation_length_m
+    if not use_orientation:
+        o.orientation_length_m = -1.0
     h = C.c_void_p()
     check(lib.stiff_identify(C.byref(h), robot, data, C.byref(o)))
     return Fit(h)

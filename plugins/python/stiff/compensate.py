@@ -90,6 +90,26 @@ def rotation_angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.arctan2(s, c)
 
 
+def rotation_from_vector(w: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) rotation matrices of (N, 3) rotation vectors [rad] (Rodrigues)."""
+    w = np.asarray(w, dtype=float).reshape(-1, 3)
+    t = np.linalg.norm(w, axis=1)
+    k = np.zeros((len(w), 3, 3))
+    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    k -= np.transpose(k, (0, 2, 1))
+    small = t < 1e-8
+    s = np.where(small, 1.0 - t ** 2 / 6, np.sin(t) / np.where(small, 1.0, t))
+    c = np.where(small, 0.5 - t ** 2 / 24, (1 - np.cos(t)) / np.where(small, 1.0, t) ** 2)
+    return np.eye(3) + s[:, None, None] * k + c[:, None, None] * (k @ k)
+
+
+def rotation_vector_angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N,) angle [rad] of the rotation between orientations given as rotation vectors."""
+    pa, pb = np.tile(np.eye(4), (len(a), 1, 1)), np.tile(np.eye(4), (len(b), 1, 1))
+    pa[:, :3, :3], pb[:, :3, :3] = rotation_from_vector(a), rotation_from_vector(b)
+    return rotation_angle_between(pa, pb)
+
+
 def xyz_rpy_from_pose(poses: np.ndarray) -> np.ndarray:
     """(N, 6) (x, y, z [m], rx, ry, rz [rad]) of (N, 4, 4) poses (inverse of pose_from_xyz_rpy)."""
     p = np.asarray(poses, dtype=float).reshape(-1, 4, 4)

@@ -201,3 +201,52 @@ def _save(fit, tmp_path):
     path = tmp_path / "fit.json"
     fit.write(path)
     return path
+
+
+def test_ur10_six_dimensional_calibration_on_half_of_c(root, tmp_path):
+    """UR10 (b) with the T-Mac's orientations: geometry, gravity compliance and the probe's frame
+    (tool_orientation) calibrated on a random half of series C (the reference's split),
+    validated on the other half. The reference (orientation residuals weighed 1 mm per mrad)
+    reaches 0.443 mm and 0.0508 deg there; the accepted figures are 0.448 mm and 0.053 deg. The
+    fit reports the orientation apart from the positions, and the same model without the probe's
+    frame says that it leaves the orientations unused."""
+    pytest.importorskip("scipy")
+    from scipy.spatial.transform import Rotation
+    sys.path.insert(0, str(root / "bench" / "peers"))
+    import absolute_ref as ref
+    C = root / "examples/real/ur10" / ref.UR10_SERIES["C"]
+    lines = C.read_text().splitlines()
+    head = [i for i, ln in enumerate(lines) if ln and not ln.startswith("#")][0]
+    body = lines[head + 1:]
+    perm = np.random.default_rng(0).permutation(len(body))
+    half = len(body) // 2
+    tr, te = tmp_path / "tr.csv", tmp_path / "te.csv"
+    tr.write_text("\n".join(lines[:head + 1] + [body[i] for i in sorted(perm[:half])]) + "\n")
+    te.write_text("\n".join(lines[:head + 1] + [body[i] for i in sorted(perm[half:])]) + "\n")
+    model = "registration+tool+tool_orientation+joint_offset+kinematic+gravity_lumped"
+    cli = [sys.executable, "-m", "stiff.cli"]
+    fit, pred = tmp_path / "fit.json", tmp_path / "pred.csv"
+    for cmd in (["identify", "--robot", "ur10", "--data", tr, "--model", model, "-o", fit],
+                ["predict", "--robot", "ur10", "--fit", fit, "--data", te, "-o", pred]):
+        p = subprocess.run(cli + [str(c) for c in cmd], capture_output=True, text=True)
+        assert p.returncode == 0, p.stderr
+    assert "orientation error" in p.stdout, p.stdout
+    stats = json.loads(fit.read_text())["fit"]
+    assert stats["oriented_rows"] == half
+    assert 0 < stats["orientation_rms_rad"] < 1e-3  # tenths of a milliradian, not degrees
+    d = ref.read_absolute(te)
+    with open(pred) as f:
+        rows = {x["id"]: x for x in csv.DictReader(f)}
+    P = np.array([[float(rows[i][k]) for k in ("x_m", "y_m", "z_m")] for i in d["ids"]])
+    W = np.array([[float(rows[i][k]) for k in ("rx_rad", "ry_rad", "rz_rad")] for i in d["ids"]])
+    e = np.linalg.norm(P - d["p"], axis=1) * 1e3
+    a = np.degrees(np.linalg.norm(
+        ref.rotation_error(d["R"], Rotation.from_rotvec(W).as_matrix()), axis=1))
+    assert e.mean() <= 0.448, e.mean()
+    assert a.mean() <= 0.053, a.mean()
+    # Without the probe's frame the orientations are not used, and the fit says so.
+    p = subprocess.run(cli + ["identify", "--robot", "ur10", "--data", str(tr), "--model",
+                              model.replace("+tool_orientation", "")],
+                       capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    assert "measured orientations, which this model does not use" in p.stdout + p.stderr

@@ -595,5 +595,227 @@ TEST(AbsoluteEffects, CalibratedRobotCarriesTheFittedGeometry) {
   EXPECT_THROW(calibrated_robot(robot, other), InvalidArgument);
 }
 
+// ---- 6-D data: the probe's orientation.
+
+/// A 6-D probe on the flange turned by `probe` (rotation vector, flange frame): the rows of
+/// `data` get the orientation the instrument measures, R_s R_06(true chain) R(probe), turned by
+/// a random small rotation of sigma_o [rad] per axis.
+void add_orientation(const RobotModel& nominal,
+                     const Geometry& g,
+                     const Eigen::Vector3d& probe,
+                     double sigma_o,
+                     std::mt19937_64& rng,
+                     Dataset* data) {
+  const RobotModel truth = perturbed(nominal, g);
+  const Eigen::Matrix3d rp = Eigen::AngleAxisd(probe.norm(), probe.normalized()).matrix();
+  std::normal_distribution<double> z(0.0, 1.0);
+  data->has_orientation = true;
+  for (auto& m : data->rows) {
+    const int s = std::stoi(m.session.substr(1));
+    const Eigen::Vector3d n(sigma_o * z(rng), sigma_o * z(rng), sigma_o * z(rng));
+    const Eigen::Matrix3d noise = n.norm() > 0
+                                      ? Eigen::AngleAxisd(n.norm(), n.normalized()).matrix()
+                                      : Eigen::Matrix3d::Identity();
+    m.has_orientation = true;
+    m.orientation = noise * g.rot[s] * truth.tool_pose(m.q + g.dq).topLeftCorner<3, 3>() * rp;
+  }
+}
+
+const std::vector<std::string> kFullTool = {"registration", "tool", "tool_orientation",
+                                            "joint_offset", "kinematic"};
+
+// The orientation residual's derivatives (automatic, through the chain rule of the fast path
+// and through the generic Jet chain) against central differences of the double evaluation, on
+// a geometric model with the probe's rotation and on one that deflects under the robot's weight.
+TEST(OrientationResidual, DerivativesMatchCentralDifferences) {
+  const RobotModel robot = ur5();
+  std::mt19937_64 rng(31);
+  const Geometry g = random_geometry(robot.dof(), 2, rng);
+  Dataset data = measure(robot, g, 4, 0.0, rng);
+  add_orientation(robot, g, Eigen::Vector3d(0.4, -1.2, 0.7), 0.0, rng, &data);
+  for (const bool deflects : {false, true}) {
+    std::vector<std::string> effects = kFullTool;
+    if (deflects) {
+      effects.push_back("gravity_lumped");
+      effects.push_back("joint");
+    }
+    const DeflectionModel m(robot, effects, &data);
+    const int p = m.parameter_count();
+    Eigen::VectorXd theta = geometric_theta(m, g);
+    // Away from the truth, so that the discrepancy is not zero (where Log is least smooth).
+    theta.segment<3>(m.offset(m.find("tool_orientation"))) = Eigen::Vector3d(0.41, -1.18, 0.72);
+    if (deflects)
+      for (int k = m.offset(m.find("gravity_lumped")); k < p; ++k)
+        theta(k) = 0.7 * m.spec(k).typical;
+    const auto ctx = m.contexts(data);
+    EvalState<Jet> scratch;
+    for (size_t r = 0; r < data.size(); ++r)
+      for (int first = 0; first < p; first += kJetStride) {
+        std::vector<Jet> t(p);
+        for (int k = 0; k < p; ++k) t[k] = Jet(theta(k));
+        const int last = std::min(p, first + kJetStride);
+        for (int k = first; k < last; ++k) t[k].v(k - first) = 1.0;
+        Vector3<Jet> d, slow, fast;
+        m.evaluate<Jet>(t.data(), data.rows[r], ctx[r], &d, nullptr, &slow);
+        m.evaluate_jet(t.data(), data.rows[r], ctx[r], scratch, &d, &fast);
+        for (int k = first; k < last; ++k) {
+          const double h = 1e-6 * std::max(std::abs(theta(k)), m.spec(k).typical);
+          Eigen::VectorXd tp = theta, tm = theta;
+          tp(k) += h;
+          tm(k) -= h;
+          Vector3<double> dd, op, om;
+          m.evaluate<double>(tp.data(), data.rows[r], ctx[r], &dd, nullptr, &op);
+          m.evaluate<double>(tm.data(), data.rows[r], ctx[r], &dd, nullptr, &om);
+          const Eigen::Vector3d fd = (op - om) / (2 * h);
+          Eigen::Vector3d ad_slow, ad_fast;
+          for (int i = 0; i < 3; ++i) {
+            ad_slow(i) = slow(i).v(k - first);
+            ad_fast(i) = fast(i).v(k - first);
+          }
+          // Rotation vectors of ~0.05 rad: rounding 1e-16 / h; truncation (h / scale)^2.
+          const double tol = 1e-6 * fd.norm() + 1e-15 / h;
+          EXPECT_LT((ad_slow - fd).norm(), tol)
+              << m.owner(k).name() << "." << m.spec(k).name << " row " << r << " deflects "
+              << deflects << ": ad " << ad_slow.transpose() << " fd " << fd.transpose();
+          EXPECT_LT((ad_fast - ad_slow).norm(), 1e-12 * (1.0 + ad_slow.norm()))
+              << m.owner(k).name() << "." << m.spec(k).name << " row " << r;
+        }
+      }
+  }
+}
+
+// With the model's truth the predicted probe orientation is the measured one, and predict()
+// gives it in the instrument frame.
+TEST(OrientationResidual, ModelEqualsTheIndependentlyPerturbedRobot) {
+  const RobotModel robot = ur5();
+  std::mt19937_64 rng(32);
+  const Geometry g = random_geometry(robot.dof(), 2, rng);
+  Dataset data = measure(robot, g, 10, 0.0, rng);
+  const Eigen::Vector3d probe(0.1, 1.5, -0.3);
+  add_orientation(robot, g, probe, 0.0, rng, &data);
+  const DeflectionModel m(robot, kFullTool, &data);
+  Eigen::VectorXd theta = geometric_theta(m, g);
+  theta.segment<3>(m.offset(m.find("tool_orientation"))) = probe;
+  const auto ctx = m.contexts(data);
+  for (size_t r = 0; r < data.size(); ++r) {
+    Vector3<double> d, o;
+    m.evaluate<double>(theta.data(), data.rows[r], ctx[r], &d, nullptr, &o);
+    EXPECT_LT(o.norm(), 1e-12) << "row " << r;
+    const Eigen::Vector3d w = m.predict(theta, data.rows[r], ctx[r]).tail<3>();
+    const Eigen::Matrix3d rp = Eigen::AngleAxisd(w.norm(), w.normalized()).matrix();
+    EXPECT_LT((rp - data.rows[r].orientation).norm(), 1e-12) << "row " << r;
+  }
+}
+
+// Recovery from 6-D data: registration (with its rotation), the probe's rotation on the flange
+// and the kinematic errors within 3 standard errors; the fit's orientation residual at the
+// noise level. The same poses without orientation hold the probe's rotation and name it.
+TEST(OrientationResidual, SixDimensionalDataIdentifyTheToolFrame) {
+  const RobotModel robot = ur5();
+  const double sigma = 20e-6, sigma_o = 20e-6;  // 20 um, 20 urad (the default 1 m per rad)
+  const Eigen::Vector3d probe(0.2, -0.9, 1.4);
+  int inside = 0, total = 0;
+  for (int seed = 1; seed <= 3; ++seed) {
+    std::mt19937_64 rng(300 + seed);
+    Geometry g = random_geometry(robot.dof(), 2, rng);
+    const std::mt19937_64 start = rng;
+    Dataset data;
+    FitResult f;
+    for (int round = 0; round < 4; ++round) {
+      rng = start;
+      data = measure(robot, g, 60, sigma, rng);
+      add_orientation(robot, g, probe, sigma_o, rng, &data);
+      f = identify(robot, data, kFullTool);
+      const Geometry before = g;
+      zero_held(
+          DeflectionModel(robot, kGeometric, &data),
+          [&] {
+            FitResult geometric = f;  // the parameters of kGeometric, in its order
+            geometric.parameters.erase(
+                std::remove_if(
+                    geometric.parameters.begin(), geometric.parameters.end(),
+                    [](const FitParameter& q) { return q.effect == "tool_orientation"; }),
+                geometric.parameters.end());
+            return geometric;
+          }(),
+          &g);
+      if (before.dq == g.dq && before.axis == g.axis) break;
+    }
+    ASSERT_EQ(f.oriented_rows, static_cast<int>(data.size()));
+    const DeflectionModel m(robot, kFullTool, &data);
+    Eigen::VectorXd truth = geometric_theta(m, g);
+    truth.segment<3>(m.offset(m.find("tool_orientation"))) = probe;
+    for (int k = 0; k < m.parameter_count(); ++k) {
+      const std::string& e = m.owner(k).name();
+      if (e == "tool_orientation" || e == "registration" || e == "tool") {
+        EXPECT_TRUE(f.parameters[k].identified) << e << "." << m.spec(k).name;
+      }
+      if (!f.parameters[k].identified) continue;
+      ++total;
+      const double z = std::abs(f.parameters[k].value - truth(k)) / f.parameters[k].standard_error;
+      if (z <= 3.0) ++inside;
+    }
+    // Both residuals at their noise (3 components each): RMS within 30 %.
+    EXPECT_LT(f.rms_m, 1.3 * sigma) << "seed " << seed;
+    EXPECT_LT(f.orientation_rms_rad, 1.3 * sigma_o) << "seed " << seed;
+    EXPECT_GT(f.orientation_rms_rad, 0.7 * sigma_o) << "seed " << seed;
+    // Without the orientations the probe's rotation is invisible: held and named.
+    Dataset positions = data;
+    positions.has_orientation = false;
+    for (auto& row : positions.rows) row.has_orientation = false;
+    const FitResult fp = identify(robot, positions, kFullTool);
+    EXPECT_EQ(fp.oriented_rows, 0);
+    for (const FitParameter& q : fp.parameters)
+      if (q.effect == "tool_orientation") {
+        EXPECT_FALSE(q.identified) << q.name;
+        bool named = false;
+        for (const auto& w : fp.warnings)
+          named = named || w.find("tool_orientation." + q.name) != std::string::npos;
+        EXPECT_TRUE(named) << q.name;
+      }
+    // More is identified with the orientations than with the positions alone.
+    EXPECT_GE(f.rank, fp.rank + 3) << "seed " << seed;
+  }
+  EXPECT_GE(inside, 0.95 * total) << inside << " of " << total;
+}
+
+TEST(OrientationResidual, NonFiniteOrientationIsRefusedNamingTheRow) {
+  const RobotModel robot = ur5();
+  std::mt19937_64 rng(33);
+  const Geometry g = random_geometry(robot.dof(), 1, rng);
+  Dataset data = measure(robot, g, 20, 10e-6, rng);
+  add_orientation(robot, g, Eigen::Vector3d(0.1, 0.2, 0.3), 10e-6, rng, &data);
+  data.rows[7].orientation(1, 2) = NAN;
+  try {
+    identify(robot, data, kFullTool);
+    FAIL() << "no error";
+  } catch (const InvalidArgument& e) {
+    const std::string w = e.what();
+    EXPECT_NE(w.find(data.rows[7].id), std::string::npos) << w;
+    EXPECT_NE(w.find("orientation"), std::string::npos) << w;
+  }
+}
+
+TEST(OrientationResidual, DegreesDeclaredAsRadiansAreDetected) {
+  // Euler angles in degrees read as radians turn the probe by wild angles between poses.
+  const RobotModel robot = ur5();
+  std::mt19937_64 rng(34);
+  const Geometry g = random_geometry(robot.dof(), 1, rng);
+  Dataset data = measure(robot, g, 20, 10e-6, rng);
+  add_orientation(robot, g, Eigen::Vector3d(0.1, 0.2, 0.3), 10e-6, rng, &data);
+  EXPECT_NO_THROW(check_absolute_data(robot, data, true));
+  constexpr double kDeg = 180.0 / 3.141592653589793;
+  for (auto& m : data.rows) {
+    const Eigen::Vector3d e = matrix_to_euler(EulerConvention::xyz, m.orientation) * kDeg;
+    m.orientation = euler_to_matrix(EulerConvention::xyz, e(0), e(1), e(2));
+  }
+  try {
+    identify(robot, data, kFullTool);
+    FAIL() << "no error";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("_deg or _rad"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace stiff

@@ -55,7 +55,18 @@ struct FitResult {
   double sigma_hat_m = 0.0;       ///< residual standard deviation sqrt(RSS / (3N - rank))
   double noise_floor_m = 0.0;     ///< stated noise (sigma_d or metadata); 0 if unknown
   double chi2 = 0.0;              ///< sum of (residual / sigma)^2 when the noise is known
-  int dof = 0;                    ///< 3N - rank
+  int dof = 0;                    ///< residual components (3N, + 3 per oriented row) - rank
+  /// Absolute rows with a measured orientation that the fit used (0: positions only).
+  int oriented_rows = 0;
+  /// 3N orientation residuals Log(R_measured R_predicted^T) [rad], NaN on rows without a
+  /// measured orientation; empty when oriented_rows is 0.
+  Eigen::VectorXd orientation_residuals;
+  double orientation_rms_rad = 0.0;   ///< RMS of the orientation residual components
+  double orientation_mean_rad = 0.0;  ///< mean orientation error angle per oriented row
+  double orientation_max_rad = 0.0;   ///< largest orientation error angle
+  /// The weight the orientation residuals had, as a length: 1 rad of orientation error weighed
+  /// as this many metres of position error (median over the oriented rows) [m].
+  double orientation_length_m = 0.0;
   std::vector<std::string> warnings;
 
   /// Parameter vector theta in model order.

@@ -49,8 +49,18 @@ struct IdentifyOptions {
   int max_iterations = 200;
   /// A measurement whose robust weight rho'(s) falls below this is listed as an outlier.
   double outlier_weight = 0.5;
-  /// Weight rows by 1/sigma_d when the data has sigma_d.
+  /// Weight rows by 1/sigma_d (sigma_p, sigma_o) when the data has them.
   bool use_sigma = true;
+  /// Absolute rows with a measured orientation add its residual, the rotation vector of
+  /// R_measured R_predicted^T [rad], when the model has the probe's frame
+  /// (DeflectionModel::predicts_orientation); false fits the positions alone.
+  bool use_orientation = true;
+  /// Weight of the orientation residuals (docs/identifiability.md): > 0, an orientation error
+  /// weighs as the position error it makes this far from the probe [m] (1 m: 1 mrad counts as
+  /// 1 mm). 0 (default): estimated from the fit's residuals, the orientation and the position
+  /// residuals as two variance components (Helmert), started from 1/sigma_o (rows weighted by
+  /// their stated sigmas) or from 1 m; each row keeps its stated relative weight.
+  double orientation_length_m = 0.0;
   /// Sine of the angle below which a (column-scaled) Jacobian column counts as lying in the
   /// span of the columns before it: that parameter is not identifiable and is held fixed.
   double rank_tolerance = 1e-6;

@@ -12,6 +12,11 @@ namespace stiff {
 /// excluded (Arun, Huang & Blostein, IEEE PAMI 9(5), 1987; Umeyama 1991). Returns false, with
 /// `r` and `t` untouched, when the points are (nearly) collinear or fewer than 3: the rotation
 /// about their line is then not determined.
+/// The rotation nearest to `m` (Frobenius norm; the maximiser of tr(R^T m)), reflection
+/// excluded: U diag(1, 1, det(U V^T)) V^T of the SVD m = U S V^T. Fits a rotation to sums of
+/// rotations (their chordal mean) and point clouds (fit_rigid_motion).
+Eigen::Matrix3d nearest_rotation(const Eigen::Matrix3d& m);
+
 bool fit_rigid_motion(const Eigen::Matrix3Xd& x,
                       const Eigen::Matrix3Xd& y,
                       Eigen::Matrix3d* r,

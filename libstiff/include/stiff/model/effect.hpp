@@ -16,6 +16,10 @@
 ///                  then evaluates the corrected forward kinematics of the measured point and
 ///                  adds the deflection d of stages 1-3, so that stage 4 receives the absolute
 ///                  position in `d` and maps it into the instrument frame (registration).
+///                  The probe's orientation follows the same way: the corrected chain's
+///                  flange rotation times the probe's rotation on the flange (`probe`, set by
+///                  tool_orientation), turned by the deflection's small rotation, is
+///                  `orientation`, which stage 4 maps into the instrument frame.
 /// Each effect writes its stage functions once as templates on the scalar T (double or
 /// ceres::Jet) so that Ceres differentiates them automatically; EffectT instantiates them.
 #pragma once
@@ -91,6 +95,13 @@ struct EvalState {
   /// translation (0-2) [m] and rotation vector (3-5) [rad]. Both start at zero.
   VectorX<T> dq;
   Matrix6X<T> joint_error;
+  /// Absolute rows: rotation of the probe frame in the flange frame (geometry stage; starts
+  /// at the identity) and the predicted rotation of the probe frame, base frame after the
+  /// geometry stage, instrument frame after stage 4 (identity when not evaluated: `oriented`
+  /// false).
+  Matrix3<T> probe;
+  Matrix3<T> orientation;
+  bool oriented = false;
 };
 
 /// What an effect needs from the robot file or the data.
@@ -105,6 +116,10 @@ enum Requirement : unsigned {
   /// point_offset's measured point). The diagnosis does not propose it on data without them.
   kNeedsAbsolute = 1u << 3,
   kNeedsTemperature = 1u << 4,  ///< a `temp` column (absolute rows)
+  /// Absolute rows with a measured orientation (a 6-D probe): the effect models the probe's
+  /// frame, which positions do not see. A model with such an effect predicts the probe's
+  /// orientation, and the identification adds the orientation residuals.
+  kNeedsOrientation = 1u << 5,
 };
 
 /// The stages of an evaluation (Effect::stages).

@@ -4,6 +4,8 @@
 /// loaded-minus-unloaded displacement and rotation of the measured point.
 #pragma once
 
+#include <ceres/rotation.h>
+
 #include <map>
 #include <memory>
 #include <string>
@@ -41,6 +43,10 @@ class DeflectionModel {
   /// is seen only in absolute data (tool, registration, self-weight, temperature). Its tool
   /// pose is the calibrated one (tool_pose), not the nominal pose plus a deflection.
   bool absolute_accuracy() const;
+  /// An effect models the frame of a 6-D probe (kNeedsOrientation): the model's probe
+  /// orientation is a prediction to compare with a measured one. Without one the probe's
+  /// frame on the flange is unknown and measured orientations are not used.
+  bool predicts_orientation() const;
   /// Every effect is linear (Effect::linear): d is affine in theta.
   bool linear() const { return linear_; }
   /// The parameters whose derivatives need evaluate_jet passes: all of them, or, when the
@@ -69,33 +75,40 @@ class DeflectionModel {
   MeasurementContext context(const Measurement& m, int row) const;
   std::vector<MeasurementContext> contexts(const Dataset& data) const;
 
-  /// Predicted displacement d [m] and rotation [rad] of the measured point, base frame.
+  /// Predicted displacement d [m] and rotation [rad] of the measured point, base frame; with
+  /// `o`, an absolute row with orientation gets its orientation discrepancy
+  /// (orientation_discrepancy of the predicted probe orientation; zero on other rows).
   template <typename T>
   void evaluate(const T* theta,
                 const Measurement& m,
                 const MeasurementContext& c,
                 Vector3<T>* d,
-                Vector3<T>* rot) const;
+                Vector3<T>* rot,
+                Vector3<T>* o = nullptr) const;
   /// evaluate<Jet> for repeated derivative evaluations (identification): the same stages,
   /// values and derivatives equal up to round-off, but the geometry stage (lever arms and
   /// external joint torques) is computed in double with the derivative parts as 3 x
   /// kJetStride arrays, skipped when no effect moved the points or the wrench in its wrench
   /// stage, EvalState::jac_meas / jac_load filled only for effects that read them, and
   /// `scratch` (reused between calls with this model, one per thread) avoids allocations.
-  /// Only the displacement d is produced.
+  /// The displacement d is produced and, with `o`, the orientation discrepancy as evaluate's.
   void evaluate_jet(const Jet* theta,
                     const Measurement& m,
                     const MeasurementContext& c,
                     EvalState<Jet>& scratch,
-                    Vector3<Jet>* d) const;
-  /// evaluate<double> of d reusing `scratch` (no allocation after the first call; one per
-  /// thread).
+                    Vector3<Jet>* d,
+                    Vector3<Jet>* o = nullptr) const;
+  /// evaluate<double> of d (and o) reusing `scratch` (no allocation after the first call; one
+  /// per thread).
   void evaluate_double(const double* theta,
                        const Measurement& m,
                        const MeasurementContext& c,
                        EvalState<double>& scratch,
-                       Vector3<double>* d) const;
-  /// Same in double: (dx, dy, dz, rx, ry, rz).
+                       Vector3<double>* d,
+                       Vector3<double>* o = nullptr) const;
+  /// Same in double: (dx, dy, dz, rx, ry, rz); on an absolute row, the position in the
+  /// instrument frame and the rotation vector [rad] of the probe's predicted orientation there
+  /// (the flange's, turned by tool_orientation and by the deflection).
   Eigen::Matrix<double, 6, 1> predict(const Eigen::VectorXd& theta,
                                       const Measurement& m,
                                       const MeasurementContext& c) const;
@@ -127,7 +140,8 @@ class DeflectionModel {
                      const Measurement& m,
                      const MeasurementContext& c,
                      EvalState<T>& s,
-                     bool instrument = true) const;
+                     bool instrument = true,
+                     bool orient = false) const;
   RobotModel robot_;
   std::vector<std::unique_ptr<Effect>> effects_;
   std::vector<int> offsets_;
@@ -144,9 +158,27 @@ extern template void DeflectionModel::evaluate<double>(const double*,
                                                        const Measurement&,
                                                        const MeasurementContext&,
                                                        Vector3<double>*,
+                                                       Vector3<double>*,
                                                        Vector3<double>*) const;
-extern template void DeflectionModel::evaluate<Jet>(
-    const Jet*, const Measurement&, const MeasurementContext&, Vector3<Jet>*, Vector3<Jet>*) const;
+extern template void DeflectionModel::evaluate<Jet>(const Jet*,
+                                                    const Measurement&,
+                                                    const MeasurementContext&,
+                                                    Vector3<Jet>*,
+                                                    Vector3<Jet>*,
+                                                    Vector3<Jet>*) const;
+
+/// The orientation discrepancy of an absolute row with a measured orientation: the rotation
+/// vector [rad] of R_predicted R_measured^T (instrument frame; the log map of SO(3) by
+/// ceres::RotationMatrixToAngleAxis, differentiable through zero). The identification treats
+/// it as the row's predicted orientation against an observed zero, so that the orientation
+/// residual (measured - predicted) is Log(R_measured R_predicted^T).
+template <typename T>
+Vector3<T> orientation_discrepancy(const Matrix3<T>& predicted, const Eigen::Matrix3d& measured) {
+  const Matrix3<T> e = predicted * measured.transpose();
+  Vector3<T> w;
+  ceres::RotationMatrixToAngleAxis(e.data(), w.data());
+  return w;
+}
 
 /// The paper's observation block (Jiang & Fang 2023): the 3 x n matrix with
 /// A[r, j] = Jp(P)[r, j] * (J(L)[:, j] . W), so that d = A c for joint compliances c.

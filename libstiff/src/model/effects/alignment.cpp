@@ -1,5 +1,5 @@
 // First alignment of absolute measurements with the nominal robot (start values of the
-// registration and tool effects).
+// registration, tool and tool_orientation effects).
 #include <Eigen/QR>
 #include <map>
 
@@ -79,6 +79,20 @@ Alignment compute(const RobotModel& robot, const Dataset& data) {
     if (step.norm() < 1e-9) break;
   }
   a.point_offset = delta;
+  // The probe's rotation on the flange: the chordal mean of (R_s R_06)^T R_measured over the
+  // rows with orientation, projected onto SO(3) (SVD).
+  Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+  int oriented = 0;
+  for (const auto& m : data.rows) {
+    if (!m.absolute || !m.has_orientation) continue;
+    const Eigen::Matrix3d f = robot.chain(m.q).flange.topLeftCorner<3, 3>();
+    sum += (a.rotation[index[m.session]] * f).transpose() * m.orientation;
+    ++oriented;
+  }
+  if (oriented > 0) {
+    const Eigen::Matrix3d r = nearest_rotation(sum);
+    ceres::RotationMatrixToAngleAxis(r.data(), a.probe.data());
+  }
   return a;
 }
 

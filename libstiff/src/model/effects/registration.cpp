@@ -8,8 +8,9 @@ namespace {
 
 /// An instrument placed once per session reports positions in its own frame:
 /// p_instrument = R(omega_s) p_base + t_s, a rigid motion per session (rotation vector
-/// omega_s, exact; translation t_s). Started from the first alignment of the nominal robot
-/// on the data (Arun, Huang & Blostein 1987). Acts on absolute rows only.
+/// omega_s, exact; translation t_s); a 6-D probe's orientation R_instrument = R(omega_s) R_base.
+/// Started from the first alignment of the nominal robot on the data (Arun, Huang & Blostein 1987).
+/// Acts on absolute rows only.
 class Registration : public EffectT<Registration> {
  public:
   explicit Registration(const EffectSetup& s) {
@@ -73,6 +74,8 @@ class Registration : public EffectT<Registration> {
     const Vector3<T> x = s.d;
     for (int a = 0; a < 3; ++a)
       s.d(a) = r(a, 0) * x(0) + r(a, 1) * x(1) + r(a, 2) * x(2) + w[3 + a];
+    // A 6-D probe's orientation turns with the frame: R_instrument = R(omega_s) R_base.
+    if (s.oriented) s.orientation = (r * s.orientation).eval();
   }
 
  private:

@@ -9,7 +9,7 @@
   X(joint) X(complementary) X(link) X(gravity_compensator) X(nonlinear_joint) X(backlash) \
   X(coupling) X(tracker_frame) X(force_frame) X(point_offset) X(tool_compliance) X(drift) \
   X(joint_offset) X(kinematic) X(registration) X(tool) X(gravity_lumped) X(harmonic) \
-  X(thermal)
+  X(thermal) X(tool_orientation)
 // clang-format on
 
 namespace stiff {

@@ -39,6 +39,7 @@ class TrackerFrame : public EffectT<TrackerFrame> {
     const Matrix3<T> r = effects::rotation_matrix(p);
     s.d = r * s.d;
     s.rot = r * s.rot;
+    if (s.oriented) s.orientation = (r * s.orientation).eval();
   }
 
  private:

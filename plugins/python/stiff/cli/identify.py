@@ -51,6 +51,12 @@ def register(sub):
                         "typical magnitude and also a third of its value, t < 3 "
                         "(docs/identifiability.md); "
                         f"0: structural rank test only (default {d['max_relative_se']:g})")
+    p.add_argument("--orientation-length", type=float, metavar="M",
+                   help="absolute rows with a measured orientation (and tool_orientation in the "
+                        "model): an orientation error weighs as the position error it makes this "
+                        "far from the probe (default: estimated from the residuals)")
+    p.add_argument("--positions-only", action="store_true",
+                   help="fit the positions alone, ignoring measured orientations")
     p.add_argument("--start", metavar="FIT",
                    help="a previous fit of this robot whose parameters start this one")
     p.add_argument("--refit", metavar="EFFECTS",
@@ -91,6 +97,12 @@ def print_fit(fit: api.Fit, truth_stiffness=None) -> None:
     print(f"fit: {s.measurements} measurements, {s.rank} parameters identified, residual RMS "
           f"{s.rms_m * 1e6:.2f} um (sigma_hat {s.sigma_hat_m * 1e6:.2f} um{floor}), "
           f"condition number {s.condition_number:.3g}")
+    if s.oriented_rows:
+        print(f"     orientation of {s.oriented_rows} rows: residual RMS "
+              f"{math.degrees(s.orientation_rms_rad):.4f} deg per axis, error mean "
+              f"{math.degrees(s.orientation_mean_rad):.4f} deg, max "
+              f"{math.degrees(s.orientation_max_rad):.4f} deg (weighed as "
+              f"{s.orientation_length_m:.3g} m per rad)")
     if s.noise_floor_m > 0 and s.dof > 0:
         ratio = s.sigma_hat_m / s.noise_floor_m
         verdict = "at the noise floor" if ratio < 1.0 + 3.0 / math.sqrt(2 * s.dof) else \
@@ -125,7 +137,8 @@ def run(args):
                            loss_scale_m=None if args.loss_scale_um is None else args.loss_scale_um * 1e-6,
                            method=args.method,
                            max_relative_se=args.max_relative_se, start=start,
-                           refit=args.refit)
+                           refit=args.refit, orientation_length_m=args.orientation_length,
+                           use_orientation=not args.positions_only)
     except Exception:
         # A fit that fails on implausible data: what is wrong with the data helps more.
         for w in plausibility_warnings(robot, data):

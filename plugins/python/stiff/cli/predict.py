@@ -14,7 +14,9 @@ Writes the predicted displacement of every row in the measurement format with th
 when the data holds measured displacements, prints the RMS prediction error. On absolute data
 (px, py, pz columns) it prints the position error (mean, RMS, max) and writes id, absolute,
 x_m, y_m, z_m: the predicted position in the instrument frame (the displacement on
-displacement rows)."""
+displacement rows); with measured orientations (a, b, c columns) also the orientation error
+in degrees (mean, RMS, max) and rx_rad, ry_rad, rz_rad: the predicted probe orientation as a
+rotation vector in the instrument frame."""
 
 
 def register(sub):
@@ -35,7 +37,7 @@ def run(args):
     check_joint_limits(robot, data, args.data, args.ignore_limits)
     model = api.Model(robot, fit)
     if data.position is not None:
-        return run_absolute(args, robot, model, data)
+        return run_absolute(args, robot, model, data, fit)
     pred = model.predict(data.q, data.wrench)
     measured = data.displacement
     if measured is not None:
@@ -54,7 +56,7 @@ def run(args):
 
 
 
-def run_absolute(args, robot, model, data):
+def run_absolute(args, robot, model, data, fit):
     """Absolute (or mixed) data: the predicted position in the instrument frame of each
     absolute row (displacement of the others), and the position error where measured."""
     pred = model.predict_dataset(data)
@@ -66,6 +68,20 @@ def run_absolute(args, robot, model, data):
         print(f"absolute position error on {int(ab.sum())} rows: mean {e.mean() * 1e3:.4f} mm, "
               f"RMS {np.sqrt(np.mean(e ** 2)) * 1e3:.4f} mm, max {e.max() * 1e3:.4f} mm "
               f"at {data.ids[worst]}")
+    # The probe's orientation is a prediction only when the model has its frame on the flange.
+    orients = any("orientation" in api.describe_effect(e)["needs"] for e in fit.model)
+    measured_o = data.orientation if orients else None
+    pred_o = model.predict_orientation(data) if measured_o is not None else None
+    if measured_o is not None:
+        has = ab & np.isfinite(measured_o).all(axis=1)
+        if has.any():
+            from ..compensate import rotation_vector_angle_between
+
+            a = np.degrees(rotation_vector_angle_between(measured_o[has], pred_o[has]))
+            worst = int(np.flatnonzero(has)[np.argmax(a)])
+            print(f"absolute orientation error on {int(has.sum())} rows: mean {a.mean():.4f} deg, "
+                  f"RMS {np.sqrt(np.mean(a ** 2)):.4f} deg, max {a.max():.4f} deg "
+                  f"at {data.ids[worst]}")
     if (~ab).any() and data.displacement is not None:
         e = err[~ab]
         print(f"displacement error on {int((~ab).sum())} rows: RMS "
@@ -77,9 +93,12 @@ def run_absolute(args, robot, model, data):
 
         text = io.StringIO()
         w = csv.writer(text, lineterminator="\n")
-        w.writerow(["id", "absolute", "x_m", "y_m", "z_m"])
+        w.writerow(["id", "absolute", "x_m", "y_m", "z_m"] +
+                   (["rx_rad", "ry_rad", "rz_rad"] if pred_o is not None else []))
         for i, r in enumerate(data.ids):
-            w.writerow([r, int(ab[i])] + [repr(float(v)) for v in pred[i]])
+            w.writerow([r, int(ab[i])] + [repr(float(v)) for v in pred[i]] +
+                       ([repr(float(v)) if ab[i] else "" for v in pred_o[i]]
+                        if pred_o is not None else []))
         atomic_write_text(args.output, text.getvalue())
         print(f"wrote {args.output}")
     return 0

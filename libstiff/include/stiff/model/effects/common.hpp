@@ -94,13 +94,16 @@ Matrix3<T> rotation_matrix(const T* w) {
 /// (instrument <- base) and one offset of the measured point (flange frame) that best map the
 /// nominal forward kinematics onto the measured positions (least squares, alternating the
 /// rotations by the SVD method of Arun, Huang & Blostein 1987 with a joint linear solve of the
-/// point offset and the translations). Start values of `registration` and `tool`.
+/// point offset and the translations), and the mean rotation of a 6-D probe on the flange.
+/// Start values of `registration`, `tool` and `tool_orientation`.
 struct Alignment {
   std::vector<std::string> sessions;      ///< labels, in the model's session order
   std::vector<Eigen::Matrix3d> rotation;  ///< per session: instrument <- base
   std::vector<Eigen::Vector3d> translation;
   Eigen::Vector3d point_offset = Eigen::Vector3d::Zero();  ///< flange frame [m]
-  double rms = 0.0;                                        ///< residual RMS after alignment [m]
+  /// Rows with orientation: rotation vector of the probe frame in the flange frame [rad].
+  Eigen::Vector3d probe = Eigen::Vector3d::Zero();
+  double rms = 0.0;  ///< residual RMS after alignment [m]
 };
 /// Throws InvalidArgument naming a session whose target positions are (nearly) collinear.
 Alignment alignment(const RobotModel& robot, const Dataset& data);
