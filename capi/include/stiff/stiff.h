@@ -206,7 +206,7 @@ typedef enum stiff_column {
   STIFF_COLUMN_POSITION = 8,
   STIFF_COLUMN_SIGMA_P = 9,
   STIFF_COLUMN_TEMPERATURE = 10,
-  /** ORIENTATION rows x 3 (@since 0.4): the measured probe orientation as a rotation vector
+  /** ORIENTATION rows x 3 (@since 0.2): the measured probe orientation as a rotation vector
    *  [rad], instrument frame (NaN on rows without one); present with a, b, c columns. */
   STIFF_COLUMN_ORIENTATION = 11
 } stiff_column;
@@ -384,7 +384,7 @@ typedef struct stiff_identify_options {
    *  R_measured R_predicted^T [rad]) when the model has the probe's frame (tool_orientation):
    *  > 0, an orientation error weighs as the position error it makes this far from the probe
    *  [m]; 0: the default, the weight estimated from the residuals (two variance components);
-   *  < 0: positions only (docs/identifiability.md). @since 0.4 */
+   *  < 0: positions only (docs/identifiability.md). @since 0.2 */
   double orientation_length_m;
 } stiff_identify_options;
 /* Every field spelled out: a bare {sizeof(...)} trips -Wmissing-field-initializers. All zero:
@@ -482,7 +482,7 @@ STIFF_API stiff_status stiff_result_residuals(double* residuals,
 
 /** Orientation residuals Log(R_measured R_predicted^T), rows x 3 [rad], NaN on rows without a
  *  measured orientation; 0 values when the fit used none (stiff_fit_statistics.oriented_rows).
- *  @since 0.4 */
+ *  @since 0.2 */
 STIFF_API stiff_status stiff_result_orientation_residuals(double* residuals,
                                                           size_t capacity,
                                                           size_t* needed,
@@ -502,13 +502,13 @@ typedef struct stiff_fit_statistics {
   double condition_number; /**< of the column-scaled observation matrix */
   uint32_t outliers;       /**< measurements flagged by the robust loss */
   uint32_t warnings;       /**< warnings (see stiff_result_warning) */
-  /** Absolute rows whose measured orientation the fit used (0: positions only). @since 0.4 */
+  /** Absolute rows whose measured orientation the fit used (0: positions only). @since 0.2 */
   uint32_t oriented_rows;
-  double orientation_rms_rad;  /**< RMS of the orientation residual components [rad] @since 0.4 */
-  double orientation_mean_rad; /**< mean orientation error angle of those rows [rad] @since 0.4 */
-  double orientation_max_rad;  /**< largest orientation error angle [rad] @since 0.4 */
+  double orientation_rms_rad;  /**< RMS of the orientation residual components [rad] @since 0.2 */
+  double orientation_mean_rad; /**< mean orientation error angle of those rows [rad] @since 0.2 */
+  double orientation_max_rad;  /**< largest orientation error angle [rad] @since 0.2 */
   /** The orientation residuals' weight as a length: 1 rad weighed as this many metres of
-   *  position error [m] @since 0.4 */
+   *  position error [m] @since 0.2 */
   double orientation_length_m;
 } stiff_fit_statistics;
 /** Fill *statistics (set its struct_size first). @since 0.1 */
@@ -547,7 +547,7 @@ STIFF_API stiff_status stiff_predict_dataset(double* predicted,
 /** The orientation the model predicts for every absolute row of a dataset, rows x 3: the
  *  rotation vector [rad] of the probe frame in the instrument frame (the flange's, turned by
  *  tool_orientation, the deflection and the registration), NaN on displacement rows. The
- *  same checks as stiff_predict_dataset. @since 0.4 */
+ *  same checks as stiff_predict_dataset. @since 0.2 */
 STIFF_API stiff_status stiff_predict_dataset_orientation(double* rotation_vectors,
                                                          size_t capacity,
                                                          size_t* needed,
