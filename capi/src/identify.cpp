@@ -18,13 +18,19 @@ const FitResult& fit_of(const stiff_result* r) {
   return r->fit;
 }
 
-/// stiff_predict_dataset and stiff_predict_dataset_orientation: the checks, then
-/// DeflectionModel::predict of every row into `out(row, values)`.
-template <typename Out>
-void predict_rows(const stiff_model* model, const stiff_dataset* dataset, Out&& out) {
+/// stiff_predict_dataset (positions or displacements) and stiff_predict_dataset_orientation
+/// (the probe's orientation of absolute rows, NaN on the others): the checks, then
+/// DeflectionModel::predict of every row, 3 values each.
+stiff_status predict_rows(double* out,
+                          size_t capacity,
+                          size_t* needed,
+                          const stiff_model* model,
+                          const stiff_dataset* dataset,
+                          bool orientation) {
   require(model, "model");
   require(dataset, "dataset");
   const Dataset& data = dataset->data;
+  require_capacity(3 * data.rows.size(), out, capacity, needed);
   const DeflectionModel& dm = *model->model;
   validate_dataset(data, model->robot.dof(), false);
   for (const auto& m : data.rows)
@@ -37,8 +43,10 @@ void predict_rows(const stiff_model* model, const stiff_dataset* dataset, Out&& 
     const Eigen::Matrix<double, 6, 1> d = dm.predict(model->theta, data.rows[r], ctx[r]);
     if (!d.allFinite())
       throw NumericalError("row " + std::to_string(r) + ": the prediction is not finite");
-    out(r, d);
+    for (int k = 0; k < 3; ++k)
+      out[3 * r + k] = !orientation ? d(k) : (data.rows[r].absolute ? d(3 + k) : std::nan(""));
   }
+  return STIFF_OK;
 }
 
 }  // namespace
@@ -389,15 +397,8 @@ stiff_status stiff_predict_dataset(double* predicted,
                                    size_t* needed,
                                    const stiff_model* model,
                                    const stiff_dataset* dataset) {
-  return guarded(__func__, [&] {
-    require(model, "model");
-    require(dataset, "dataset");
-    require_capacity(3 * dataset->data.rows.size(), predicted, capacity, needed);
-    predict_rows(model, dataset, [&](size_t r, const Eigen::Matrix<double, 6, 1>& d) {
-      for (int k = 0; k < 3; ++k) predicted[3 * r + k] = d(k);
-    });
-    return STIFF_OK;
-  });
+  return guarded(__func__,
+                 [&] { return predict_rows(predicted, capacity, needed, model, dataset, false); });
 }
 
 stiff_status stiff_predict_dataset_orientation(double* rotation_vectors,
@@ -406,14 +407,7 @@ stiff_status stiff_predict_dataset_orientation(double* rotation_vectors,
                                                const stiff_model* model,
                                                const stiff_dataset* dataset) {
   return guarded(__func__, [&] {
-    require(model, "model");
-    require(dataset, "dataset");
-    require_capacity(3 * dataset->data.rows.size(), rotation_vectors, capacity, needed);
-    predict_rows(model, dataset, [&](size_t r, const Eigen::Matrix<double, 6, 1>& d) {
-      const bool absolute = dataset->data.rows[r].absolute;
-      for (int k = 0; k < 3; ++k) rotation_vectors[3 * r + k] = absolute ? d(3 + k) : NAN;
-    });
-    return STIFF_OK;
+    return predict_rows(rotation_vectors, capacity, needed, model, dataset, true);
   });
 }
 

@@ -255,6 +255,16 @@ FitResult identify(const RobotModel& robot,
                               : (weighted ? c_sigma : c_sigma * noise * s.row_weight(r))) *
         std::sqrt(s.components(r) / 3.0);
 
+  // The robust weight rho'(|e_r|^2) in [0, 1] of row r at the weighted residuals e (1 without a
+  // loss): a row the loss down-weights counts that much in the scales and statistics below.
+  auto robust_weight = [&](const Eigen::VectorXd& e, int r) {
+    std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
+    if (!loss) return 1.0;
+    double rho[3];
+    loss->Evaluate(e.segment(dim * r, dim).squaredNorm(), rho);
+    return std::min(1.0, std::max(0.0, rho[1]));
+  };
+
   // ---- identifiability, solve, re-check at the solution (offsets can make c6 visible).
   Identifiability idf;
   std::vector<bool> left_out;  ///< per parameter: an optional term the data do not support
@@ -308,13 +318,7 @@ FitResult identify(const RobotModel& robot,
     const Eigen::VectorXd e = weighted_residuals(s, theta);
     double wsum = 0, wrss = 0;
     for (int r = 0; r < n; ++r) {
-      double w = 1.0;
-      std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
-      if (loss) {
-        double rho[3];
-        loss->Evaluate(e.segment(dim * r, dim).squaredNorm(), rho);
-        w = std::min(1.0, std::max(0.0, rho[1]));
-      }
+      const double w = robust_weight(e, r);
       wsum += s.components(r) * w;
       wrss += w * w * e.segment(dim * r, dim).squaredNorm();
     }
@@ -379,11 +383,7 @@ FitResult identify(const RobotModel& robot,
     for (int k = 0; k < p; ++k) js.col(k) = jac.col(k) * s.typical(k);
     // Rows a robust loss down-weights count that much (as in the residual scale above).
     for (int r = 0; r < n; ++r) {
-      std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
-      if (!loss) continue;
-      double rho[3];
-      loss->Evaluate(e.segment(dim * r, dim).squaredNorm(), rho);
-      const double w = std::sqrt(std::min(1.0, std::max(0.0, rho[1])));
+      const double w = std::sqrt(robust_weight(e, r));
       e.segment(dim * r, dim) *= w;
       js.middleRows(dim * r, dim) *= w;
     }
@@ -557,13 +557,7 @@ FitResult identify(const RobotModel& robot,
       const Eigen::VectorXd e = weighted_residuals(s, theta);
       double sp = 0, np = 0, so = 0, no = 0;
       for (int r = 0; r < n; ++r) {
-        double w = 1.0;
-        std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
-        if (loss) {
-          double rho[3];
-          loss->Evaluate(e.segment(dim * r, dim).squaredNorm(), rho);
-          w = std::min(1.0, std::max(0.0, rho[1]));
-        }
+        const double w = robust_weight(e, r);
         sp += w * e.segment<3>(dim * r).squaredNorm();
         np += 3.0 * w;
         if (s.orient_weight(r) > 0) {
@@ -584,13 +578,7 @@ FitResult identify(const RobotModel& robot,
   // ---- statistics at the solution.
   const Eigen::VectorXd e = weighted_residuals(s, theta);
   f.weights = Eigen::VectorXd::Ones(n);
-  for (int r = 0; r < n; ++r) {
-    std::unique_ptr<ceres::LossFunction> loss(make_loss(opt.loss, loss_scale(r)));
-    if (!loss) continue;
-    double rho[3];
-    loss->Evaluate(e.segment(dim * r, dim).squaredNorm(), rho);
-    f.weights(r) = std::min(1.0, std::max(0.0, rho[1]));
-  }
+  for (int r = 0; r < n; ++r) f.weights(r) = robust_weight(e, r);
   const int nf = static_cast<int>(free.size());
   // The Jacobian of the last identifiability check is the one at the solution unless the
   // clamping above moved theta.

@@ -771,22 +771,41 @@ Eigen::Matrix4d DeflectionModel::tool_pose(const Eigen::VectorXd& theta,
   return t;
 }
 
-Eigen::Matrix<double, 3, Eigen::Dynamic> DeflectionModel::displacement_jacobian(
-    const Eigen::VectorXd& theta, const Measurement& m, const MeasurementContext& c) const {
-  Eigen::Matrix<double, 3, Eigen::Dynamic> out(3, count_);
-  std::vector<Jet> t(count_);
-  for (int k = 0; k < count_; ++k) t[k] = Jet(theta(k));
-  // Differentiate kJetStride parameters per pass.
-  for (int first = 0; first < count_; first += kJetStride) {
-    for (int k = 0; k < count_; ++k) t[k].v.setZero();
-    const int last = std::min(count_, first + kJetStride);
+namespace {
+
+/// The 3 x P Jacobian of the displacement (or, with `orientation`, of the orientation
+/// discrepancy) by kJetStride parameters per pass of evaluate<Jet>.
+Eigen::Matrix<double, 3, Eigen::Dynamic> jet_jacobian(const DeflectionModel& model,
+                                                      const Eigen::VectorXd& theta,
+                                                      const Measurement& m,
+                                                      const MeasurementContext& c,
+                                                      bool orientation) {
+  const int count = model.parameter_count();
+  Eigen::Matrix<double, 3, Eigen::Dynamic> out(3, count);
+  std::vector<Jet> t(count);
+  for (int k = 0; k < count; ++k) t[k] = Jet(theta(k));
+  for (int first = 0; first < count; first += kJetStride) {
+    for (int k = 0; k < count; ++k) t[k].v.setZero();
+    const int last = std::min(count, first + kJetStride);
     for (int k = first; k < last; ++k) t[k].v(k - first) = 1.0;
-    Vector3<Jet> d;
-    evaluate<Jet>(t.data(), m, c, &d, nullptr);
+    Vector3<Jet> d, o;
+    model.evaluate<Jet>(t.data(), m, c, &d, nullptr, orientation ? &o : nullptr);
     for (int k = first; k < last; ++k)
-      for (int r = 0; r < 3; ++r) out(r, k) = d(r).v(k - first);
+      for (int r = 0; r < 3; ++r) out(r, k) = (orientation ? o : d)(r).v(k - first);
   }
   return out;
+}
+
+}  // namespace
+
+Eigen::Matrix<double, 3, Eigen::Dynamic> DeflectionModel::orientation_jacobian(
+    const Eigen::VectorXd& theta, const Measurement& m, const MeasurementContext& c) const {
+  return jet_jacobian(*this, theta, m, c, true);
+}
+
+Eigen::Matrix<double, 3, Eigen::Dynamic> DeflectionModel::displacement_jacobian(
+    const Eigen::VectorXd& theta, const Measurement& m, const MeasurementContext& c) const {
+  return jet_jacobian(*this, theta, m, c, false);
 }
 
 Eigen::Matrix<double, 3, Eigen::Dynamic> observation_block(

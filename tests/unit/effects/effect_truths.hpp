@@ -2,6 +2,7 @@
 // shared by the effect and identification tests.
 #pragma once
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <random>
 #include <stdexcept>
@@ -54,7 +55,8 @@ inline unsigned requirements_of(const std::string& effect, const RobotModel& rob
 /// effect acts on absolute rows only (kNeedsAbsolute), every row turned into an absolute row of
 /// one tracker placement whose frame is the robot base (position: the nominal forward
 /// kinematics of the measured point, the row's load kept), with a workshop's spread of
-/// temperatures (14-26 deg C) when an effect needs them. A session column when one is needed.
+/// temperatures (14-26 deg C) when an effect needs them, and the nominal flange orientation as a
+/// 6-D probe's when an effect needs orientations. A session column when one is needed.
 inline Dataset data_for(const std::vector<std::string>& effects,
                         const RobotModel& robot,
                         Dataset data) {
@@ -72,7 +74,12 @@ inline Dataset data_for(const std::vector<std::string>& effects,
     m.absolute = true;
     m.position = robot.point_position(robot.chain(m.q), robot.measured_point);
     m.temperature = 20.0 + 6.0 * std::sin(0.7 * static_cast<double>(r));
+    if (req & kNeedsOrientation) {
+      m.has_orientation = true;
+      m.orientation = robot.chain(m.q).flange.topLeftCorner<3, 3>();
+    }
   }
+  data.has_orientation = (req & kNeedsOrientation) != 0;
   return data;
 }
 inline Dataset data_for(const std::string& effect, const RobotModel& robot, Dataset data) {
@@ -81,7 +88,9 @@ inline Dataset data_for(const std::string& effect, const RobotModel& robot, Data
 
 /// The virtual robot's measurements of a design: simulate() for loaded-minus-unloaded rows;
 /// for effects that act on absolute rows only, the rows of data_for() with the truth's
-/// predicted positions plus Gaussian tracker noise (per axis, noise.tracker_sigma_m).
+/// predicted positions plus Gaussian tracker noise (per axis, noise.tracker_sigma_m) and, with
+/// orientations, the predicted probe orientation turned by a noise of tracker_sigma_m per metre
+/// [rad] per axis.
 inline Dataset measure(const RobotModel& robot,
                        const Truth& truth,
                        const Dataset& design,
@@ -96,8 +105,13 @@ inline Dataset measure(const RobotModel& robot,
   std::normal_distribution<double> z(0.0, noise.tracker_sigma_m);
   for (size_t r = 0; r < data.rows.size(); ++r) {
     auto& row = data.rows[r];
-    row.position = m.predict(truth.theta, row, ctx[r]).head<3>();
+    const Eigen::Matrix<double, 6, 1> p = m.predict(truth.theta, row, ctx[r]);
+    row.position = p.head<3>();
     for (int a = 0; a < 3; ++a) row.position(a) += z(rng);
+    if (row.has_orientation) {
+      const Eigen::Vector3d w = p.tail<3>() + Eigen::Vector3d(z(rng), z(rng), z(rng));
+      row.orientation = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
+    }
   }
   return data;
 }

@@ -2,6 +2,7 @@
 // physics of the second-order (complementary) term against the exact loaded equilibrium.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <set>
 
 #include "effect_truths.hpp"
@@ -79,7 +80,14 @@ void expect_jacobian_matches(const std::vector<std::string>& effects,
   const auto ctx = m.contexts(data);
   for (size_t r = 0; r < data.size(); ++r) {
     const auto ad = m.displacement_jacobian(theta, data.rows[r], ctx[r]);
+    const auto ao = m.orientation_jacobian(theta, data.rows[r], ctx[r]);
     const Eigen::Vector3d d = m.predict(theta, data.rows[r], ctx[r]).head<3>();
+    // The orientation discrepancy (zero without a measured orientation).
+    auto discrepancy = [&](const Eigen::VectorXd& t) {
+      Vector3<double> dd, o;
+      m.evaluate<double>(t.data(), data.rows[r], ctx[r], &dd, nullptr, &o);
+      return Eigen::Vector3d(o);
+    };
     for (int k = 0; k < m.parameter_count(); ++k) {
       // Decided from the data, not fitted: the model has no derivative with respect to it.
       if (m.spec(k).from_data) {
@@ -98,6 +106,11 @@ void expect_jacobian_matches(const std::vector<std::string>& effects,
       EXPECT_LT((ad.col(k) - fd).norm(), tol)
           << m.model_string() << " " << m.spec(k).name << " row " << r << ": ad "
           << ad.col(k).transpose() << " fd " << fd.transpose();
+      // Rotation vectors of order 1 rad at most: rounding ~ 1e-16 / h.
+      const Eigen::Vector3d fo = (discrepancy(tp) - discrepancy(tm)) / (2 * h);
+      EXPECT_LT((ao.col(k) - fo).norm(), 1e-6 * ao.col(k).norm() + 1e-13 / h)
+          << m.model_string() << " " << m.spec(k).name << " row " << r << " (orientation): ad "
+          << ao.col(k).transpose() << " fd " << fo.transpose();
     }
   }
   (void)effects;
@@ -119,11 +132,17 @@ TEST(Effects, AutodiffJacobianMatchesCentralDifferences) {
     // The effect acts on these rows: a check of zero derivatives would prove nothing.
     const auto ctx = m.contexts(data);
     double largest = 0;
+    // (positions, or the orientations for an effect that only they see)
     for (size_t r = 0; r < data.size(); ++r)
-      largest = std::max(largest, m.displacement_jacobian(theta, data.rows[r], ctx[r])
-                                      .rightCols(m.effects()[1]->size())
-                                      .cwiseAbs()
-                                      .maxCoeff());
+      largest = std::max({largest,
+                          m.displacement_jacobian(theta, data.rows[r], ctx[r])
+                              .rightCols(m.effects()[1]->size())
+                              .cwiseAbs()
+                              .maxCoeff(),
+                          m.orientation_jacobian(theta, data.rows[r], ctx[r])
+                              .rightCols(m.effects()[1]->size())
+                              .cwiseAbs()
+                              .maxCoeff()});
     EXPECT_GT(largest, 0.0) << name;
   }
 }

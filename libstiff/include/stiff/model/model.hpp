@@ -126,6 +126,11 @@ class DeflectionModel {
   Eigen::Matrix<double, 3, Eigen::Dynamic> displacement_jacobian(const Eigen::VectorXd& theta,
                                                                  const Measurement& m,
                                                                  const MeasurementContext& c) const;
+  /// Jacobian (3 x P) of the orientation discrepancy of an absolute row with a measured
+  /// orientation (evaluate's `o`; zeros on other rows), by automatic differentiation.
+  Eigen::Matrix<double, 3, Eigen::Dynamic> orientation_jacobian(const Eigen::VectorXd& theta,
+                                                                const Measurement& m,
+                                                                const MeasurementContext& c) const;
 
   /// Index of a session label (0 for unknown labels and for data without sessions).
   int session_index(const std::string& label) const;
