@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import stiff
+from stiff.compensate import rotation_from_vector, rotation_vector_angle_between
 
 STIFF = [sys.executable, "-m", "stiff.cli"]
 
@@ -79,3 +80,50 @@ def test_absolute_row_without_registration_is_refused(tmp_path, ur5):
     write_absolute(calib, ur5, 20, seed=5)
     with pytest.raises(stiff.StiffError, match="metres away"):
         stiff.identify(ur5, stiff.Dataset.read(calib, ur5), model="tool")
+
+
+def write_six_d(path, robot, rows, seed, sigma=20e-6, probe=(0.3, -1.1, 0.6), first=0):
+    """6-D rows: positions as write_absolute (tool at the flange origin) and the orientation of
+    a probe turned by `probe` on the flange, with sigma [rad] of noise per axis (1 m per rad)."""
+    rng = np.random.default_rng(seed)
+    r, t = rot(np.array((0.1, -0.2, 2.5))), np.array((1.8, -0.7, 0.2))
+    lines = ["# euler: xyz", "id,session," + ",".join(f"q{j + 1}_rad" for j in range(robot.dof))
+             + ",px_m,py_m,pz_m,a_rad,b_rad,c_rad"]
+    for i in range(rows):
+        q = rng.uniform(-2.8, 2.8, robot.dof)
+        pose = robot.tool_pose(q)
+        p = r @ pose[:3, 3] + t + rng.normal(0, sigma, 3)
+        m = rotation_from_vector(rng.normal(0, sigma, 3))[0] @ r @ pose[:3, :3] @ rot(np.array(probe))
+        # R = Rx(a) Ry(b) Rz(c)
+        e = (np.arctan2(-m[1, 2], m[2, 2]), np.arcsin(m[0, 2]), np.arctan2(-m[0, 1], m[0, 0]))
+        lines.append(f"p{first + i},T1," + ",".join(repr(float(v)) for v in (*q, *p, *e)))
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_six_d_data_identify_the_probe_frame(tmp_path, ur5):
+    calib, valid = tmp_path / "calib.csv", tmp_path / "valid.csv"
+    write_six_d(calib, ur5, 60, seed=11)
+    write_six_d(valid, ur5, 20, seed=12, sigma=0.0, first=100)
+    data = stiff.Dataset.read(calib, ur5)
+    assert data.orientation.shape == (60, 3)
+    model = "registration+tool+tool_orientation"
+    fit = stiff.identify(ur5, data, model=model)
+    s = fit.statistics
+    assert s.oriented_rows == 60
+    # At the noise (20 urad per axis), and weighed about as made (1 m per rad).
+    assert 0.6 * 20e-6 < s.orientation_rms_rad < 1.4 * 20e-6, s
+    assert 0.5 < s.orientation_length_m < 2.0, s
+    w = np.array([p["value"] for p in fit.json["parameters"] if p["effect"] == "tool_orientation"])
+    assert np.abs(w - (0.3, -1.1, 0.6)).max() < 1e-4, w
+    assert fit.orientation_residuals.shape == (60, 3)
+    v = stiff.Dataset.read(valid, ur5)
+    angle = rotation_vector_angle_between(v.orientation, stiff.Model(ur5, fit).predict_orientation(v))
+    assert angle.max() < 6 * 20e-6, angle.max()
+    # Positions alone: the probe's frame is invisible, held and named.
+    pos = stiff.identify(ur5, data, model=model, use_orientation=False)
+    assert pos.statistics.oriented_rows == 0 and pos.orientation_residuals is None
+    assert not any(p["identified"] for p in pos.json["parameters"]
+                   if p["effect"] == "tool_orientation")
+    assert any(w.startswith("tool_orientation.w_x is not identifiable") for w in pos.warnings)
+    with pytest.raises(stiff.StiffError, match="orientation_length_m"):
+        stiff.identify(ur5, data, model=model, orientation_length_m=-1.0)
