@@ -71,7 +71,9 @@ def test_defaults_are_what_the_init_calls_write():
     assert stiff.identify_defaults() == {
         "model": o.model.decode(), "loss": o.loss.decode(), "loss_scale_m": o.loss_scale_m,
         "method": "auto", "max_iterations": o.max_iterations,
-        "max_relative_se": o.max_relative_se}
+        "max_relative_se": o.max_relative_se,
+        # 0 in C: estimated from the residuals (None in Python)
+        "orientation_length_m": o.orientation_length_m or None}
     n = _capi.defaults(_capi.NoiseOptions)
     d = stiff.noise_defaults()
     assert d["tracker_sigma_m"] == n.tracker_sigma_m > 0 and d["seed"] == n.seed
