@@ -423,29 +423,61 @@ TEST(AbsoluteData, FarAwayFrameWithoutRegistrationIsAnError) {
   }
 }
 
+/// A 6-D probe on the flange turned by `probe` (rotation vector, flange frame): the rows of
+/// `data` get the orientation the instrument measures, R_s R_06(true chain) R(probe), turned by
+/// a random small rotation of sigma_o [rad] per axis.
+void add_orientation(const RobotModel& nominal,
+                     const Geometry& g,
+                     const Eigen::Vector3d& probe,
+                     double sigma_o,
+                     std::mt19937_64& rng,
+                     Dataset* data) {
+  const RobotModel truth = perturbed(nominal, g);
+  const Eigen::Matrix3d rp = probe.norm() > 0
+                                 ? Eigen::AngleAxisd(probe.norm(), probe.normalized()).matrix()
+                                 : Eigen::Matrix3d::Identity();
+  std::normal_distribution<double> z(0.0, 1.0);
+  data->has_orientation = true;
+  for (auto& m : data->rows) {
+    const int s = std::stoi(m.session.substr(1));
+    const Eigen::Vector3d n(sigma_o * z(rng), sigma_o * z(rng), sigma_o * z(rng));
+    const Eigen::Matrix3d noise = n.norm() > 0
+                                      ? Eigen::AngleAxisd(n.norm(), n.normalized()).matrix()
+                                      : Eigen::Matrix3d::Identity();
+    m.has_orientation = true;
+    m.orientation = noise * g.rot[s] * truth.tool_pose(m.q + g.dq).topLeftCorner<3, 3>() * rp;
+  }
+}
+
+/// The orientations of `data` (in order), written as Euler angles in `written` and read back
+/// as XYZ angles scaled by `unit` (a convention or an angle unit mixed up), are refused naming
+/// the cause `what`; the data as they are pass.
+void expect_mixed_up_orientations_refused(const RobotModel& robot,
+                                          Dataset data,
+                                          EulerConvention written,
+                                          double unit,
+                                          const std::string& what) {
+  EXPECT_NO_THROW(check_absolute_data(robot, data, true));
+  for (auto& m : data.rows) {
+    const Eigen::Vector3d e = matrix_to_euler(written, m.orientation) * unit;
+    m.orientation = euler_to_matrix(EulerConvention::xyz, e(0), e(1), e(2));
+  }
+  try {
+    check_absolute_data(robot, data, true);
+    FAIL() << "no error";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+  }
+}
+
 TEST(AbsoluteData, EulerConventionMixUpIsDetected) {
   // 6-D data written in ZYX but read as XYZ turn by wrong angles between poses.
   const RobotModel robot = ur5();
   std::mt19937_64 rng(9);
   const Geometry g = random_geometry(robot.dof(), 1, rng);
   Dataset data = measure(robot, g, 20, 10e-6, rng);
-  data.has_orientation = true;
-  const RobotModel truth = perturbed(robot, g);
-  for (auto& m : data.rows) {
-    m.has_orientation = true;
-    m.orientation = g.rot[0] * truth.tool_pose(m.q + g.dq).topLeftCorner<3, 3>();
-  }
-  EXPECT_NO_THROW(check_absolute_data(robot, data, true));
-  for (auto& m : data.rows) {
-    const Eigen::Vector3d zyx = matrix_to_euler(EulerConvention::zyx, m.orientation);
-    m.orientation = euler_to_matrix(EulerConvention::xyz, zyx(0), zyx(1), zyx(2));
-  }
-  try {
-    check_absolute_data(robot, data, true);
-    FAIL() << "no error";
-  } catch (const InvalidArgument& e) {
-    EXPECT_NE(std::string(e.what()).find("Euler convention"), std::string::npos) << e.what();
-  }
+  add_orientation(robot, g, Eigen::Vector3d::Zero(), 0.0, rng, &data);
+  expect_mixed_up_orientations_refused(robot, data, EulerConvention::zyx, 1.0, "Euler convention");
 }
 
 TEST(Identifiability, JointTheDataBarelySeeIsHeldNotFittedToNoise) {
@@ -596,30 +628,6 @@ TEST(AbsoluteEffects, CalibratedRobotCarriesTheFittedGeometry) {
 }
 
 // ---- 6-D data: the probe's orientation.
-
-/// A 6-D probe on the flange turned by `probe` (rotation vector, flange frame): the rows of
-/// `data` get the orientation the instrument measures, R_s R_06(true chain) R(probe), turned by
-/// a random small rotation of sigma_o [rad] per axis.
-void add_orientation(const RobotModel& nominal,
-                     const Geometry& g,
-                     const Eigen::Vector3d& probe,
-                     double sigma_o,
-                     std::mt19937_64& rng,
-                     Dataset* data) {
-  const RobotModel truth = perturbed(nominal, g);
-  const Eigen::Matrix3d rp = Eigen::AngleAxisd(probe.norm(), probe.normalized()).matrix();
-  std::normal_distribution<double> z(0.0, 1.0);
-  data->has_orientation = true;
-  for (auto& m : data->rows) {
-    const int s = std::stoi(m.session.substr(1));
-    const Eigen::Vector3d n(sigma_o * z(rng), sigma_o * z(rng), sigma_o * z(rng));
-    const Eigen::Matrix3d noise = n.norm() > 0
-                                      ? Eigen::AngleAxisd(n.norm(), n.normalized()).matrix()
-                                      : Eigen::Matrix3d::Identity();
-    m.has_orientation = true;
-    m.orientation = noise * g.rot[s] * truth.tool_pose(m.q + g.dq).topLeftCorner<3, 3>() * rp;
-  }
-}
 
 const std::vector<std::string> kFullTool = {"registration", "tool", "tool_orientation",
                                             "joint_offset", "kinematic"};
@@ -803,18 +811,8 @@ TEST(OrientationResidual, DegreesDeclaredAsRadiansAreDetected) {
   const Geometry g = random_geometry(robot.dof(), 1, rng);
   Dataset data = measure(robot, g, 20, 10e-6, rng);
   add_orientation(robot, g, Eigen::Vector3d(0.1, 0.2, 0.3), 10e-6, rng, &data);
-  EXPECT_NO_THROW(check_absolute_data(robot, data, true));
-  constexpr double kDeg = 180.0 / 3.141592653589793;
-  for (auto& m : data.rows) {
-    const Eigen::Vector3d e = matrix_to_euler(EulerConvention::xyz, m.orientation) * kDeg;
-    m.orientation = euler_to_matrix(EulerConvention::xyz, e(0), e(1), e(2));
-  }
-  try {
-    identify(robot, data, kFullTool);
-    FAIL() << "no error";
-  } catch (const InvalidArgument& e) {
-    EXPECT_NE(std::string(e.what()).find("_deg or _rad"), std::string::npos) << e.what();
-  }
+  expect_mixed_up_orientations_refused(robot, data, EulerConvention::xyz, 180.0 / 3.141592653589793,
+                                       "_deg or _rad");
 }
 
 }  // namespace
