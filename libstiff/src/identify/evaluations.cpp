@@ -29,6 +29,7 @@ void displacement_and_jacobian(const Setup& s,
   for (int first = 0; first < nc; first += kJetStride) {
     const int last = std::min(nc, first + kJetStride);
     for (int i = first; i < last; ++i) t[jc[i]].v(i - first) = scale ? scale[i] : 1.0;
+    s.scratch.same_values = first > 0;  // the same row and values, other directions
     model.evaluate_jet(t.data(), m, s.ctx[row], s.scratch, &dj, op);
     for (int i = first; i < last; ++i) {
       t[jc[i]].v(i - first) = 0.0;
@@ -38,6 +39,7 @@ void displacement_and_jacobian(const Setup& s,
         for (int k = 0; k < 3; ++k) o[3 + k] = oj(k).v(i - first);
     }
   }
+  s.scratch.same_values = false;
   for (int k = 0; k < 3; ++k) d[k] = dj(k).a;
   if (op)
     for (int k = 0; k < 3; ++k) d[3 + k] = oj(k).a;

@@ -324,6 +324,18 @@ Vector3<T> corrected_point(const RobotModel& robot,
   return rot * r + pos;
 }
 
+/// As above; the state's `kept` values serve the Jet overload below only.
+template <typename T>
+Vector3<T> corrected_point(const RobotModel& robot,
+                           const Eigen::VectorXd& q,
+                           const VectorX<T>& dq,
+                           const Matrix6X<T>& joint_error,
+                           const Vector3<T>& r,
+                           Matrix3<T>* flange,
+                           EvalState<T>& /*s*/) {
+  return corrected_point<T>(robot, q, dq, joint_error, r, flange);
+}
+
 /// corrected_point for Jets by the chain rule: the chain once in double, then the point's
 /// derivatives with respect to each joint's dq, error translation and error rotation vector
 /// and to r, applied to the Jets' derivative parts. The same first derivatives as the Jet
@@ -342,7 +354,8 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
                              const VectorX<Jet>& dq,
                              const Matrix6X<Jet>& joint_error,
                              const Vector3<Jet>& r,
-                             Matrix3<Jet>* flange = nullptr) {
+                             Matrix3<Jet>* flange,
+                             EvalState<Jet>& s) {
   const int n = robot.dof();
   constexpr int kMax = 32;
   if (n > kMax) return corrected_point<Jet>(robot, q, dq, joint_error, r, flange);
@@ -350,7 +363,32 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
   Eigen::Vector3d pb[kMax], pe[kMax], ze[kMax];
   Eigen::Matrix3d rot = Eigen::Matrix3d::Identity();
   Eigen::Vector3d pos = Eigen::Vector3d::Zero();
-  for (int j = 0; j < n; ++j) {
+  // The chain in double depends on the values only: the row's later passes (other derivative
+  // directions at the same values) take it from the first.
+  const size_t kept_size = static_cast<size_t>(36 * n + 12);
+  auto keep = [&](bool store) {
+    double* k = s.kept.data();
+    auto move = [&](double* x, int len) {
+      if (store)
+        std::copy(x, x + len, k);
+      else
+        std::copy(k, k + len, x);
+      k += len;
+    };
+    for (int j = 0; j < n; ++j) {
+      move(rb[j].data(), 9);
+      move(re[j].data(), 9);
+      move(jr[j].data(), 9);
+      move(pb[j].data(), 3);
+      move(pe[j].data(), 3);
+      move(ze[j].data(), 3);
+    }
+    move(rot.data(), 9);
+    move(pos.data(), 3);
+  };
+  const bool reuse = s.same_values && s.kept.size() == kept_size;
+  if (reuse) keep(false);
+  for (int j = 0; j < n && !reuse; ++j) {
     const Joint& jt = robot.joints[j];
     pos += rot * jt.pre.topRightCorner<3, 1>();
     rot = (rot * jt.pre.topLeftCorner<3, 3>()).eval();
@@ -378,6 +416,10 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
     rot = (rot * Eigen::AngleAxisd(q(j) + dq(j).a, jt.axis).toRotationMatrix()).eval();
     pos += rot * jt.post.topRightCorner<3, 1>();
     rot = (rot * jt.post.topLeftCorner<3, 3>()).eval();
+  }
+  if (!reuse) {
+    s.kept.resize(kept_size);
+    keep(true);
   }
   const Eigen::Vector3d ra(r(0).a, r(1).a, r(2).a);
   const Eigen::Vector3d p = rot * ra + pos;
@@ -466,8 +508,8 @@ void DeflectionModel::evaluate_into(const T* theta,
       s.joint_error = Matrix6X<T>::Zero(6, n);
       for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
       Matrix3<T> fr;
-      s.d +=
-          corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, s.oriented ? &fr : nullptr);
+      s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, s.oriented ? &fr : nullptr,
+                             s);
       if (s.oriented) probe_orientation(s, fr, false);
       if (instrument)
         for (size_t e = 0; e < effects_.size(); ++e)
@@ -505,7 +547,8 @@ void DeflectionModel::evaluate_into(const T* theta,
     s.joint_error = Matrix6X<T>::Zero(6, n);
     for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
     Matrix3<T> fr;
-    s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, s.oriented ? &fr : nullptr);
+    s.d +=
+        corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, s.oriented ? &fr : nullptr, s);
     if (s.oriented) probe_orientation(s, fr, true);
   }
   if (instrument)
@@ -685,7 +728,7 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
     s.joint_error = Matrix6X<Jet>::Zero(6, n);
     for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
     Matrix3<Jet> fr;
-    s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, orient ? &fr : nullptr);
+    s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, orient ? &fr : nullptr, s);
     if (orient) probe_orientation(s, fr, true);
   }
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);

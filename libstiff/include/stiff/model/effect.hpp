@@ -102,6 +102,11 @@ struct EvalState {
   Matrix3<T> probe;
   Matrix3<T> orientation;
   bool oriented = false;
+  /// Set by a caller that evaluates the same row at the same parameter values again, only for
+  /// other derivative directions (one pass per kJetStride parameters): the model may reuse the
+  /// plain values it kept on the previous pass (`kept`) instead of computing them again.
+  bool same_values = false;
+  std::vector<double> kept;
 };
 
 /// What an effect needs from the robot file or the data.
