@@ -169,8 +169,8 @@ Identifiability check_identifiability(const DeflectionModel& model,
   const Eigen::MatrixXd js = j * typical.asDiagonal();
   // With the residuals at theta, the residual scale is that of the linear least-squares step
   // over each round's free set.
-  Eigen::VectorXd b;
-  if (residuals) b = js.transpose() * *residuals;
+  Eigen::VectorXd jtr;  // J^T r
+  if (residuals) jtr = js.transpose() * *residuals;
   Eigen::MatrixXd g = Eigen::MatrixXd::Zero(p, p);
   g.selfadjointView<Eigen::Lower>().rankUpdate(js.transpose());
   g = g.selfadjointView<Eigen::Lower>();
@@ -195,7 +195,7 @@ Identifiability check_identifiability(const DeflectionModel& model,
         d.asDiagonal() * ge.ldlt().solve(Eigen::MatrixXd::Identity(nf, nf)) * d.asDiagonal();
     if (residuals) {
       Eigen::VectorXd bf(nf);
-      for (int a = 0; a < nf; ++a) bf(a) = b(free[a]);
+      for (int a = 0; a < nf; ++a) bf(a) = jtr(free[a]);
       const Eigen::VectorXd z = cov * bf;  // step in units of the typical magnitudes
       const double rss = std::max(0.0, residuals->squaredNorm() - bf.dot(z));
       const double dof = static_cast<double>(residuals->size() - nf);

@@ -242,10 +242,10 @@ void DeflectionModel::evaluate_double(const double* theta,
   double jm[kMax][3];
   for (int j = 0; j < n; ++j) {
     const double* z = c.chain.axis.data() + 3 * j;
-    const double* o = c.chain.origin.data() + 3 * j;
-    lever_arm(z, o, s.p_meas, jm[j]);
+    const double* origin = c.chain.origin.data() + 3 * j;
+    lever_arm(z, origin, s.p_meas, jm[j]);
     double wl[3];
-    lever_arm(z, o, s.p_load, wl);
+    lever_arm(z, origin, s.p_load, wl);
     s.tau(j) = joint_torque(wl, z, s.force, s.moment);
   }
   s.dtheta.setZero(n);
@@ -657,10 +657,10 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
   double jm[kMax][3];  // J_p(P) translational columns
   for (int j = 0; j < n; ++j) {
     const double* z = c.chain.axis.data() + 3 * j;
-    const double* o = c.chain.origin.data() + 3 * j;
+    const double* origin = c.chain.origin.data() + 3 * j;
     double wm[3], wl[3];
-    lever_arm(z, o, pm, wm);
-    lever_arm(z, o, pl, wl);
+    lever_arm(z, origin, pm, wm);
+    lever_arm(z, origin, pl, wl);
     for (int k = 0; k < 3; ++k) jm[j][k] = wm[k];
     const double tau = joint_torque(wl, z, f, mo) + (gravity ? c.tau_gravity(j) : 0.0);
     Vec tv = Vec::Zero();

@@ -248,7 +248,9 @@ TEST(DiagnoseMassModel, BacklashWithMassesThirtyPercentOff) {
     const Diagnosis d = diagnose(file, s.calib, &s.valid, {"joint"}, {});
     print("backlash, masses off", seed, d);
     EXPECT_TRUE(found(d, "backlash")) << "seed " << seed << ": " << d.summary;
-    if (d.after_valid) EXPECT_LT(d.after.validation_rms_m, d.fit.validation_rms_m);
+    if (d.after_valid) {
+      EXPECT_LT(d.after.validation_rms_m, d.fit.validation_rms_m);
+    }
   }
 }
 

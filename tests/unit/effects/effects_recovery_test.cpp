@@ -134,7 +134,7 @@ TEST_P(EffectRecovery, SlowWithinThreeStandardErrors200Seeds) { check(GetParam()
 INSTANTIATE_TEST_SUITE_P(Effects,
                          EffectRecovery,
                          ::testing::ValuesIn(effect_names()),
-                         [](const auto& info) { return info.param; });
+                         [](const auto& p) { return p.param; });
 
 TEST(EffectRecoveryDetails, PointOffsetMakesJointSixIdentifiable) {
   const RobotModel robot = test::rokae();
