@@ -309,31 +309,20 @@ void corrected_flange(const RobotModel& robot,
 }
 
 /// The corrected chain's position of the flange point r and, with `flange`, its flange
-/// rotation (base frame).
+/// rotation (base frame). `s` serves the Jet overload below (its kept values) only.
 template <typename T>
 Vector3<T> corrected_point(const RobotModel& robot,
                            const Eigen::VectorXd& q,
                            const VectorX<T>& dq,
                            const Matrix6X<T>& joint_error,
                            const Vector3<T>& r,
-                           Matrix3<T>* flange = nullptr) {
+                           Matrix3<T>* flange = nullptr,
+                           EvalState<T>* /*s*/ = nullptr) {
   Matrix3<T> rot;
   Vector3<T> pos;
   corrected_flange(robot, q, dq, joint_error, rot, pos);
   if (flange) *flange = rot;
   return rot * r + pos;
-}
-
-/// As above; the state's `kept` values serve the Jet overload below only.
-template <typename T>
-Vector3<T> corrected_point(const RobotModel& robot,
-                           const Eigen::VectorXd& q,
-                           const VectorX<T>& dq,
-                           const Matrix6X<T>& joint_error,
-                           const Vector3<T>& r,
-                           Matrix3<T>* flange,
-                           EvalState<T>& /*s*/) {
-  return corrected_point<T>(robot, q, dq, joint_error, r, flange);
 }
 
 /// corrected_point for Jets by the chain rule: the chain once in double, then the point's
@@ -355,7 +344,7 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
                              const Matrix6X<Jet>& joint_error,
                              const Vector3<Jet>& r,
                              Matrix3<Jet>* flange,
-                             EvalState<Jet>& s) {
+                             EvalState<Jet>* state) {
   const int n = robot.dof();
   constexpr int kMax = 32;
   if (n > kMax) return corrected_point<Jet>(robot, q, dq, joint_error, r, flange);
@@ -367,7 +356,7 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
   // directions at the same values) take it from the first.
   const size_t kept_size = static_cast<size_t>(36 * n + 12);
   auto keep = [&](bool store) {
-    double* k = s.kept.data();
+    double* k = state->kept.data();
     auto move = [&](double* x, int len) {
       if (store)
         std::copy(x, x + len, k);
@@ -386,7 +375,7 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
     move(rot.data(), 9);
     move(pos.data(), 3);
   };
-  const bool reuse = s.same_values && s.kept.size() == kept_size;
+  const bool reuse = state && state->same_values && state->kept.size() == kept_size;
   if (reuse) keep(false);
   for (int j = 0; j < n && !reuse; ++j) {
     const Joint& jt = robot.joints[j];
@@ -417,8 +406,8 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
     pos += rot * jt.post.topRightCorner<3, 1>();
     rot = (rot * jt.post.topLeftCorner<3, 3>()).eval();
   }
-  if (!reuse) {
-    s.kept.resize(kept_size);
+  if (state && !reuse) {
+    state->kept.resize(kept_size);
     keep(true);
   }
   const Eigen::Vector3d ra(r(0).a, r(1).a, r(2).a);
@@ -509,7 +498,7 @@ void DeflectionModel::evaluate_into(const T* theta,
       for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
       Matrix3<T> fr;
       s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, s.oriented ? &fr : nullptr,
-                             s);
+                             &s);
       if (s.oriented) probe_orientation(s, fr, false);
       if (instrument)
         for (size_t e = 0; e < effects_.size(); ++e)
@@ -548,7 +537,7 @@ void DeflectionModel::evaluate_into(const T* theta,
     for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
     Matrix3<T> fr;
     s.d +=
-        corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, s.oriented ? &fr : nullptr, s);
+        corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, s.oriented ? &fr : nullptr, &s);
     if (s.oriented) probe_orientation(s, fr, true);
   }
   if (instrument)
@@ -728,7 +717,7 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
     s.joint_error = Matrix6X<Jet>::Zero(6, n);
     for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->geometry(theta + offsets_[e], s);
     Matrix3<Jet> fr;
-    s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, orient ? &fr : nullptr, s);
+    s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, orient ? &fr : nullptr, &s);
     if (orient) probe_orientation(s, fr, true);
   }
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);

@@ -160,30 +160,38 @@ TEST(AbsoluteEffects, FastJetEvaluationEqualsTheGenericOne) {
   std::mt19937_64 rng(12);
   const Geometry g = random_geometry(robot.dof(), 2, rng);
   const Dataset data = measure(robot, g, 5, 0.0, rng);
-  std::vector<std::string> all = kGeometric;
-  for (const char* e : {"gravity_lumped", "harmonic", "joint"}) all.push_back(e);
-  const DeflectionModel m(robot, all, &data);
-  const int p = m.parameter_count();
-  Eigen::VectorXd theta = geometric_theta(m, g);
-  for (int k = m.offset(m.find("gravity_lumped")); k < p; ++k)
-    theta(k) = 0.7 * m.spec(k).typical * (k % 3 - 1);
-  const auto ctx = m.contexts(data);
-  EvalState<Jet> scratch;
-  for (size_t r = 0; r < data.size(); ++r)
-    for (int first = 0; first < p; first += kJetStride) {
-      std::vector<Jet> t(p);
-      for (int k = 0; k < p; ++k) t[k] = Jet(theta(k));
-      for (int k = first; k < std::min(p, first + kJetStride); ++k) t[k].v(k - first) = 1.0;
-      Vector3<Jet> slow, fast;
-      m.evaluate<Jet>(t.data(), data.rows[r], ctx[r], &slow, nullptr);
-      m.evaluate_jet(t.data(), data.rows[r], ctx[r], scratch, &fast);
-      for (int i = 0; i < 3; ++i) {
-        EXPECT_NEAR(fast(i).a, slow(i).a, 1e-15 + 1e-12 * std::abs(slow(i).a));
-        for (int k = 0; k < kJetStride; ++k)
-          EXPECT_NEAR(fast(i).v(k), slow(i).v(k), 1e-15 + 1e-11 * slow(i).v.cwiseAbs().maxCoeff())
-              << "row " << r << " parameter " << first + k;
+  // With deflection effects (the fast Jet path) and without (the geometric short cut); the
+  // later passes of a row reuse the chain kept by the first (same_values), as identify's do.
+  for (const bool deflecting : {true, false}) {
+    std::vector<std::string> all = kGeometric;
+    if (deflecting)
+      for (const char* e : {"gravity_lumped", "harmonic", "joint"}) all.push_back(e);
+    const DeflectionModel m(robot, all, &data);
+    const int p = m.parameter_count();
+    Eigen::VectorXd theta = geometric_theta(m, g);
+    if (deflecting)
+      for (int k = m.offset(m.find("gravity_lumped")); k < p; ++k)
+        theta(k) = 0.7 * m.spec(k).typical * (k % 3 - 1);
+    const auto ctx = m.contexts(data);
+    EvalState<Jet> scratch;
+    for (size_t r = 0; r < data.size(); ++r)
+      for (int first = 0; first < p; first += kJetStride) {
+        std::vector<Jet> t(p);
+        for (int k = 0; k < p; ++k) t[k] = Jet(theta(k));
+        for (int k = first; k < std::min(p, first + kJetStride); ++k) t[k].v(k - first) = 1.0;
+        Vector3<Jet> slow, fast;
+        m.evaluate<Jet>(t.data(), data.rows[r], ctx[r], &slow, nullptr);
+        scratch.same_values = first > 0;
+        m.evaluate_jet(t.data(), data.rows[r], ctx[r], scratch, &fast);
+        for (int i = 0; i < 3; ++i) {
+          EXPECT_NEAR(fast(i).a, slow(i).a, 1e-15 + 1e-12 * std::abs(slow(i).a));
+          for (int k = 0; k < kJetStride; ++k)
+            EXPECT_NEAR(fast(i).v(k), slow(i).v(k), 1e-15 + 1e-11 * slow(i).v.cwiseAbs().maxCoeff())
+                << (deflecting ? "deflecting" : "geometric") << " row " << r << " parameter "
+                << first + k;
+        }
       }
-    }
+  }
 }
 
 // The loop on absolute data (stiff diagnose --auto from the nominal registration and tool)
