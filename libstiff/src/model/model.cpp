@@ -2,6 +2,7 @@
 
 #include <ceres/rotation.h>
 
+#include <Eigen/QR>
 #include <cstdint>
 #include <cstring>
 #include <map>
@@ -838,6 +839,41 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> DeflectionModel::orientation_jacobian(
 Eigen::Matrix<double, 3, Eigen::Dynamic> DeflectionModel::displacement_jacobian(
     const Eigen::VectorXd& theta, const Measurement& m, const MeasurementContext& c) const {
   return jet_jacobian(*this, theta, m, c, false);
+}
+
+Eigen::VectorXd DeflectionModel::align_sessions(const Eigen::VectorXd& theta,
+                                                const Dataset& data,
+                                                const std::vector<MeasurementContext>& ctx,
+                                                int* estimated) const {
+  if (estimated) *estimated = 0;
+  std::vector<int> cols;
+  for (int k = 0; k < count_; ++k)
+    if (spec(k).per_session) cols.push_back(k);
+  Eigen::VectorXd out = theta;
+  if (cols.empty() || data.rows.empty()) return out;
+  const int n = static_cast<int>(data.rows.size());
+  Eigen::MatrixXd z(3 * n, cols.size());
+  Eigen::VectorXd e(3 * n);
+  // Gauss-Newton on the session's parameters alone; the effects that carry them are linear in
+  // them (an offset and a rate), so the first step is the solution and the second checks it.
+  for (int it = 0; it < 2; ++it) {
+    for (int r = 0; r < n; ++r) {
+      const Measurement& m = data.rows[r];
+      e.segment<3>(3 * r) = m.observed() - predict(out, m, ctx[r]).head<3>();
+      const auto jac = displacement_jacobian(out, m, ctx[r]);
+      for (size_t i = 0; i < cols.size(); ++i) z.block<3, 1>(3 * r, i) = jac.col(cols[i]);
+    }
+    // Columns with no effect on these rows (another session's parameters) drop out through
+    // the rank of the decomposition.
+    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(z);
+    const double top = qr.maxPivot();
+    if (!(top > 0)) return out;
+    qr.setThreshold(1e-10);
+    const Eigen::VectorXd step = qr.solve(e);
+    for (size_t i = 0; i < cols.size(); ++i) out(cols[i]) += step(i);
+    if (estimated) *estimated = static_cast<int>(qr.rank());
+  }
+  return out;
 }
 
 Eigen::Matrix<double, 3, Eigen::Dynamic> observation_block(

@@ -59,6 +59,12 @@ struct ParameterSpec {
   /// are that decision, the model has no derivative with respect to it, and a fit holds it
   /// (backlash's preload errors, found by threshold regression).
   bool from_data = false;
+  /// A parameter of the measurement session (its thermal state, its instrument set-up), not of
+  /// the robot: another session has its own value (a warm-up restarts, its course depends on
+  /// the day and on the protocol), which only that session's own readings can tell. A
+  /// comparison on a session the fit has not seen re-estimates it from that session's rows
+  /// (DeflectionModel::align_sessions) instead of carrying the calibration's value over.
+  bool per_session = false;
 };
 
 /// Data of one measurement that does not depend on the parameters (computed once).

@@ -132,6 +132,17 @@ class DeflectionModel {
                                                                 const Measurement& m,
                                                                 const MeasurementContext& c) const;
 
+  /// theta with the per-session parameters (ParameterSpec::per_session) that act on `data`
+  /// re-estimated from its own rows by least squares, every other parameter held: the model's
+  /// prediction for a measurement session the fit has not seen (a validation file, another
+  /// day), whose drift is its own. `ctx` = contexts(data). `*estimated` (may be null) receives
+  /// the number of directions estimated (the rank), which a comparison of mean squares must
+  /// count as degrees of freedom used. Rows weighted equally (the comparison's own weighting).
+  Eigen::VectorXd align_sessions(const Eigen::VectorXd& theta,
+                                 const Dataset& data,
+                                 const std::vector<MeasurementContext>& ctx,
+                                 int* estimated = nullptr) const;
+
   /// Index of a session label (0 for unknown labels and for data without sessions).
   int session_index(const std::string& label) const;
   /// True when the model knows the session label.

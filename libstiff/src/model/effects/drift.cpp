@@ -44,6 +44,9 @@ class Drift : public EffectT<Drift> {
             std::string("drift rate of the measured displacement, base ") + axis[a] + where, -1e-3,
             1e-3, 1e-7, 0.0, 0.0));
     }
+    // Offset and rate belong to the session's warm-up, not to the robot: a session the fit has
+    // not seen has its own (ParameterSpec::per_session).
+    for (auto& p : params_) p.per_session = true;
   }
   const std::string& name() const override { return name_; }
   bool example_parameters(const Eigen::VectorXd& /*c*/, double* p) const override {
