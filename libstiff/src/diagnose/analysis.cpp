@@ -230,12 +230,16 @@ Analysis analyse(const Context& cx,
   if (cx.validation) {
     const Dataset& v = *cx.validation;
     double ss = 0;
-    for (const Eigen::Vector3d& e : validation_errors(*a.model, a.theta, *cx.split)) {
+    int aligned = 0;
+    for (const Eigen::Vector3d& e : validation_errors(*a.model, a.theta, *cx.split, &aligned)) {
       q.validation_error_m.push_back(e.norm());
       ss += e.squaredNorm();
     }
     q.has_validation = true;
-    q.validation_rms_m = std::sqrt(ss / (3.0 * v.rows.size()));
+    q.validation_session_parameters = aligned;
+    // Mean squares per degree of freedom: the session's own parameters used some.
+    const double vdof = std::max(1.0, 3.0 * v.rows.size() - aligned);
+    q.validation_rms_m = std::sqrt(ss / vdof);
     const double vs = cx.vnoise->known ? cx.vnoise->floor_m : noise.floor_m;  // RMS sigma
     q.validation_floor_m = vs * std::sqrt(1.0 + static_cast<double>(a.p) / a.n);
     // Prediction error of new poses expected from the fit residual alone: E[RSS] = s^2 (n - p)
@@ -243,12 +247,12 @@ Analysis analyse(const Context& cx,
     // ratio of the two mean squares is ~ F(3m, n - p) (unweighted: no stated noise needed).
     if (q.dof > 0 && ss_m > 0) {
       const double fit_ms = ss_m / q.dof;
-      const double f = (ss / (3.0 * v.rows.size())) / (fit_ms * (1.0 + double(a.p) / a.n));
+      const double f = (ss / vdof) / (fit_ms * (1.0 + double(a.p) / a.n));
       q.validation_to_fit = std::sqrt(f);
       // A validation session's noise is not the calibration's (another day, another thermal
       // state): allowed to differ by the same relative uncertainty as a stated noise level.
       const double u = 1.0 + cx.opt->noise_uncertainty;
-      q.validation_to_fit_p = stats::f_sf(f / (u * u), 3.0 * v.rows.size(), q.dof);
+      q.validation_to_fit_p = stats::f_sf(f / (u * u), vdof, q.dof);
     }
   }
   return a;

@@ -40,10 +40,14 @@ ValidationSplit split_validation(const Dataset& calibration,
 
 /// Prediction errors (observed - predicted position) [m] of `split.scored`'s rows under
 /// `model` at `theta`, each new session first registered by the rigid motion that best maps
-/// its registering rows' predictions onto their measurements (least squares).
+/// its registering rows' predictions onto their measurements (least squares). On displacement
+/// rows the validation session's own parameters (ParameterSpec::per_session: its drift) are
+/// re-estimated from the scored rows (DeflectionModel::align_sessions);
+/// `*session_parameters` receives how many directions that used (degrees of freedom).
 std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
                                                const VectorXd& theta,
-                                               const ValidationSplit& split);
+                                               const ValidationSplit& split,
+                                               int* session_parameters = nullptr);
 
 struct Context {
   const RobotModel* robot;

@@ -34,6 +34,7 @@ nlohmann::json quality_json(const ModelQuality& q) {
     j["validation_error_m"] = q.validation_error_m;
     j["validation_to_fit"] = finite(q.validation_to_fit);
     j["validation_to_fit_p"] = q.validation_to_fit_p;
+    j["validation_session_parameters"] = q.validation_session_parameters;
   }
   nlohmann::json p = nlohmann::json::object();
   for (size_t k = 0; k < q.parameter_names.size(); ++k)

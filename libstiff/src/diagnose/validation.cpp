@@ -71,8 +71,20 @@ ValidationSplit split_validation(const Dataset& calibration,
 }
 
 std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
-                                               const VectorXd& theta,
-                                               const ValidationSplit& split) {
+                                               const VectorXd& theta_fit,
+                                               const ValidationSplit& split,
+                                               int* session_parameters) {
+  // The validation file is another session: the parameters of the session itself (its drift:
+  // a warm-up restarts, and its course depends on the day and the protocol) are its own and
+  // come from its rows; only the robot's are carried over. Absolute rows keep the fit's: their
+  // new set-ups are registered below, from other rows.
+  if (session_parameters) *session_parameters = 0;
+  const bool displacement = std::none_of(split.scored.rows.begin(), split.scored.rows.end(),
+                                         [](const Measurement& m) { return m.absolute; });
+  const VectorXd theta =
+      displacement ? model.align_sessions(theta_fit, split.scored, model.contexts(split.scored),
+                                          session_parameters)
+                   : theta_fit;
   // A new session is predicted with some other session's registration; the rigid motion
   // fitted on its registering rows replaces it (a composition of rigid motions is one).
   auto predicted = [&](const Dataset& d) {
