@@ -65,6 +65,7 @@ stiff_status stiff_identify_options_init(stiff_identify_options* options, size_t
     o.method = STIFF_METHOD_AUTO;
     o.max_relative_se = io.max_relative_se;
     o.orientation_length_m = io.orientation_length_m;
+    o.select_terms = io.select_terms ? 1 : -1;
     return init_options(options, struct_size, offsetof(stiff_identify_options, max_relative_se),
                         "stiff_identify_options", o);
   });
@@ -95,6 +96,7 @@ stiff_status stiff_identify(stiff_result** out,
     if (o.max_iterations)
       io.max_iterations =
           static_cast<int>(std::min<uint32_t>(o.max_iterations, std::numeric_limits<int>::max()));
+    if (o.select_terms != 0) io.select_terms = o.select_terms > 0;
     check_identify_options(io);
     const bool linear_ok = effects.size() == 1 && effects[0] == kDefaultModel &&
                            io.loss == IdentifyOptions{}.loss && !o.start;

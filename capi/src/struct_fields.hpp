@@ -68,7 +68,8 @@ STIFF_FIELDS(stiff_identify_options,
              STIFF_FIELD(stiff_identify_options, max_relative_se),
              STIFF_FIELD(stiff_identify_options, start),
              STIFF_FIELD(stiff_identify_options, refit),
-             STIFF_FIELD(stiff_identify_options, orientation_length_m));
+             STIFF_FIELD(stiff_identify_options, orientation_length_m),
+             STIFF_FIELD(stiff_identify_options, select_terms));
 STIFF_FIELDS(stiff_fit_statistics,
              STIFF_FIELD(stiff_fit_statistics, struct_size),
              STIFF_FIELD(stiff_fit_statistics, measurements),

@@ -232,6 +232,7 @@ TEST_F(OptionsInit, IdentifyOptions) {
   EXPECT_EQ(o.max_relative_se, stiff::LinearOptions{}.max_relative_se);
   EXPECT_EQ(o.start, nullptr);
   EXPECT_EQ(o.refit, nullptr);
+  EXPECT_EQ(o.select_terms, core.select_terms ? 1 : -1);
   expect_refuses_bad_arguments(stiff_identify_options_init, "stiff_identify_options_init",
                                offsetof(stiff_identify_options, max_relative_se));
 
@@ -265,6 +266,27 @@ TEST_F(OptionsInit, IdentifyOptions) {
   EXPECT_EQ(text_of(stiff_result_json, a), text_of(stiff_result_json, b));
   stiff_result_destroy(a);
   stiff_result_destroy(b);
+
+  // select_terms: the data have no nonlinear reducer, so nonlinear_joint's optional terms
+  // (all null in truth) are each kept only when they lower the BIC, i.e. with the chance of a
+  // chi2(1) above ln(3N) (a few %): the default fit leaves terms out; < 0 fits every term and
+  // leaves none out; > 0 is the default.
+  {
+    auto fit_text = [&](int32_t select) {
+      stiff_identify_options t = o;
+      t.model = "joint+nonlinear_joint";
+      t.select_terms = select;
+      stiff_result* r = nullptr;
+      EXPECT_EQ(stiff_identify(&r, robot_, data, &t), STIFF_OK) << stiff_last_error();
+      const std::string text = r ? text_of(stiff_result_json, r) : "";
+      stiff_result_destroy(r);
+      return text;
+    };
+    const std::string by_default = fit_text(0), all = fit_text(-1);
+    EXPECT_NE(by_default.find("is left out"), std::string::npos);
+    EXPECT_EQ(all.find("is left out"), std::string::npos);
+    EXPECT_EQ(fit_text(1), by_default);
+  }
 
   // Checked once, in the core, whichever method solves: the same message for both.
   for (const uint32_t method : {uint32_t{STIFF_METHOD_LINEAR}, uint32_t{STIFF_METHOD_CERES}}) {

@@ -386,12 +386,17 @@ typedef struct stiff_identify_options {
    *  [m]; 0: the default, the weight estimated from the residuals (two variance components);
    *  < 0: positions only (docs/identifiability.md). @since 0.2 */
   double orientation_length_m;
+  /** Optional terms of an effect (the second-order terms of nonlinear_joint, the second
+   *  harmonics of gravity_compensator): 0 = the default, kept only when they lower the
+   *  Bayesian information criterion, the others held at 0 ("is left out",
+   *  docs/identifiability.md); > 0 the same; < 0 every term fitted. @since 0.2 */
+  int32_t select_terms;
 } stiff_identify_options;
 /* Every field spelled out: a bare {sizeof(...)} trips -Wmissing-field-initializers. All zero:
  * every field at its default. stiff_identify_options_init writes the defaults themselves.
  * @since 0.1 */
 #define STIFF_IDENTIFY_OPTIONS_INIT \
-  { sizeof(stiff_identify_options), NULL, NULL, 0.0, 0, 0, NULL, NULL, 0.0, NULL, NULL, 0.0 }
+  { sizeof(stiff_identify_options), NULL, NULL, 0.0, 0, 0, NULL, NULL, 0.0, NULL, NULL, 0.0, 0 }
 
 /** Fill *options with the library's defaults (model "joint", loss "none", loss_scale_m 0 =
  *  from the noise, the solver's iteration limit, STIFF_METHOD_AUTO, the default

@@ -84,6 +84,7 @@ class IdentifyOptions(C.Structure):
         ("start", C.c_void_p),
         ("refit", C.c_char_p),
         ("orientation_length_m", C.c_double),
+        ("select_terms", C.c_int32),
     ]
 
 

@@ -591,7 +591,8 @@ def identify_defaults() -> dict:
     return {"model": _c.text(o.model), "loss": _c.text(o.loss), "loss_scale_m": o.loss_scale_m,
             "method": next(k for k, v in METHODS.items() if v == o.method),
             "max_iterations": o.max_iterations, "max_relative_se": o.max_relative_se,
-            "orientation_length_m": o.orientation_length_m or None}
+            "orientation_length_m": o.orientation_length_m or None,
+            "select_terms": o.select_terms > 0}
 
 
 def identify(robot: Robot, data: Dataset, model: Optional[str] = None,
@@ -600,7 +601,8 @@ def identify(robot: Robot, data: Dataset, model: Optional[str] = None,
              max_relative_se: Optional[float] = None, start: Optional["Fit"] = None,
              refit: Optional[str] = None,
              orientation_length_m: Optional[float] = None,
-             use_orientation: bool = True) -> Fit:
+             use_orientation: bool = True,
+             select_terms: Optional[bool] = None) -> Fit:
     """Identify the model (effects joined by '+') from measured displacements and/or absolute
     positions (e.g. model='registration+tool+joint_offset+kinematic' on absolute data).
     An argument left at None takes the library's default (identify_defaults()); the library
@@ -613,7 +615,10 @@ def identify(robot: Robot, data: Dataset, model: Optional[str] = None,
     registered to a calibrated robot). Absolute rows with a measured orientation add the
     orientation residual when the model has the probe's frame (tool_orientation);
     `orientation_length_m` > 0 weighs it as the position error it makes this far from the probe
-    (None: estimated from the residuals); `use_orientation=False` fits the positions alone."""
+    (None: estimated from the residuals); `use_orientation=False` fits the positions alone.
+    `select_terms`: True keeps an optional term of an effect (nonlinear_joint's second-order
+    terms, gravity_compensator's second harmonics) only when it lowers the Bayesian information
+    criterion (docs/identifiability.md); False fits them all."""
     o = _c.defaults(_c.IdentifyOptions)
     for name, v in (("model", model), ("loss", loss), ("refit", refit)):
         if v is not None and not isinstance(v, str):  # ctypes would take bytes or a pointer
@@ -641,6 +646,10 @@ def identify(robot: Robot, data: Dataset, model: Optional[str] = None,
             raise InvalidArgumentError(
                 f"identify: max_relative_se must be a finite value >= 0 (got {max_relative_se})", -1)
         o.max_relative_se = max_relative_se if max_relative_se > 0 else -1.0
+    if select_terms is not None:
+        if not isinstance(select_terms, bool):
+            raise TypeError(f"select_terms must be True or False, not {type(select_terms).__name__}")
+        o.select_terms = 1 if select_terms else -1
     if start is not None:
         if not isinstance(start, Fit):
             raise TypeError(f"start must be a Fit, not {type(start).__name__}")

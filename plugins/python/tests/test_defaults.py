@@ -52,7 +52,8 @@ def measured(robot, design):
 def test_option_arguments_default_to_none_so_the_library_decides():
     # An argument with a library default is None in the signature: nothing is restated here.
     for fn, names in ((stiff.identify, ("model", "loss", "loss_scale_m", "method",
-                                        "max_iterations", "max_relative_se")),
+                                        "max_iterations", "max_relative_se",
+                                        "select_terms")),
                       (stiff.simulate, ("tracker_sigma_m", "tracker_ppm", "force_relative",
                                         "force_absolute_N", "joint_sigma_rad", "outlier_rate",
                                         "outlier_size_m", "seed", "tracker_position_m")),
@@ -73,7 +74,8 @@ def test_defaults_are_what_the_init_calls_write():
         "method": "auto", "max_iterations": o.max_iterations,
         "max_relative_se": o.max_relative_se,
         # 0 in C: estimated from the residuals (None in Python)
-        "orientation_length_m": o.orientation_length_m or None}
+        "orientation_length_m": o.orientation_length_m or None,
+        "select_terms": o.select_terms > 0}
     n = _capi.defaults(_capi.NoiseOptions)
     d = stiff.noise_defaults()
     assert d["tracker_sigma_m"] == n.tracker_sigma_m > 0 and d["seed"] == n.seed
@@ -186,3 +188,24 @@ def test_fmu_help_shows_the_library_defaults():
     text = help_of("fmu", "export")
     assert f"FMI version (default {d['fmi_version']})" in text
     assert f"model identifier (default {d['model_identifier']})" in text
+
+
+def test_select_terms_reaches_the_library(robot, measured, rokae_path, tmp_path):
+    # The data have no nonlinear reducer: by default nonlinear_joint's optional terms are kept
+    # only when they lower the BIC (each null term with the chance of a chi2(1) above ln(3N),
+    # a few %), so some are left out; select_terms=False (CLI --all-terms) fits them all.
+    model = "joint+nonlinear_joint"
+    left_out = lambda fit: [w for w in fit.warnings if "is left out" in w]
+    default = stiff.identify(robot, measured, model=model)
+    assert left_out(default)
+    assert stiff.identify(robot, measured, model=model, select_terms=True).json == default.json
+    assert not left_out(stiff.identify(robot, measured, model=model, select_terms=False))
+    with pytest.raises(TypeError):
+        stiff.identify(robot, measured, model=model, select_terms=1)
+    measured.write(tmp_path / "m.csv")
+    cli("identify", "--robot", rokae_path, "--data", tmp_path / "m.csv", "--model", model,
+        "--all-terms", "-o", tmp_path / "all.json")
+    assert "is left out" not in (tmp_path / "all.json").read_text()
+    cli("identify", "--robot", rokae_path, "--data", tmp_path / "m.csv", "--model", model,
+        "-o", tmp_path / "sel.json")
+    assert "is left out" in (tmp_path / "sel.json").read_text()

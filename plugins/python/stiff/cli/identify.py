@@ -57,6 +57,11 @@ def register(sub):
                         "far from the probe (default: estimated from the residuals)")
     p.add_argument("--positions-only", action="store_true",
                    help="fit the positions alone, ignoring measured orientations")
+    p.add_argument("--all-terms", action="store_true",
+                   help="fit every optional term of the effects (nonlinear_joint's second-order "
+                        "terms, gravity_compensator's second harmonics) instead of keeping only "
+                        "those that lower the Bayesian information criterion "
+                        "(docs/identifiability.md)")
     p.add_argument("--start", metavar="FIT",
                    help="a previous fit of this robot whose parameters start this one")
     p.add_argument("--refit", metavar="EFFECTS",
@@ -138,7 +143,8 @@ def run(args):
                            method=args.method,
                            max_relative_se=args.max_relative_se, start=start,
                            refit=args.refit, orientation_length_m=args.orientation_length,
-                           use_orientation=not args.positions_only)
+                           use_orientation=not args.positions_only,
+                           select_terms=False if args.all_terms else None)
     except Exception:
         # A fit that fails on implausible data: what is wrong with the data helps more.
         for w in plausibility_warnings(robot, data):
