@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <random>
 #include <set>
 
 #include "effect_truths.hpp"
@@ -283,6 +284,52 @@ TEST(Effects, DriftHasOneBlockPerSession) {
   const auto ctx = m.contexts(data);
   EXPECT_DOUBLE_EQ(m.predict(t, data.rows[0], ctx[0])(0), 0.0);
   EXPECT_DOUBLE_EQ(m.predict(t, data.rows[7], ctx[7])(0), 1e-5);
+}
+
+// A validation session's drift is its own (ParameterSpec::per_session): align_sessions
+// re-estimates it from that session's rows and leaves every robot parameter as it was. The
+// session here drifts by an offset and a rate that the calibration did not have; the estimates
+// must agree with the truth within 4.5 standard errors of least squares with 10 um noise
+// (intercept and slope on 40 rows: se(b) = sigma sqrt(1/m + tbar^2/Sxx), se(v) = sigma/sqrt(Sxx)).
+TEST(Effects, AlignSessionsReestimatesOnlyTheSessionsDrift) {
+  const RobotModel robot = test::rokae();
+  const int m = 40;
+  Dataset data = test::design60(11, m);
+  DeflectionModel model(robot, {"joint", "drift"}, &data);
+  const int drift = model.offset(model.find("drift"));
+  Eigen::VectorXd truth = model.null_parameters();
+  const Eigen::VectorXd k = test::paper_stiffness();
+  for (int j = 0; j < k.size(); ++j) truth(j) = 1.0 / k(j);
+  const Eigen::Vector3d offset(30e-6, -20e-6, 10e-6), rate(0.5e-6, 0.0, -0.3e-6);
+  truth.segment<3>(drift) = offset;
+  truth.segment<3>(drift + 3) = rate;
+  const auto ctx = model.contexts(data);
+  const double sigma = 10e-6;
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> noise(0.0, sigma);
+  for (int r = 0; r < m; ++r) {
+    data.rows[r].displacement = model.predict(truth, data.rows[r], ctx[r]).head<3>();
+    for (int a = 0; a < 3; ++a) data.rows[r].displacement(a) += noise(rng);
+  }
+  Eigen::VectorXd fit = truth;
+  fit.segment<6>(drift).setZero();  // the calibration session did not drift
+  int estimated = -1;
+  const Eigen::VectorXd aligned = model.align_sessions(fit, data, ctx, &estimated);
+  EXPECT_EQ(estimated, 6);
+  for (int j = 0; j < drift; ++j) EXPECT_EQ(aligned(j), fit(j)) << model.spec(j).name;
+  double tbar = 0, sxx = 0;
+  for (int r = 0; r < m; ++r) tbar += ctx[r].time / m;
+  for (int r = 0; r < m; ++r) sxx += (ctx[r].time - tbar) * (ctx[r].time - tbar);
+  const double se_b = sigma * std::sqrt(1.0 / m + tbar * tbar / sxx), se_v = sigma / std::sqrt(sxx);
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_NEAR(aligned(drift + a), offset(a), 4.5 * se_b) << "offset " << a;
+    EXPECT_NEAR(aligned(drift + 3 + a), rate(a), 4.5 * se_v) << "rate " << a;
+  }
+  // Nothing of the session in the model: nothing to align.
+  DeflectionModel joint(robot, {"joint"}, &data);
+  const Eigen::VectorXd c = truth.head(joint.parameter_count());
+  EXPECT_EQ(joint.align_sessions(c, data, joint.contexts(data), &estimated), c);
+  EXPECT_EQ(estimated, 0);
 }
 
 }  // namespace
