@@ -63,6 +63,8 @@ bool Chain::explained_by_chain(size_t i, int depth, std::string* why, std::strin
   static constexpr size_t kAlternatives = 3;
   std::string first;
   size_t best = SIZE_MAX;
+  // A copy: levels grows (and may move) while the chains are built.
+  const std::string top_effect = levels[i].scores.empty() ? "" : levels[i].scores[0].effect;
   double best_rms = INFINITY, top_rms = INFINITY;
   const size_t tries = std::min(kAlternatives, levels[i].scores.size());
   const auto& group = levels[i].group;
@@ -76,7 +78,15 @@ bool Chain::explained_by_chain(size_t i, int depth, std::string* why, std::strin
     levels.resize(i + 1);
     levels[i].pick = k;
     std::string w;
-    if (explained_by(i, depth, &w)) {
+    const bool explains = explained_by(i, depth, &w);
+    // A rival whose chain explains the data only once the top is added later is no evidence
+    // for the rival: the top's own chain asked whether the rival is needed after the top, and
+    // the data did not say so; the rival's first step only took up part of the top's signal.
+    const auto& chain_effects = levels.back().a.effects;
+    if (explains && k > 0 &&
+        std::find(chain_effects.begin(), chain_effects.end(), top_effect) != chain_effects.end())
+      continue;
+    if (explains) {
       const ModelQuality& end = levels.back().a.quality;
       const double rms = end.has_validation ? end.validation_rms_m : 0.0;
       if (k == 0) top_rms = end.has_validation ? rms : INFINITY;
