@@ -229,25 +229,27 @@ Analysis analyse(const Context& cx,
   }
   if (cx.validation) {
     const Dataset& v = *cx.validation;
-    double ss = 0;
+    double ss = 0, session_leverage = 0;
     int aligned = 0;
-    for (const Eigen::Vector3d& e : validation_errors(*a.model, a.theta, *cx.split, &aligned)) {
+    for (const Eigen::Vector3d& e :
+         validation_errors(*a.model, a.theta, *cx.split, &aligned, &session_leverage)) {
       q.validation_error_m.push_back(e.norm());
       ss += e.squaredNorm();
     }
     q.has_validation = true;
     q.validation_session_parameters = aligned;
-    // Mean squares per degree of freedom: the session's own parameters used some.
-    const double vdof = std::max(1.0, 3.0 * v.rows.size() - aligned);
+    const double vdof = 3.0 * v.rows.size();
     q.validation_rms_m = std::sqrt(ss / vdof);
     const double vs = cx.vnoise->known ? cx.vnoise->floor_m : noise.floor_m;  // RMS sigma
     q.validation_floor_m = vs * std::sqrt(1.0 + static_cast<double>(a.p) / a.n);
     // Prediction error of new poses expected from the fit residual alone: E[RSS] = s^2 (n - p)
     // and E[validation SS] = s^2 3m (1 + p/n) for a right model (mean leverage p/n), so the
     // ratio of the two mean squares is ~ F(3m, n - p) (unweighted: no stated noise needed).
+    // The validation session's own parameters, cross-fitted on its other half, add their
+    // prediction variance (mean leverage session_leverage).
     if (q.dof > 0 && ss_m > 0) {
       const double fit_ms = ss_m / q.dof;
-      const double f = (ss / vdof) / (fit_ms * (1.0 + double(a.p) / a.n));
+      const double f = (ss / vdof) / (fit_ms * (1.0 + double(a.p) / a.n + session_leverage));
       q.validation_to_fit = std::sqrt(f);
       // A validation session's noise is not the calibration's (another day, another thermal
       // state): allowed to differ by the same relative uncertainty as a stated noise level.

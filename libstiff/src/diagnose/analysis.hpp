@@ -42,12 +42,15 @@ ValidationSplit split_validation(const Dataset& calibration,
 /// `model` at `theta`, each new session first registered by the rigid motion that best maps
 /// its registering rows' predictions onto their measurements (least squares). On displacement
 /// rows the validation session's own parameters (ParameterSpec::per_session: its drift) are
-/// re-estimated from the scored rows (DeflectionModel::align_sessions);
-/// `*session_parameters` receives how many directions that used (degrees of freedom).
+/// cross-fitted (DeflectionModel::align_sessions on the rows of odd position predicts those of
+/// even position, and the other way round); `*session_parameters` receives how many
+/// directions were estimated, `*session_leverage` the mean leverage this adds to a scored
+/// component (its prediction variance over sigma^2).
 std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
                                                const VectorXd& theta,
                                                const ValidationSplit& split,
-                                               int* session_parameters = nullptr);
+                                               int* session_parameters = nullptr,
+                                               double* session_leverage = nullptr);
 
 struct Context {
   const RobotModel* robot;

@@ -155,8 +155,9 @@ struct ModelQuality {
   double validation_to_fit_p = 1.0;
   std::vector<double> validation_error_m;  ///< per validation row, norm of the error
   /// Directions of the measurement session's own parameters (ParameterSpec::per_session, e.g.
-  /// drift) re-estimated on the validation session: the validation is another session, and
-  /// its warm-up is its own. The validation mean squares divide by 3m minus these.
+  /// drift) estimated on the validation session, cross-fitted (each half of its rows predicted
+  /// with the values from the other half): the validation is another session, and its warm-up
+  /// is its own. Their prediction variance enters the fit-versus-validation test.
   int validation_session_parameters = 0;
   std::vector<std::string> parameter_names;
   std::vector<double> parameter_values;
