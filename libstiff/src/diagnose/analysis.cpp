@@ -238,6 +238,7 @@ Analysis analyse(const Context& cx,
     }
     q.has_validation = true;
     q.validation_session_parameters = aligned;
+    q.validation_session_leverage = session_leverage;
     const double vdof = 3.0 * v.rows.size();
     q.validation_rms_m = std::sqrt(ss / vdof);
     const double vs = cx.vnoise->known ? cx.vnoise->floor_m : noise.floor_m;  // RMS sigma

@@ -59,6 +59,19 @@ bool Chain::at_floor(const Level& L, std::string* why) const {
   return true;
 }
 
+namespace {
+/// Validation RMS of a model with the prediction variance of the validation session's own
+/// parameters (cross-fitted drift) taken out, so that models with and without them compare
+/// like with like: that variance is the leverage times the noise variance, estimated by the
+/// fit's residual variance (subtracted, not divided: gross errors in the validation rows are
+/// not scaled down with it).
+double comparable_validation(const ModelQuality& q) {
+  const double ms = q.validation_rms_m * q.validation_rms_m -
+                    q.validation_session_leverage * q.sigma_hat_m * q.sigma_hat_m;
+  return std::sqrt(std::max(0.0, ms));
+}
+}  // namespace
+
 bool Chain::explained_by_chain(size_t i, int depth, std::string* why, std::string* top_why) {
   static constexpr size_t kAlternatives = 3;
   std::string first;
@@ -88,7 +101,7 @@ bool Chain::explained_by_chain(size_t i, int depth, std::string* why, std::strin
       continue;
     if (explains) {
       const ModelQuality& end = levels.back().a.quality;
-      const double rms = end.has_validation ? end.validation_rms_m : 0.0;
+      const double rms = end.has_validation ? comparable_validation(end) : 0.0;
       if (k == 0) top_rms = end.has_validation ? rms : INFINITY;
       if (rms < best_rms) {
         best_rms = rms;
@@ -136,7 +149,7 @@ bool Chain::explained_by(size_t i, int depth, std::string* why) {
   }
   const ModelQuality& q = levels[i].a.quality;
   const ModelQuality& nq = n->a.quality;
-  if (q.has_validation && nq.validation_rms_m >= q.validation_rms_m) {
+  if (q.has_validation && comparable_validation(nq) >= comparable_validation(q)) {
     *why = "adding " + added + " does not improve the validation error (" + um(q.validation_rms_m) +
            " -> " + um(nq.validation_rms_m) + ")";
     return false;

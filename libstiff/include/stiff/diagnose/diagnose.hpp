@@ -159,6 +159,9 @@ struct ModelQuality {
   /// with the values from the other half): the validation is another session, and its warm-up
   /// is its own. Their prediction variance enters the fit-versus-validation test.
   int validation_session_parameters = 0;
+  /// Their mean leverage on a scored component: the validation mean square of a right model is
+  /// sigma^2 (1 + p/n + this); comparisons between models divide it out.
+  double validation_session_leverage = 0.0;
   std::vector<std::string> parameter_names;
   std::vector<double> parameter_values;
 };
