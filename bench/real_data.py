@@ -593,6 +593,15 @@ def write_doc(res):
               f"{min(tr(gg)):.2f}-{max(tr(gg)):.2f} mm, so it is what transfers; joint "
               f"harmonics fitted on C raise it to {min(tr(gh)):.1f}-{max(tr(gh)):.1f} mm: "
               "they fit C's poses, not the robot, and a calibration must refuse them.")
+            lp = res.get("loop", {}).get("ur10")
+            if lp:
+                added = [st["added"] for st in lp["steps"] if st["added"]]
+                refused = "harmonic" not in added
+                w("")
+                w("The loop above finds this from the data: validated on series B as a new "
+                  f"set-up, it adds {', '.join(added)}" +
+                  (" and refuses the harmonics." if refused else
+                   " (harmonics included)."))
             w("")
         w("Published (Landgraf et al. 2021, IEEE CASE): the same four series, with the "
           "authors' own evaluation protocol (a hybrid of a kinematic calibration and neural "
