@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <set>
 
 #include "diagnose/analysis.hpp"
@@ -202,10 +203,9 @@ Diagnosis diagnose(const RobotModel& robot,
     // level i + 1 built; false (pick unchanged) when none is confirmed.
     auto choose_by_validation = [&](size_t i) {
       if (!validation || !claims(chain.levels[i])) return false;
-      const size_t original = chain.levels[i].pick;
-      size_t best = SIZE_MAX;
+      size_t best = chain.levels[i].pick;  // unchanged unless a candidate is confirmed
       double best_rms = INFINITY;
-      std::vector<Level> kept;  // the best level so far (moved out, not refitted)
+      std::optional<Level> kept;  // the best candidate's level (moved out, not refitted)
       for (size_t k = 0; k < chain.levels[i].scores.size(); ++k) {
         if (!chain.levels[i].scores[k].significant) continue;
         chain.levels.resize(i + 1);
@@ -215,13 +215,12 @@ Diagnosis diagnose(const RobotModel& robot,
           continue;
         best = k;
         best_rms = n->a.quality.validation_rms_m;
-        kept.clear();
-        kept.push_back(std::move(chain.levels[i + 1]));
+        kept = std::move(chain.levels[i + 1]);
       }
       chain.levels.resize(i + 1);
-      chain.levels[i].pick = best == SIZE_MAX ? original : best;
-      if (best == SIZE_MAX) return false;
-      chain.levels.push_back(std::move(kept[0]));
+      chain.levels[i].pick = best;
+      if (!kept) return false;
+      chain.levels.push_back(std::move(*kept));
       return true;
     };
     std::string verdict = d.verdict;

@@ -756,18 +756,19 @@ FitResult identify(const RobotModel& robot,
         "the residuals are " + num(bulk, 3) + " times the stated noise (robust scale of " +
         std::to_string(n) + " rows): the model misses an effect (stiff diagnose) or the stated " +
         "sigma is too small; outliers are judged against the residuals' own scale");
+  // The unit of the norms below: the stated sigma, unless least squares counts in the
+  // residuals' own scale (or there is no stated noise).
+  const double unit_used = opt.loss == "none" ? unit_scale : 1.0;
+  const std::string unit = stated_unit && unit_used == 1.0 ? " sigma" : " robust sigma";
   for (int r = 0; r < n; ++r) {
     Outlier o;
     o.row = r;
     o.id = data.rows[r].id;
     o.residual_m = f.residuals.segment<3>(3 * r).norm();
     o.weight = f.weights(r);
-    const bool robust_unit = opt.loss == "none" && !(stated_unit && unit_scale == 1.0);
-    const double norm_sigma =
-        e.segment(dim * r, dim).norm() / (opt.loss == "none" ? unit_scale : 1.0);
+    const double norm_sigma = e.segment(dim * r, dim).norm() / unit_used;
     // A row with orientation has 6 components: its clean norm is sqrt(2) larger.
     const double limit = 5.0 * std::sqrt(s.components(r) / 3.0);
-    const std::string unit = robust_unit || !stated_unit ? " robust sigma" : " sigma";
     if (opt.loss != "none") {
       if (o.weight >= opt.outlier_weight) continue;
       o.reason = "robust weight " + num(o.weight, 2) + " < " + num(opt.outlier_weight, 2) +

@@ -106,6 +106,16 @@ Eigen::VectorXd geometric_theta(const DeflectionModel& m, const Geometry& g) {
 
 const std::vector<std::string> kGeometric = {"registration", "tool", "joint_offset", "kinematic"};
 
+/// theta as Jets carrying the derivative directions of parameters first .. first + kJetStride - 1
+/// (one pass of a Jacobian, as identify makes them).
+std::vector<Jet> seeded(const Eigen::VectorXd& theta, int first) {
+  const int p = static_cast<int>(theta.size());
+  std::vector<Jet> t(p);
+  for (int k = 0; k < p; ++k) t[k] = Jet(theta(k));
+  for (int k = first; k < std::min(p, first + kJetStride); ++k) t[k].v(k - first) = 1.0;
+  return t;
+}
+
 TEST(AbsoluteEffects, ModelEqualsTheIndependentlyPerturbedRobot) {
   const RobotModel robot = ur5();
   std::mt19937_64 rng(7);
@@ -176,9 +186,7 @@ TEST(AbsoluteEffects, FastJetEvaluationEqualsTheGenericOne) {
     EvalState<Jet> scratch;
     for (size_t r = 0; r < data.size(); ++r)
       for (int first = 0; first < p; first += kJetStride) {
-        std::vector<Jet> t(p);
-        for (int k = 0; k < p; ++k) t[k] = Jet(theta(k));
-        for (int k = first; k < std::min(p, first + kJetStride); ++k) t[k].v(k - first) = 1.0;
+        const std::vector<Jet> t = seeded(theta, first);
         Vector3<Jet> slow, fast;
         m.evaluate<Jet>(t.data(), data.rows[r], ctx[r], &slow, nullptr);
         scratch.same_values = first > 0;
@@ -667,10 +675,8 @@ TEST(OrientationResidual, DerivativesMatchCentralDifferences) {
     EvalState<Jet> scratch;
     for (size_t r = 0; r < data.size(); ++r)
       for (int first = 0; first < p; first += kJetStride) {
-        std::vector<Jet> t(p);
-        for (int k = 0; k < p; ++k) t[k] = Jet(theta(k));
+        const std::vector<Jet> t = seeded(theta, first);
         const int last = std::min(p, first + kJetStride);
-        for (int k = first; k < last; ++k) t[k].v(k - first) = 1.0;
         Vector3<Jet> d, slow, fast;
         m.evaluate<Jet>(t.data(), data.rows[r], ctx[r], &d, nullptr, &slow);
         m.evaluate_jet(t.data(), data.rows[r], ctx[r], scratch, &d, &fast);
