@@ -37,6 +37,7 @@ stiff_status stiff_diagnose_options_init(stiff_diagnose_options* options, size_t
     o.alpha = d.alpha;
     o.auto_steps = 0u;  // with auto_loop: the core's number of steps (d.max_steps)
     o.auto_loop = d.auto_loop ? 1u : 0u;
+    o.repeatability_m = d.repeatability_m;
     o.command_prefix = static_string([] { return DiagnosisOptions{}.command_prefix; });
     return init_options(options, struct_size, offsetof(stiff_diagnose_options, auto_loop),
                         "stiff_diagnose_options", o);
@@ -64,6 +65,7 @@ stiff_status stiff_diagnose(stiff_diagnosis** out,
       d.max_steps =
           static_cast<int>(std::min<uint32_t>(o.auto_steps, std::numeric_limits<int>::max()));
     if (o.command_prefix) d.command_prefix = o.command_prefix;
+    d.repeatability_m = o.repeatability_m;  // 0: not stated, as in the core
     auto r = std::make_unique<stiff_diagnosis>();
     r->diagnosis = diagnose(robot->model, calibration->data,
                             validation ? &validation->data : nullptr, model, d);

@@ -100,7 +100,8 @@ STIFF_FIELDS(stiff_diagnose_options,
              STIFF_FIELD(stiff_diagnose_options, alpha),
              STIFF_FIELD(stiff_diagnose_options, auto_steps),
              STIFF_FIELD(stiff_diagnose_options, command_prefix),
-             STIFF_FIELD(stiff_diagnose_options, auto_loop));
+             STIFF_FIELD(stiff_diagnose_options, auto_loop),
+             STIFF_FIELD(stiff_diagnose_options, repeatability_m));
 STIFF_FIELDS(stiff_fmu_options,
              STIFF_FIELD(stiff_fmu_options, struct_size),
              STIFF_FIELD(stiff_fmu_options, fmi_version),

@@ -45,6 +45,10 @@ typedef struct stiff_diagnose_options {
    *  (auto_steps > 0 still walks the loop with that many). A caller whose struct_size ends
    *  before this field: no such request. @since 0.2 */
   uint32_t auto_loop;
+  /** The robot's pose repeatability [m] as its data sheet states it (ISO 9283 RP); 0 = not
+   *  stated. On absolute data a model whose held-out mean position error is at most this is
+   *  `adequate` and the loop stops there. @since 0.2 */
+  double repeatability_m;
 } stiff_diagnose_options;
 
 /**

@@ -22,16 +22,6 @@ Dataset subset(const Dataset& d, const std::vector<int>& rows) {
   return out;
 }
 
-/// Fit `effects` to `data` (linear least squares for the joint model, else Ceres).
-FitResult fit_model(const RobotModel& robot,
-                    const Dataset& data,
-                    const std::vector<std::string>& effects) {
-  if (effects.size() == 1 && effects[0] == "joint") return identify_joint_linear(robot, data);
-  IdentifyOptions o;
-  o.max_iterations = 100;
-  return identify(robot, data, effects, o);
-}
-
 /// Rows improbable under the linear model y ~ M beta (weighted, 3 rows per measurement):
 /// least squares on the rows not yet flagged, robust scale (MAD of the residual components,
 /// never below 1 when the noise is stated), flag rows with P(chi2_3 > |r_i|^2/s^2) < alpha/N;
@@ -84,6 +74,15 @@ std::vector<bool> improbable_rows(
 }
 
 }  // namespace
+
+FitResult fit_model(const RobotModel& robot,
+                    const Dataset& data,
+                    const std::vector<std::string>& effects) {
+  if (effects.size() == 1 && effects[0] == "joint") return identify_joint_linear(robot, data);
+  IdentifyOptions o;
+  o.max_iterations = 100;
+  return identify(robot, data, effects, o);
+}
 
 MatrixXd orthonormal_basis(
     const MatrixXd& a, double tol, VectorXd* sv, MatrixXd* v_null, double scale_ref) {
@@ -176,12 +175,14 @@ Analysis analyse(const Context& cx,
   }
   for (const auto& w : fit.warnings)
     if (w.find("outlier") == std::string::npos) a.warnings.push_back(w);
+  a.fit = std::move(fit);
 
   const int nu = static_cast<int>(a.used_rows.size());
   a.n = 3 * nu;
   a.ctx = a.model->contexts(a.used);
-  a.identified.resize(fit.parameters.size());
-  for (size_t k = 0; k < fit.parameters.size(); ++k) a.identified[k] = fit.parameters[k].identified;
+  a.identified.resize(a.fit.parameters.size());
+  for (size_t k = 0; k < a.fit.parameters.size(); ++k)
+    a.identified[k] = a.fit.parameters[k].identified;
   a.w.resize(nu);
   for (int i = 0; i < nu; ++i) a.w(i) = 1.0 / noise.sigma(a.used_rows[i]);
   // Weighted Jacobian of the identified parameters, and the weighted residual.

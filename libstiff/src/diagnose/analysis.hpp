@@ -70,6 +70,7 @@ struct Analysis {
   std::vector<int> used_rows;  ///< their index in the calibration data
   std::vector<bool> outlier;   ///< per calibration row
   std::unique_ptr<DeflectionModel> model;
+  FitResult fit;                        ///< the fit on `used`
   std::vector<MeasurementContext> ctx;  ///< of `used`
   VectorXd theta;
   std::vector<bool> identified;
@@ -82,6 +83,18 @@ struct Analysis {
   ModelQuality quality;
   std::vector<std::string> warnings;
 };
+
+/// Fit `effects` to `data` (linear least squares for the joint model, else Ceres).
+FitResult fit_model(const RobotModel& robot,
+                    const Dataset& data,
+                    const std::vector<std::string>& effects);
+
+/// K-fold cross-validated prediction errors of the model of `a` on the calibration rows it
+/// used: each session's rows dealt to `folds` folds in a fixed pseudo-random order, each fold
+/// predicted by the model refitted on the other folds. Per calibration
+/// row the norm of observed - predicted position [m], NaN for rows `a` did not use. Empty when
+/// a fold's fit fails or a session has fewer than 2 `folds` rows.
+std::vector<double> cross_validation_errors(const Context& cx, const Analysis& a, int folds);
 
 /// Orthonormal basis of the column space of `a` (columns scaled to unit norm first); columns
 /// whose relative singular value is below `tol` are dropped. `v_null` (optional) receives the
@@ -126,6 +139,7 @@ struct Level {
   std::string rival;      ///< a group member whose chain explains the data as well as the pick
   bool separable = true;  ///< the top is separable from every group member
   std::string experiment;
+  bool cross_validated = false;  ///< a.quality.cross_validation_error_m has been computed
 };
 
 /// The experiments that would separate the effects of an ambiguous group: each effect's own

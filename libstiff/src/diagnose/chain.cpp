@@ -197,6 +197,16 @@ std::string Chain::decide(size_t i, std::string* why) {
              "explains it" + extra;
       return std::string("unexplained");
     }
+    // Without a stated noise the fit-versus-validation test is the absolute check: a model
+    // that predicts new poses worse than it fits leaves structure that no candidate explains.
+    if (!known && q.has_validation && q.validation_to_fit_p < alpha) {
+      *why =
+          "no candidate effect is significant, but the model predicts the validation poses "
+          "worse than it fits (validation/fit = " +
+          num(q.validation_to_fit, 3) + ", p = " + num(q.validation_to_fit_p, 2) +
+          "): the missing effect is probably not in the candidate list" + extra;
+      return std::string("unexplained");
+    }
     *why = known
                ? "the residuals are at the noise floor (" + chi + ") and no candidate " +
                      "effect is significant" + extra

@@ -20,8 +20,10 @@ using diagnose_detail::analyse;
 using diagnose_detail::Chain;
 using diagnose_detail::claims;
 using diagnose_detail::Context;
+using diagnose_detail::cross_validation_errors;
 using diagnose_detail::join;
 using diagnose_detail::Level;
+using diagnose_detail::mm;
 using diagnose_detail::Noise;
 using diagnose_detail::noise_of;
 using diagnose_detail::num;
@@ -51,6 +53,11 @@ Diagnosis diagnose(const RobotModel& robot,
   if (!(options.validation_registration_fraction > 0 &&
         options.validation_registration_fraction < 1))
     throw InvalidArgument("diagnose: validation_registration_fraction must be in (0, 1)");
+  if (!(options.repeatability_m >= 0 && std::isfinite(options.repeatability_m)))
+    throw InvalidArgument("diagnose: repeatability_m must be finite and >= 0 (0: not stated)");
+  if (options.cross_validation_folds < 0 || options.cross_validation_folds == 1 ||
+      options.cross_validation_folds > 20)
+    throw InvalidArgument("diagnose: cross_validation_folds must be 0 (none) or in [2, 20]");
   if (options.max_steps < 0 || options.max_steps > 20)
     throw InvalidArgument("diagnose: max_steps must be in [0, 20]");
   if (model.empty()) throw InvalidArgument("diagnose: the model has no effect (e.g. 'joint')");
@@ -98,6 +105,7 @@ Diagnosis diagnose(const RobotModel& robot,
   d.alpha = options.alpha;
   d.noise_floor_m = noise.floor_m;
   d.noise_source = noise.source;
+  d.repeatability_m = options.repeatability_m;
   if (!noise.known)
     d.warnings.push_back(
         "the noise level is unknown (no sigma_d or sigma_p, no # tracker_sigma_m, no replicated "
@@ -120,7 +128,44 @@ Diagnosis diagnose(const RobotModel& robot,
     chain.levels.push_back(score_level(cx, analyse(cx, model, &final_flags), candidates));
     d.verdict = chain.decide(0, &why);
   }
-  const Level* next = chain.next(0);
+  // Held-out evidence on absolute data: the validation rows and the calibration's own poses,
+  // cross-validated (docs/diagnosis.md, section 3, rule 5).
+  const bool absolute = std::any_of(calibration.rows.begin(), calibration.rows.end(),
+                                    [](const Measurement& m) { return m.absolute; });
+  auto held_out = [&](Level& L) {
+    ModelQuality& q = L.a.quality;
+    if (absolute && options.cross_validation_folds >= 2 && !L.cross_validated) {
+      L.cross_validated = true;
+      q.cross_validation_error_m = cross_validation_errors(cx, L.a, options.cross_validation_folds);
+    }
+    std::vector<double> h = q.validation_error_m;
+    h.insert(h.end(), q.cross_validation_error_m.begin(), q.cross_validation_error_m.end());
+    return h;
+  };
+  // A model whose held-out mean error is within the robot's stated repeatability predicts the
+  // robot within its own scatter: nothing beyond it can be shown on single measurements.
+  auto at_repeatability = [&](Level& L, std::string* reason) {
+    if (!absolute || !(options.repeatability_m > 0)) return false;
+    double sum = 0;
+    int n = 0;
+    for (double e : held_out(L))
+      if (std::isfinite(e)) {
+        sum += e;
+        ++n;
+      }
+    if (n < 3 || sum / n > options.repeatability_m) return false;
+    const size_t v = L.a.quality.validation_error_m.size();
+    *reason = "the held-out mean position error, " + mm(sum / n) + " over " + std::to_string(n) +
+              " poses (" + std::to_string(v) + " validation, " + std::to_string(n - v) +
+              " cross-validated), is within the robot's repeatability of " +
+              mm(options.repeatability_m) + " (ISO 9283 RP): what remains is at the repeatability";
+    return true;
+  };
+  if (at_repeatability(chain.levels[0], &why)) {
+    d.verdict = "adequate";
+    d.notes.push_back("step 0: " + why);
+  }
+  const Level* next = d.verdict == "adequate" ? nullptr : chain.next(0);
   const Level& L0 = chain.levels[0];
   d.fit = L0.a.quality;
   d.omnibus_rejects = noise.known && d.fit.floor_p < options.alpha;
@@ -131,7 +176,7 @@ Diagnosis diagnose(const RobotModel& robot,
     d.after = next->a.quality;
     d.after_valid = true;
   }
-  if (claims(L0)) {
+  if (claims(L0) && d.verdict != "adequate") {
     d.suggested_model = join(model, "+") + "+" + L0.scores[L0.pick].effect;
     d.suggested_command = L0.scores[L0.pick].command;
   }
@@ -154,13 +199,14 @@ Diagnosis diagnose(const RobotModel& robot,
 
   // Step 0 and the loop.
   auto step_of = [&](size_t i, const std::string& added, const std::string& verdict) {
+    if (options.auto_loop) held_out(chain.levels[i]);  // the steps show the held-out errors
     const Level& L = chain.levels[i];
     DiagnosisStep s;
     s.step = static_cast<int>(i);
     s.added = added;
     s.quality = L.a.quality;
     s.verdict = verdict;
-    if (claims(L)) {
+    if (claims(L) && verdict != "adequate") {
       s.top = L.scores[L.pick].effect;
       s.top_p_adjusted = L.scores[L.pick].p_adjusted;
       s.top_expected_rms_drop_m = L.scores[L.pick].expected_rms_drop_m;
@@ -174,64 +220,101 @@ Diagnosis diagnose(const RobotModel& robot,
     // On absolute data the loop is also a calibration: a residual that no candidate explains
     // completely (unexplained), or that two candidates explain equally well (ambiguous, e.g. a
     // joint offset and a tilt of the same axis), still gets a candidate when the held-out poses
-    // confirm it, i.e. their squared errors fall (paired one-sided t test at alpha). Which one,
-    // the held-out poses decide: of the significant candidates, the one whose refit predicts
-    // them best (the calibration's own ranking favours terms that fit its poses, e.g.
-    // harmonics, which may not carry over). The model grows while the evidence holds, and the
-    // last step says what is left. Displacement data stop at rule 4: their verdicts name a
-    // physical effect, not an accuracy.
-    const bool absolute = std::any_of(calibration.rows.begin(), calibration.rows.end(),
-                                      [](const Measurement& m) { return m.absolute; });
-    auto confirms = [&](const Level& from, const Level& to) {
-      const std::vector<double>& a = from.a.quality.validation_error_m;
-      const std::vector<double>& b = to.a.quality.validation_error_m;
-      const size_t m = a.size();
-      if (m < 3 || b.size() != m) return false;
+    // confirm it. Which one, the held-out poses decide (the calibration's own ranking favours
+    // terms that fit its poses, e.g. harmonics, which may not carry over); the model grows
+    // while the evidence holds, and the last step says what is left. Displacement data stop at
+    // rule 4: their verdicts name a physical effect, not an accuracy.
+    //
+    // Do the squared held-out errors b fall against a (paired one-sided t test at alpha)? The
+    // pairs are the common prefix: the validation rows, then the cross-validated calibration
+    // rows when both levels have them (NaN: a row that is not used).
+    auto falls = [&](const std::vector<double>& a, const std::vector<double>& b) {
+      std::vector<double> dif;
+      for (size_t r = 0; r < std::min(a.size(), b.size()); ++r)
+        if (std::isfinite(a[r]) && std::isfinite(b[r])) dif.push_back(a[r] * a[r] - b[r] * b[r]);
+      const size_t m = dif.size();
+      if (m < 3) return false;
       double mean = 0, sq = 0;
-      for (size_t r = 0; r < m; ++r) mean += (a[r] * a[r] - b[r] * b[r]) / m;
-      for (size_t r = 0; r < m; ++r) {
-        const double e = a[r] * a[r] - b[r] * b[r] - mean;
-        sq += e * e;
-      }
+      for (double x : dif) mean += x / m;
+      for (double x : dif) sq += (x - mean) * (x - mean);
       const double se = std::sqrt(sq / (m - 1) / m);
       if (!(mean > 0)) return false;
       if (!(se > 0)) return true;
       const double t = mean / se;
       return 0.5 * stats::f_sf(t * t, 1.0, static_cast<double>(m - 1)) < options.alpha;
     };
-    // Level i's pick becomes the confirmed candidate that predicts the held-out poses best, its
-    // level i + 1 built; false (pick unchanged) when none is confirmed.
-    auto choose_by_validation = [&](size_t i) {
-      if (!validation || !claims(chain.levels[i])) return false;
-      size_t best = chain.levels[i].pick;  // unchanged unless a candidate is confirmed
-      double best_rms = INFINITY;
-      std::optional<Level> kept;  // the best candidate's level (moved out, not refitted)
+    auto mean_square = [](const std::vector<double>& e) {
+      double s2 = 0;
+      int n = 0;
+      for (double x : e)
+        if (std::isfinite(x)) {
+          s2 += x * x;
+          ++n;
+        }
+      return n ? s2 / n : INFINITY;
+    };
+    // Level i's pick becomes the candidate the held-out poses support best, its level i + 1
+    // built; false (pick unchanged) when none is confirmed. Confirmed: the held-out errors fall
+    // against level i. Of those, a candidate that the validation rows alone show to predict
+    // worse than another is refuted (they are the poses the user asked about: another region,
+    // another set-up); the rest are ranked by the mean square over all held-out poses (the
+    // validation rows resolve a small difference only when there are many).
+    auto choose_by_held_out = [&](size_t i) {
+      if (!claims(chain.levels[i])) return false;
+      const std::vector<double> base = held_out(chain.levels[i]);
+      struct Option {
+        size_t k;
+        std::optional<Level> level;
+        std::vector<double> h;
+      };
+      const size_t v = chain.levels[i].a.quality.validation_error_m.size();
+      auto validation_part = [&](const std::vector<double>& h) {
+        return std::vector<double>(h.begin(), h.begin() + v);
+      };
+      std::vector<Option> confirmed;
       for (size_t k = 0; k < chain.levels[i].scores.size(); ++k) {
         if (!chain.levels[i].scores[k].significant) continue;
         chain.levels.resize(i + 1);
         chain.levels[i].pick = k;
-        const Level* n = chain.next(i);
-        if (!n || !confirms(chain.levels[i], *n) || !(n->a.quality.validation_rms_m < best_rms))
+        if (!chain.next(i)) continue;
+        std::vector<double> h = held_out(chain.levels[i + 1]);
+        // ... and the validation error itself falls: each step must show it to the user.
+        if (!falls(base, h) ||
+            (v > 0 && !(mean_square(validation_part(h)) < mean_square(validation_part(base)))))
           continue;
-        best = k;
-        best_rms = n->a.quality.validation_rms_m;
-        kept = std::move(chain.levels[i + 1]);
+        confirmed.push_back({k, std::move(chain.levels[i + 1]), std::move(h)});
       }
       chain.levels.resize(i + 1);
-      chain.levels[i].pick = best;
-      if (!kept) return false;
-      chain.levels.push_back(std::move(*kept));
+      if (confirmed.empty()) return false;
+      size_t best_v = 0;
+      for (size_t c = 1; c < confirmed.size(); ++c)
+        if (mean_square(validation_part(confirmed[c].h)) <
+            mean_square(validation_part(confirmed[best_v].h)))
+          best_v = c;
+      std::optional<size_t> best;
+      for (size_t c = 0; c < confirmed.size(); ++c) {
+        if (c != best_v &&
+            falls(validation_part(confirmed[c].h), validation_part(confirmed[best_v].h)))
+          continue;
+        if (!best || mean_square(confirmed[c].h) < mean_square(confirmed[*best].h)) best = c;
+      }
+      chain.levels[i].pick = confirmed[*best].k;
+      chain.levels.push_back(std::move(*confirmed[*best].level));
       return true;
     };
     std::string verdict = d.verdict;
     for (size_t i = 0; static_cast<int>(i) < options.max_steps; ++i) {
       const bool go = verdict == "missing_effect" ||
                       (absolute && (verdict == "unexplained" || verdict == "ambiguous") &&
-                       choose_by_validation(i));
+                       choose_by_held_out(i));
       if (!go || !chain.next(i)) break;
       const std::string added = chain.levels[i].scores[chain.levels[i].pick].effect;
       std::string w2;
       verdict = chain.decide(i + 1, &w2);
+      if (at_repeatability(chain.levels[i + 1], &w2)) {
+        verdict = "adequate";
+        d.notes.push_back("step " + std::to_string(i + 1) + ": " + w2);
+      }
       d.steps.push_back(step_of(i + 1, added, verdict));
       d.final_model = chain.levels[i + 1].a.quality.model;
       d.final_verdict = verdict;

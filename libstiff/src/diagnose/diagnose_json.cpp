@@ -15,6 +15,11 @@ nlohmann::json finite(double v) {
   return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
 }
 
+/// A text, or null when there is none.
+nlohmann::json text_or_null(const std::string& s) {
+  return s.empty() ? nlohmann::json(nullptr) : nlohmann::json(s);
+}
+
 nlohmann::json quality_json(const ModelQuality& q) {
   nlohmann::json j;
   j["model"] = q.model;
@@ -35,6 +40,11 @@ nlohmann::json quality_json(const ModelQuality& q) {
     j["validation_to_fit"] = finite(q.validation_to_fit);
     j["validation_to_fit_p"] = q.validation_to_fit_p;
     j["validation_session_parameters"] = q.validation_session_parameters;
+  }
+  if (!q.cross_validation_error_m.empty()) {
+    nlohmann::json cv = nlohmann::json::array();
+    for (double e : q.cross_validation_error_m) cv.push_back(finite(e));  // null: row not used
+    j["cross_validation_error_m"] = cv;
   }
   nlohmann::json p = nlohmann::json::object();
   for (size_t k = 0; k < q.parameter_names.size(); ++k)
@@ -57,6 +67,7 @@ std::string diagnosis_to_json(const Diagnosis& d) {
   j["alpha"] = d.alpha;
   j["noise_floor_m"] = d.noise_floor_m;
   j["noise_source"] = d.noise_source;
+  j["repeatability_m"] = d.repeatability_m > 0 ? json(d.repeatability_m) : json(nullptr);
   json fit = quality_json(d.fit);
   fit["omnibus_rejects"] = d.omnibus_rejects;
   j["fit"] = fit;
@@ -68,13 +79,12 @@ std::string diagnosis_to_json(const Diagnosis& d) {
     if (d.after_valid) v["rms_after_m"] = d.after.validation_rms_m;
     j["validation"] = v;
   }
-  j["suggested_model"] = d.suggested_model.empty() ? json(nullptr) : json(d.suggested_model);
-  j["suggested_command"] = d.suggested_command.empty() ? json(nullptr) : json(d.suggested_command);
+  j["suggested_model"] = text_or_null(d.suggested_model);
+  j["suggested_command"] = text_or_null(d.suggested_command);
   if (d.after_valid) j["after"] = quality_json(d.after);
   j["ambiguous_group"] = d.ambiguous_group;
-  j["experiment"] = d.experiment.empty() ? json(nullptr) : json(d.experiment);
-  j["unexplained_signature"] =
-      d.unexplained_signature.empty() ? json(nullptr) : json(d.unexplained_signature);
+  j["experiment"] = text_or_null(d.experiment);
+  j["unexplained_signature"] = text_or_null(d.unexplained_signature);
   json cands = json::array();
   for (const auto& c : d.candidates) {
     json x;
@@ -146,9 +156,9 @@ std::string diagnosis_to_json(const Diagnosis& d) {
   for (const auto& s : d.steps) {
     json x = quality_json(s.quality);
     x["step"] = s.step;
-    x["added"] = s.added.empty() ? json(nullptr) : json(s.added);
+    x["added"] = text_or_null(s.added);
     x["verdict"] = s.verdict;
-    x["top"] = s.top.empty() ? json(nullptr) : json(s.top);
+    x["top"] = text_or_null(s.top);
     x["top_p_adjusted"] = s.top_p_adjusted;
     x["top_expected_rms_drop_m"] = s.top_expected_rms_drop_m;
     steps.push_back(x);

@@ -13,6 +13,7 @@ inline std::string num(double v, int precision = 3) {
   return b;
 }
 inline std::string um(double m) { return num(m * 1e6, 3) + " um"; }
+inline std::string mm(double m) { return num(m * 1e3, 3) + " mm"; }
 
 inline std::string join(const std::vector<std::string>& v, const std::string& sep) {
   std::string s;

@@ -3,11 +3,14 @@
 // section 1).
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
+#include <random>
 #include <set>
 
 #include "diagnose/analysis.hpp"
 #include "stiff/error.hpp"
+#include "stiff/identify/identify.hpp"
 #include "stiff/kinematics/rigid_fit.hpp"
 
 namespace stiff::diagnose_detail {
@@ -153,6 +156,51 @@ std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
     const Eigen::Vector3d q =
         it == motion.end() ? p[r] : it->second.first * p[r] + it->second.second;
     e[r] = m.observed() - q;
+  }
+  return e;
+}
+
+std::vector<double> cross_validation_errors(const Context& cx, const Analysis& a, int folds) {
+  const Dataset& calib = *cx.calib;
+  const size_t rows = calib.rows.size();
+  // Folds within each session, so that every training set registers every session. The order
+  // is pseudo-random but fixed (a 32-bit Mersenne twister is specified bit for bit, and the
+  // shuffle is written here): a grid measured row by row must not put neighbours, or every
+  // k-th pose, into one fold, and the same data must give the same folds on every platform.
+  std::map<std::string, std::vector<int>> by_session;
+  for (int r : a.used_rows) by_session[calib.rows[r].session].push_back(r);
+  std::vector<int> fold(rows, -1);
+  std::mt19937 rng(0x5eed);
+  for (auto& [label, idx] : by_session) {
+    if (static_cast<int>(idx.size()) < 2 * folds) return {};
+    for (size_t i = idx.size() - 1; i > 0; --i) std::swap(idx[i], idx[rng() % (i + 1)]);
+    for (size_t i = 0; i < idx.size(); ++i) fold[idx[i]] = static_cast<int>(i % folds);
+  }
+  std::vector<double> e(rows, std::numeric_limits<double>::quiet_NaN());
+  for (int f = 0; f < folds; ++f) {
+    Dataset train = calib, test = calib;
+    train.rows.clear();
+    test.rows.clear();
+    std::vector<int> test_rows;
+    for (int r : a.used_rows) {
+      if (fold[r] == f) {
+        test.rows.push_back(calib.rows[r]);
+        test_rows.push_back(r);
+      } else {
+        train.rows.push_back(calib.rows[r]);
+      }
+    }
+    try {
+      const FitResult fit = fit_model(*cx.robot, train, a.effects);
+      const DeflectionModel model(*cx.robot, a.effects, &train);
+      const VectorXd theta = fit.theta();
+      const auto ctx = model.contexts(test);
+      for (size_t i = 0; i < test.rows.size(); ++i)
+        e[test_rows[i]] =
+            (test.rows[i].observed() - model.predict(theta, test.rows[i], ctx[i]).head<3>()).norm();
+    } catch (const Error&) {
+      return {};  // a fold the model cannot be fitted to: no cross-validation
+    }
   }
   return e;
 }

@@ -32,7 +32,12 @@ std::string num(double v) {
 /// deflection model's core), then the effects in model order; on a geometric model (an effect
 /// that corrects the chain or registers the instrument) the model order alone, so that the
 /// registration, tool and geometry the user lists first keep what the compliances share.
-std::vector<int> priority_order(const DeflectionModel& model) {
+/// Parameters marked in `first` (those a start fit identified) go before all others, in the
+/// same order among themselves: the data decided once which of a confounded set carries it,
+/// and a refit from that solution keeps the decision (at another linearisation point the
+/// order alone would pick another member, held at its null value while its partners keep
+/// values fitted with it free).
+std::vector<int> priority_order(const DeflectionModel& model, const std::vector<bool>* first) {
   const int p = model.parameter_count();
   bool geometric = false;
   for (const auto& e : model.effects())
@@ -43,13 +48,16 @@ std::vector<int> priority_order(const DeflectionModel& model) {
     for (int k = 0; k < model.effects()[je]->size(); ++k) order.push_back(model.offset(je) + k);
   for (int k = 0; k < p; ++k)
     if (std::find(order.begin(), order.end(), k) == order.end()) order.push_back(k);
+  if (first && static_cast<int>(first->size()) == p)
+    std::stable_partition(order.begin(), order.end(), [&](int k) { return (*first)[k]; });
   return order;
 }
 
 Identifiability structural(const DeflectionModel& model,
                            const Eigen::MatrixXd& j,
                            const Eigen::VectorXd& typical,
-                           double tolerance) {
+                           double tolerance,
+                           const std::vector<bool>* first) {
   const int p = model.parameter_count();
   // Finite but absurd data (a displacement of 1e308 m) overflow the Jacobian; the rank test
   // below would then run a QR on an empty matrix.
@@ -60,7 +68,7 @@ Identifiability structural(const DeflectionModel& model,
   Identifiability out;
   out.fixed.assign(p, false);
   out.reason.assign(p, "");
-  const std::vector<int> order = priority_order(model);
+  const std::vector<int> order = priority_order(model, first);
 
   // The same decisions on the p x p Gram matrix J^T J (Cholesky of the normalised columns in
   // this order: the squared orthogonal rest is 1 - |L^-1 c|^2), which costs a third of the
@@ -160,8 +168,9 @@ Identifiability check_identifiability(const DeflectionModel& model,
                                       double max_relative_se,
                                       const Eigen::VectorXd* theta,
                                       const std::vector<bool>* fitted,
-                                      const Eigen::VectorXd* residuals) {
-  Identifiability out = structural(model, j, typical, tolerance);
+                                      const Eigen::VectorXd* residuals,
+                                      const std::vector<bool>* first) {
+  Identifiability out = structural(model, j, typical, tolerance, first);
   out.statistical.assign(out.fixed.size(), false);
   if (!(max_relative_se > 0) || !theta || !(residual_sigma > 0 || residuals)) return out;
   const int p = model.parameter_count();
@@ -176,7 +185,7 @@ Identifiability check_identifiability(const DeflectionModel& model,
   g = g.selfadjointView<Eigen::Lower>();
   std::vector<int> rank(p);  // position in the priority order
   {
-    const std::vector<int> order = priority_order(model);
+    const std::vector<int> order = priority_order(model, first);
     for (int i = 0; i < p; ++i) rank[order[i]] = i;
   }
   while (true) {

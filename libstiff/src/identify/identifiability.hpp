@@ -41,6 +41,8 @@ struct Identifiability {
 ///     theta (the rows of j; before a solve), the residual scale is that of the linear
 ///     least-squares step from theta over each round's free set, and a parameter is held
 ///     when its standard error alone exceeds `max_relative_se` times its typical magnitude.
+/// `first` (optional, per parameter): parameters that come first in the priority order, e.g.
+/// those a start fit identified.
 /// Throws NumericalError when j is not finite.
 Identifiability check_identifiability(const DeflectionModel& model,
                                       const Eigen::MatrixXd& j,
@@ -50,6 +52,7 @@ Identifiability check_identifiability(const DeflectionModel& model,
                                       double max_relative_se = 0.0,
                                       const Eigen::VectorXd* theta = nullptr,
                                       const std::vector<bool>* fitted = nullptr,
-                                      const Eigen::VectorXd* residuals = nullptr);
+                                      const Eigen::VectorXd* residuals = nullptr,
+                                      const std::vector<bool>* first = nullptr);
 
 }  // namespace stiff::detail

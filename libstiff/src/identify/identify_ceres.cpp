@@ -280,6 +280,11 @@ FitResult identify(const RobotModel& robot,
   // Parameters decided already (given by the start fit; on absolute data, those held at the
   // start): their columns take no part in the decision `run` makes about the others, and they
   // keep their own decision.
+  // A start fit's identified parameters claim first what the data show (priority_order).
+  std::vector<bool> start_identified(p, false);
+  for (int k = 0; k < p; ++k)
+    start_identified[k] = from_start[k] >= 0 && opt.start->parameters[from_start[k]].identified;
+  const std::vector<bool>* first = opt.start ? &start_identified : nullptr;
   Identifiability given_idf;
   given_idf.fixed = given;
   given_idf.statistical.assign(p, false);
@@ -309,7 +314,7 @@ FitResult identify(const RobotModel& robot,
     for (int k : free) fitted[k] = true;
     return apart(jac, given_idf, [&](const Eigen::MatrixXd& j) {
       return check_identifiability(model, j, s.typical, opt.rank_tolerance, residual_sigma,
-                                   opt.max_relative_se, &at, &fitted);
+                                   opt.max_relative_se, &at, &fitted, nullptr, first);
     });
   };
   // Residual standard deviation of the weighted fit at theta, as the statistics below: rows
@@ -338,7 +343,7 @@ FitResult identify(const RobotModel& robot,
     const Identifiability stat = apart(jac, given_idf, [&](const Eigen::MatrixXd& j) {
       return check_identifiability(model, j, s.typical, opt.rank_tolerance, 0.0,
                                    std::min(kStartRelativeSe, opt.max_relative_se), &theta, &fitted,
-                                   &e);
+                                   &e, first);
     });
     if (std::find(stat.statistical.begin(), stat.statistical.end(), true) != stat.statistical.end())
       idf = stat;

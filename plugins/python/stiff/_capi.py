@@ -358,6 +358,7 @@ class DiagnoseOptions(C.Structure):
         ("auto_steps", C.c_uint32),
         ("command_prefix", C.c_char_p),
         ("auto_loop", C.c_uint32),
+        ("repeatability_m", C.c_double),
     ]
 
 

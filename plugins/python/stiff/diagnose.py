@@ -96,19 +96,22 @@ def diagnose_defaults() -> dict:
     o = _c.defaults(_c.DiagnoseOptions)
     return {"model": _c.text(o.model), "candidates": _c.text(o.candidates), "alpha": o.alpha,
             "auto_loop": bool(o.auto_loop), "auto_steps": o.auto_steps,
-            "command_prefix": _c.text(o.command_prefix)}
+            "command_prefix": _c.text(o.command_prefix), "repeatability_m": o.repeatability_m}
 
 
 def diagnose(robot: Robot, calibration: Dataset, validation: Optional[Dataset] = None,
              model: Union[None, str, Iterable[str]] = None, candidates=None,
              alpha: Optional[float] = None, auto_steps: Optional[int] = None,
-             command_prefix: Optional[str] = None, auto_loop: Optional[bool] = None) -> Diagnosis:
+             command_prefix: Optional[str] = None, auto_loop: Optional[bool] = None,
+             repeatability_m: Optional[float] = None) -> Diagnosis:
     """Diagnose ``model`` (e.g. "joint" or "joint+link") on ``calibration``.
 
     candidates: effects to test ('+'-joined or a list; default every effect not in the model);
     alpha: family-wise error rate (Holm); auto_steps: > 0 walks the loop (add the top effect,
     re-fit, re-score) up to that many times; auto_loop: walk the loop, with the library's number
-    of steps unless auto_steps gives one; command_prefix: start of the suggested commands.
+    of steps unless auto_steps gives one; command_prefix: start of the suggested commands;
+    repeatability_m: the robot's pose repeatability [m] (ISO 9283 RP, from its data sheet): on
+    absolute data a model whose held-out mean error is within it is adequate.
     An argument left at None takes the library's default (diagnose_defaults()); the library
     checks every value and its message names the option."""
     o = _c.defaults(_c.DiagnoseOptions)
@@ -129,6 +132,8 @@ def diagnose(robot: Robot, calibration: Dataset, validation: Optional[Dataset] =
         o.auto_loop = 1 if auto_loop else 0
     if command_prefix is not None:
         o.command_prefix = _c.encode(command_prefix)
+    if repeatability_m is not None:
+        o.repeatability_m = float(repeatability_m)
     h = C.c_void_p()
     check(lib.stiff_diagnose(C.byref(h), robot, calibration,
                              validation if validation is not None else None, C.byref(o)))

@@ -72,8 +72,11 @@ def test_auto_loop_and_python_api(data, tmp_path):
     robot = stiff.Robot(stiff_robot_path())
     calib = stiff.Dataset.read(data / "calib.csv", robot)
     valid = stiff.Dataset.read(data / "valid.csv", robot)
-    d = stiff.diagnose(robot, calib, valid, model="joint", auto_steps=3)
+    d = stiff.diagnose(robot, calib, valid, model="joint", auto_steps=3, repeatability_m=1e-4)
     assert isinstance(d, stiff.Diagnosis)
+    # Displacement data: the repeatability (a statement about absolute positions) is reported,
+    # not used; the verdicts are the physical effect's.
+    assert d["repeatability_m"] == pytest.approx(1e-4)
     assert d.verdict == "missing_effect" and d["verdict"] == "missing_effect"
     assert d.top["effect"] == "force_frame"
     assert [s["added"] for s in d["steps"]] == [None, "force_frame"]
@@ -103,11 +106,15 @@ def test_bad_input_is_one_line_exit_2(data, tmp_path):
     for extra in (["missing.csv"],
                   [str(data / "calib.csv"), "--model", "joint+bogus"],
                   [str(data / "calib.csv"), "--candidates", "nope"],
-                  [str(data / "calib.csv"), "--alpha", "2"]):
+                  [str(data / "calib.csv"), "--alpha", "2"],
+                  [str(data / "calib.csv"), "--repeatability", "-0.1"],
+                  [str(data / "calib.csv"), "--repeatability", "nan"]):
         r = subprocess.run(env_cmd + extra, capture_output=True, text=True, cwd=tmp_path)
         assert r.returncode == 2, r.stderr
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("stiff diagnose: error:"), r.stderr
+        if "--repeatability" in extra:
+            assert "repeatability" in lines[0], lines[0]
 
 
 def test_help_has_worked_example(capsys):

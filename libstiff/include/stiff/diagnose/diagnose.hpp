@@ -70,6 +70,15 @@ struct DiagnosisOptions {
   /// the instrument is registered from this fraction of its rows (spread evenly over the file)
   /// and the model is scored on the others, as a calibrated robot is used in a new cell.
   double validation_registration_fraction = 0.2;
+  /// The robot's pose repeatability [m] as its data sheet states it (ISO 9283 RP: the radius
+  /// about the mean attained position that holds the repeated attainments, mean distance plus
+  /// three standard deviations); 0: not stated. On absolute data a model whose held-out mean
+  /// position error is at most this predicts the robot within its own scatter: its verdict is
+  /// `adequate` and the loop stops there.
+  double repeatability_m = 0.0;
+  /// Folds of the cross-validation that adds the calibration's own poses to the held-out
+  /// evidence of the loop on absolute data (section 3 of docs/diagnosis.md); 0: none.
+  int cross_validation_folds = 5;
   /// Number of worst poses listed.
   int worst_poses = 5;
   /// Flag rows whose residual is improbable under chi2_3 at this family-wise level (after a
@@ -154,6 +163,9 @@ struct ModelQuality {
   double validation_to_fit = NAN;
   double validation_to_fit_p = 1.0;
   std::vector<double> validation_error_m;  ///< per validation row, norm of the error
+  /// Absolute data in the loop: per calibration row, the norm of its K-fold cross-validated
+  /// prediction error [m] (NaN for rows not used); empty when not computed.
+  std::vector<double> cross_validation_error_m;
   /// Directions of the measurement session's own parameters (ParameterSpec::per_session, e.g.
   /// drift) estimated on the validation session, cross-fitted (each half of its rows predicted
   /// with the values from the other half): the validation is another session, and its warm-up
@@ -190,7 +202,8 @@ struct Diagnosis {
   std::vector<std::string> ambiguous_group;
   std::string unexplained_signature;  ///< what the structure looks like (unexplained)
   double noise_floor_m = 0.0;
-  std::string noise_source;  ///< "sigma_d", "metadata", "replicates" or "none"
+  std::string noise_source;      ///< "sigma_d", "metadata", "replicates" or "none"
+  double repeatability_m = 0.0;  ///< the robot's stated repeatability (options); 0: none
   double alpha = 0.05;
   ModelQuality fit;  ///< the model as given
   bool omnibus_rejects = false;

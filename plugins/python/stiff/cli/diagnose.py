@@ -3,6 +3,7 @@ physical effect it is missing, add it and watch the error fall."""
 from __future__ import annotations
 
 import json
+import math
 import shlex
 
 from .. import api
@@ -43,6 +44,9 @@ def register(sub):
     p.add_argument("--alpha", type=float, help=f"family-wise error rate (Holm, default {d['alpha']:g})")
     p.add_argument("--auto", action="store_true", help="add the top effect while the evidence holds, re-fit, repeat")
     p.add_argument("--max-steps", type=whole, help="steps of --auto (default: the library's)")
+    p.add_argument("--repeatability", type=float, metavar="MM",
+                   help="the robot's pose repeatability from its data sheet (ISO 9283 RP) [mm]: on "
+                        "absolute data a model whose held-out mean error is within it is adequate")
     p.add_argument("--report", help="HTML report to write (self-contained, with plots)")
     p.add_argument("--json", help="diagnosis JSON to write (docs/diagnosis.md)")
     p.set_defaults(func=run)
@@ -106,10 +110,16 @@ def print_text(d) -> None:
         print(f"  next: {d['suggested_command']}")
     if len(d["steps"]) > 1:
         print()
-        print(table(["step", "added", "model", "fit RMS", "validation RMS", "verdict"],
+        def cv_rms(s):  # the calibration poses cross-validated (absolute data), per axis
+            e = [x for x in s.get("cross_validation_error_m") or [] if x is not None]
+            return math.sqrt(sum(x * x for x in e) / (3 * len(e))) if e else None
+
+        print(table(["step", "added", "model", "fit RMS", "validation RMS", "cross-validated RMS",
+                     "verdict"],
                     [[s["step"], s["added"] or "-", s["model"], um(s["rms_m"]),
-                      um(s.get("validation_rms_m")), s["verdict"]] for s in d["steps"]],
-                    [">", "<", "<", ">", ">", "<"]))
+                      um(s.get("validation_rms_m")), um(cv_rms(s)), s["verdict"]]
+                     for s in d["steps"]],
+                    [">", "<", "<", ">", ">", ">", "<"]))
         print(f"final model: {d['final_model']} ({d['final_verdict']})")
     for note in d.get("notes", []):
         print(f"note: {note}")
@@ -124,7 +134,8 @@ def run(args):
     d = diagnose(robot, calib, valid, model=args.model, candidates=args.candidates,
                  alpha=args.alpha, auto_loop=args.auto or None,
                  auto_steps=args.max_steps if args.auto else None,
-                 command_prefix=_command_prefix(args))
+                 command_prefix=_command_prefix(args),
+                 repeatability_m=args.repeatability * 1e-3 if args.repeatability is not None else None)
     print_text(d)
     if args.json:
         atomic_write_text(args.json, json.dumps(d.json, indent=1))
