@@ -21,30 +21,45 @@ const FitResult& fit_of(const stiff_result* r) {
 /// stiff_predict_dataset (positions or displacements) and stiff_predict_dataset_orientation
 /// (the probe's orientation of absolute rows, NaN on the others): the checks, then
 /// DeflectionModel::predict of every row, 3 values each.
+/// What predict_rows returns per row.
+enum class RowPrediction { position, orientation, cross_fitted };
+
 stiff_status predict_rows(double* out,
                           size_t capacity,
                           size_t* needed,
                           const stiff_model* model,
                           const stiff_dataset* dataset,
-                          bool orientation) {
+                          RowPrediction what) {
   require(model, "model");
   require(dataset, "dataset");
   const Dataset& data = dataset->data;
   require_capacity(3 * data.rows.size(), out, capacity, needed);
   const DeflectionModel& dm = *model->model;
-  validate_dataset(data, model->robot.dof(), false);
+  // Cross-fitting estimates the session's own parameters from its measured rows.
+  validate_dataset(data, model->robot.dof(), what == RowPrediction::cross_fitted);
   for (const auto& m : data.rows)
     if (m.absolute && dm.find("registration") >= 0 && !dm.has_session(m.session))
       throw InvalidArgument("measurement '" + m.id + "': session '" + m.session +
                             "' was not registered by this fit; identify with its rows, or "
                             "refit the registration of this set-up");
   const std::vector<MeasurementContext> ctx = dm.contexts(data);
+  if (what == RowPrediction::cross_fitted) {
+    const std::vector<Eigen::Vector3d> p = dm.predict_cross_fitted(model->theta, data, ctx);
+    for (size_t r = 0; r < p.size(); ++r) {
+      if (!p[r].allFinite())
+        throw NumericalError("row " + std::to_string(r) + ": the prediction is not finite");
+      for (int k = 0; k < 3; ++k) out[3 * r + k] = p[r](k);
+    }
+    return STIFF_OK;
+  }
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const Eigen::Matrix<double, 6, 1> d = dm.predict(model->theta, data.rows[r], ctx[r]);
     if (!d.allFinite())
       throw NumericalError("row " + std::to_string(r) + ": the prediction is not finite");
     for (int k = 0; k < 3; ++k)
-      out[3 * r + k] = !orientation ? d(k) : (data.rows[r].absolute ? d(3 + k) : std::nan(""));
+      out[3 * r + k] = what == RowPrediction::position
+                           ? d(k)
+                           : (data.rows[r].absolute ? d(3 + k) : std::nan(""));
   }
   return STIFF_OK;
 }
@@ -399,8 +414,19 @@ stiff_status stiff_predict_dataset(double* predicted,
                                    size_t* needed,
                                    const stiff_model* model,
                                    const stiff_dataset* dataset) {
-  return guarded(__func__,
-                 [&] { return predict_rows(predicted, capacity, needed, model, dataset, false); });
+  return guarded(__func__, [&] {
+    return predict_rows(predicted, capacity, needed, model, dataset, RowPrediction::position);
+  });
+}
+
+stiff_status stiff_predict_dataset_cross_fitted(double* predicted,
+                                                size_t capacity,
+                                                size_t* needed,
+                                                const stiff_model* model,
+                                                const stiff_dataset* dataset) {
+  return guarded(__func__, [&] {
+    return predict_rows(predicted, capacity, needed, model, dataset, RowPrediction::cross_fitted);
+  });
 }
 
 stiff_status stiff_predict_dataset_orientation(double* rotation_vectors,
@@ -409,7 +435,8 @@ stiff_status stiff_predict_dataset_orientation(double* rotation_vectors,
                                                const stiff_model* model,
                                                const stiff_dataset* dataset) {
   return guarded(__func__, [&] {
-    return predict_rows(rotation_vectors, capacity, needed, model, dataset, true);
+    return predict_rows(rotation_vectors, capacity, needed, model, dataset,
+                        RowPrediction::orientation);
   });
 }
 

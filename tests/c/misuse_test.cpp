@@ -285,6 +285,13 @@ TEST(CApiMisuse, EveryFunctionReturnsItsStatusAndNamesItself) {
        [&] { return stiff_robot_jacobians(out, 64, &needed, f.robot, q, 1, 5); }},
       {"stiff_robot_jacobians", STIFF_E_BUFFER_TOO_SMALL,
        [&] { return stiff_robot_jacobians(out, 35, &needed, f.robot, q, 1, 6); }},
+      {"stiff_predict_dataset_cross_fitted", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_predict_dataset_cross_fitted(out, 64, &needed, nullptr, f.data); }},
+      // A plan has no readings to estimate the session's own parameters from.
+      {"stiff_predict_dataset_cross_fitted", STIFF_E_INVALID_ARGUMENT,
+       [&] { return stiff_predict_dataset_cross_fitted(out, 64, &needed, f.model, f.design); }},
+      {"stiff_predict_dataset_cross_fitted", STIFF_E_BUFFER_TOO_SMALL,
+       [&] { return stiff_predict_dataset_cross_fitted(out, 2, &needed, f.model, f.data); }},
       {"stiff_file_write", STIFF_E_INVALID_ARGUMENT,
        [&] { return stiff_file_write(nullptr, "x", 1); }},
       {"stiff_file_write", STIFF_E_IO,

@@ -549,6 +549,19 @@ STIFF_API stiff_status stiff_predict_dataset(double* predicted,
                                              size_t* needed,
                                              const stiff_model* model,
                                              const stiff_dataset* dataset);
+/** As stiff_predict_dataset for the measured displacement rows of a session the fit has not
+ *  seen (a validation file, another day), with the session's own parameters (drift: its
+ *  warm-up restarts) cross-fitted from its readings: the rows of even position are predicted
+ *  with the values estimated from the rows of odd position and the other way round, every
+ *  other parameter at the fit's value. This is how stiff_diagnose scores validation data. Plain
+ *  predictions when the model has no per-session parameter, for absolute rows and for fewer
+ *  than 4 rows. Errors as stiff_predict_dataset; the rows must carry their measurements.
+ *  @since 0.2 */
+STIFF_API stiff_status stiff_predict_dataset_cross_fitted(double* predicted,
+                                                          size_t capacity,
+                                                          size_t* needed,
+                                                          const stiff_model* model,
+                                                          const stiff_dataset* dataset);
 /** The orientation the model predicts for every absolute row of a dataset, rows x 3: the
  *  rotation vector [rad] of the probe frame in the instrument frame (the flange's, turned by
  *  tool_orientation, the deflection and the registration), NaN on displacement rows. The

@@ -89,33 +89,11 @@ std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
   // wrong model leaves). Absolute rows keep the fit's: their new set-ups are registered below.
   const bool displacement = std::none_of(split.scored.rows.begin(), split.scored.rows.end(),
                                          [](const Measurement& m) { return m.absolute; });
-  bool per_session = false;
-  for (int k = 0; k < model.parameter_count(); ++k) per_session |= model.spec(k).per_session;
-  const size_t scored = split.scored.rows.size();
-  if (displacement && per_session && scored >= 4) {
-    const auto ctx = model.contexts(split.scored);
-    Dataset half[2] = {split.scored, split.scored};
-    std::vector<MeasurementContext> hctx[2];
-    half[0].rows.clear();
-    half[1].rows.clear();
-    for (size_t r = 0; r < scored; ++r) {
-      half[r % 2].rows.push_back(split.scored.rows[r]);
-      hctx[r % 2].push_back(ctx[r]);
-    }
-    VectorXd aligned[2];  // [h]: estimated from half h, predicts the other half
-    int used[2] = {0, 0};
-    for (int h = 0; h < 2; ++h)
-      aligned[h] = model.align_sessions(theta, half[h], hctx[h], &used[h]);
-    std::vector<Eigen::Vector3d> e(scored);
-    for (size_t r = 0; r < scored; ++r)
-      e[r] = split.scored.rows[r].observed() -
-             model.predict(aligned[1 - r % 2], split.scored.rows[r], ctx[r]).head<3>();
-    if (session_parameters) *session_parameters = std::max(used[0], used[1]);
-    // Mean leverage of a row under parameters estimated from the other half's 3 m_h equations:
-    // about q / (3 m_h) per component (intercept and slope on rows spread over the same time).
-    if (session_leverage)
-      *session_leverage =
-          0.5 * (used[0] / (3.0 * half[0].rows.size()) + used[1] / (3.0 * half[1].rows.size()));
+  if (displacement) {
+    const auto p = model.predict_cross_fitted(theta, split.scored, model.contexts(split.scored),
+                                              session_parameters, session_leverage);
+    std::vector<Eigen::Vector3d> e(p.size());
+    for (size_t r = 0; r < p.size(); ++r) e[r] = split.scored.rows[r].observed() - p[r];
     return e;
   }
   // A new session is predicted with some other session's registration; the rigid motion

@@ -876,6 +876,45 @@ Eigen::VectorXd DeflectionModel::align_sessions(const Eigen::VectorXd& theta,
   return out;
 }
 
+std::vector<Eigen::Vector3d> DeflectionModel::predict_cross_fitted(
+    const Eigen::VectorXd& theta,
+    const Dataset& data,
+    const std::vector<MeasurementContext>& ctx,
+    int* estimated,
+    double* leverage) const {
+  if (estimated) *estimated = 0;
+  if (leverage) *leverage = 0.0;
+  const size_t n = data.rows.size();
+  bool per_session = false;
+  for (int k = 0; k < count_; ++k) per_session |= spec(k).per_session;
+  const bool displacement = std::none_of(data.rows.begin(), data.rows.end(),
+                                         [](const Measurement& m) { return m.absolute; });
+  std::vector<Eigen::Vector3d> p(n);
+  if (!per_session || !displacement || n < 4) {
+    for (size_t r = 0; r < n; ++r) p[r] = predict(theta, data.rows[r], ctx[r]).head<3>();
+    return p;
+  }
+  Dataset half[2] = {data, data};
+  std::vector<MeasurementContext> hctx[2];
+  half[0].rows.clear();
+  half[1].rows.clear();
+  for (size_t r = 0; r < n; ++r) {
+    half[r % 2].rows.push_back(data.rows[r]);
+    hctx[r % 2].push_back(ctx[r]);
+  }
+  Eigen::VectorXd aligned[2];  // [h]: estimated from half h, predicts the other half
+  int used[2] = {0, 0};
+  for (int h = 0; h < 2; ++h) aligned[h] = align_sessions(theta, half[h], hctx[h], &used[h]);
+  for (size_t r = 0; r < n; ++r) p[r] = predict(aligned[1 - r % 2], data.rows[r], ctx[r]).head<3>();
+  if (estimated) *estimated = std::max(used[0], used[1]);
+  // A row predicted with q values estimated from the other half's 3 m_h equations has a mean
+  // leverage of about q / (3 m_h) per component (offset and rate over rows spread alike).
+  if (leverage)
+    *leverage =
+        0.5 * (used[0] / (3.0 * half[0].rows.size()) + used[1] / (3.0 * half[1].rows.size()));
+  return p;
+}
+
 Eigen::Matrix<double, 3, Eigen::Dynamic> observation_block(
     const Matrix6X<double>& jac_meas,
     const Matrix6X<double>& jac_load,

@@ -198,6 +198,7 @@ _proto("stiff_model_destroy", None, H)
 _proto("stiff_predict", S, c_double_p, H, c_double_p, C.c_size_t, c_double_p)
 _proto("stiff_predict_dataset", S, c_double_p, C.c_size_t, c_size_p, H, H)
 _proto("stiff_predict_dataset_orientation", S, c_double_p, C.c_size_t, c_size_p, H, H)
+_proto("stiff_predict_dataset_cross_fitted", S, c_double_p, C.c_size_t, c_size_p, H, H)
 _proto("stiff_result_orientation_residuals", S, c_double_p, C.c_size_t, c_size_p, H)
 _proto("stiff_predict_batch", S, c_double_p, C.c_size_t, c_size_p, H, c_double_p, c_double_p,
        C.c_size_t, C.c_size_t)

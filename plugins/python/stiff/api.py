@@ -568,11 +568,17 @@ class Model(_Handle):
                                       _c.ptr(w), rows, n))
         return out[0] if np.ndim(q) == 1 else out
 
-    def predict_dataset(self, data: "Dataset") -> np.ndarray:
+    def predict_dataset(self, data: "Dataset", cross_fit_sessions: bool = False) -> np.ndarray:
         """What the model predicts for every row of `data`, N x 3 [m]: the displacement of a
         displacement row, the target position in the instrument frame of an absolute row (the
-        registration of its session, which the fit must have identified)."""
-        return _c.get_doubles(lib.stiff_predict_dataset, self, data).reshape(-1, 3)
+        registration of its session, which the fit must have identified).
+
+        cross_fit_sessions: `data` is a measured session the fit has not seen; its own
+        parameters (drift) are estimated from its readings, cross-fitted (each half of the rows
+        predicted with the values from the other half), as the diagnosis scores validation
+        data (docs/effects.md, drift)."""
+        f = lib.stiff_predict_dataset_cross_fitted if cross_fit_sessions else lib.stiff_predict_dataset
+        return _c.get_doubles(f, self, data).reshape(-1, 3)
 
     def predict_orientation(self, data: "Dataset") -> np.ndarray:
         """The probe orientation the model predicts for every absolute row of `data`, N x 3

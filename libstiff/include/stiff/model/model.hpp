@@ -143,6 +143,19 @@ class DeflectionModel {
                                  const std::vector<MeasurementContext>& ctx,
                                  int* estimated = nullptr) const;
 
+  /// What the model predicts for measured displacement rows of a session the fit has not seen,
+  /// with that session's own parameters cross-fitted: the rows of even position are predicted
+  /// with the values align_sessions estimates from the rows of odd position and the other way
+  /// round, so that no row is predicted by values fitted to it (docs/effects.md, drift).
+  /// `*estimated` (may be null) receives the larger of the two halves' ranks, `*leverage` the
+  /// mean leverage this adds to a predicted component (its prediction variance over sigma^2).
+  /// With fewer than 4 rows, absolute rows or no per-session parameter: the plain predictions.
+  std::vector<Eigen::Vector3d> predict_cross_fitted(const Eigen::VectorXd& theta,
+                                                    const Dataset& data,
+                                                    const std::vector<MeasurementContext>& ctx,
+                                                    int* estimated = nullptr,
+                                                    double* leverage = nullptr) const;
+
   /// Index of a session label (0 for unknown labels and for data without sessions).
   int session_index(const std::string& label) const;
   /// True when the model knows the session label.

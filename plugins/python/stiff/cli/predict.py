@@ -16,7 +16,13 @@ when the data holds measured displacements, prints the RMS prediction error. On 
 x_m, y_m, z_m: the predicted position in the instrument frame (the displacement on
 displacement rows); with measured orientations (a, b, c columns) also the orientation error
 in degrees (mean, RMS, max) and rx_rad, ry_rad, rz_rad: the predicted probe orientation as a
-rotation vector in the instrument frame."""
+rotation vector in the instrument frame.
+
+Measured displacements are a session of their own: when the model has parameters of the
+measurement session (drift: the warm-up restarts with every session), they are estimated from
+the file's own readings, cross-fitted (each half of the rows predicted with the values from
+the other half), as `stiff diagnose` scores validation data; --calibration-session applies the
+fit's values instead (docs/effects.md, drift)."""
 
 
 def register(sub):
@@ -26,6 +32,9 @@ def register(sub):
     p.add_argument("--fit", "-f", required=True, help="fit JSON from `stiff identify`")
     p.add_argument("--data", "-d", required=True, help="measurement or plan CSV")
     p.add_argument("-o", "--output", help="CSV of predicted displacements to write")
+    p.add_argument("--calibration-session", action="store_true",
+                   help="measured displacements: apply the calibration session's drift instead of "
+                        "estimating the file's own (cross-fitted)")
     add_limits_flag(p)
     p.set_defaults(func=run)
 
@@ -40,6 +49,12 @@ def run(args):
         return run_absolute(args, robot, model, data, fit)
     pred = model.predict(data.q, data.wrench)
     measured = data.displacement
+    if measured is not None and not args.calibration_session:
+        own = model.predict_dataset(data, cross_fit_sessions=True)
+        if not np.array_equal(own, model.predict_dataset(data)):
+            pred[:, :3] = own
+            print("the file's own session parameters (drift) are estimated from its readings, "
+                  "cross-fitted (--calibration-session applies the fit's)")
     if measured is not None:
         err = measured - pred[:, :3]
         rms = float(np.sqrt(np.mean(err ** 2)))
