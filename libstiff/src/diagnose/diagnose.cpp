@@ -161,11 +161,12 @@ Diagnosis diagnose(const RobotModel& robot,
               mm(options.repeatability_m) + " (ISO 9283 RP): what remains is at the repeatability";
     return true;
   };
-  if (at_repeatability(chain.levels[0], &why)) {
+  const bool repeats = at_repeatability(chain.levels[0], &why);
+  if (repeats) {
     d.verdict = "adequate";
     d.notes.push_back("step 0: " + why);
   }
-  const Level* next = d.verdict == "adequate" ? nullptr : chain.next(0);
+  const Level* next = repeats ? nullptr : chain.next(0);
   const Level& L0 = chain.levels[0];
   d.fit = L0.a.quality;
   d.omnibus_rejects = noise.known && d.fit.floor_p < options.alpha;
@@ -176,7 +177,7 @@ Diagnosis diagnose(const RobotModel& robot,
     d.after = next->a.quality;
     d.after_valid = true;
   }
-  if (claims(L0) && d.verdict != "adequate") {
+  if (claims(L0) && !repeats) {
     d.suggested_model = join(model, "+") + "+" + L0.scores[L0.pick].effect;
     d.suggested_command = L0.scores[L0.pick].command;
   }
@@ -206,7 +207,7 @@ Diagnosis diagnose(const RobotModel& robot,
     s.added = added;
     s.quality = L.a.quality;
     s.verdict = verdict;
-    if (claims(L) && verdict != "adequate") {
+    if (claims(L)) {
       s.top = L.scores[L.pick].effect;
       s.top_p_adjusted = L.scores[L.pick].p_adjusted;
       s.top_expected_rms_drop_m = L.scores[L.pick].expected_rms_drop_m;
