@@ -278,11 +278,13 @@ Diagnosis diagnose(const RobotModel& robot,
         chain.levels.resize(i + 1);
         chain.levels[i].pick = k;
         if (!chain.next(i)) continue;
-        std::vector<double> h = held_out(chain.levels[i + 1]);
-        // ... and the validation error itself falls: each step must show it to the user.
-        if (!falls(base, h) ||
-            (v > 0 && !(mean_square(validation_part(h)) < mean_square(validation_part(base)))))
+        // ... and the validation error itself falls: each step must show it to the user
+        // (checked first: it needs no cross-validation refits).
+        if (v > 0 && !(mean_square(chain.levels[i + 1].a.quality.validation_error_m) <
+                       mean_square(validation_part(base))))
           continue;
+        std::vector<double> h = held_out(chain.levels[i + 1]);
+        if (!falls(base, h)) continue;
         confirmed.push_back({k, std::move(chain.levels[i + 1]), std::move(h)});
       }
       chain.levels.resize(i + 1);
