@@ -17,12 +17,16 @@ void displacement_and_jacobian(const Setup& s,
   const DeflectionModel& model = *s.model;
   const int p = model.parameter_count();
   auto& t = s.theta_jet;
+  const Measurement& m = s.data->rows[row];
+  if (every && dim == 3 && m.absolute && model.analytic_absolute()) {
+    model.absolute_jacobian(theta, m, s.ctx[row], s.scratch, s.dscratch, t, d, out);
+    return;
+  }
   t.resize(p);
   for (int k = 0; k < p; ++k) t[k] = Jet(theta[k]);
   const bool analytic = every && model.analytic() && dim == 3;
   const std::vector<int>& jc = analytic ? model.jet_parameters() : cols;
   const int nc = static_cast<int>(jc.size());
-  const Measurement& m = s.data->rows[row];
   Vector3<Jet> dj, oj;
   Vector3<Jet>* op = dim == 6 ? &oj : nullptr;
   if (nc == 0) model.evaluate_jet(t.data(), m, s.ctx[row], s.scratch, &dj, op);
@@ -118,7 +122,11 @@ void Evaluations::get(int row,
     } else if (cols || linear_) {
       // Every column when that takes no more passes of the model than the ones asked for.
       const int want = cols ? static_cast<int>(cols->size()) : 0;
-      const int passes = static_cast<int>(s_->model->jet_parameters().size()) + kJetStride - 1;
+      const DeflectionModel& model = *s_->model;
+      const bool absolute = s_->data->rows[row].absolute && model.analytic_absolute() && dim == 3;
+      const int passes = (absolute ? 3 + static_cast<int>(model.absolute_jet_parameters().size())
+                                   : static_cast<int>(model.jet_parameters().size())) +
+                         kJetStride - 1;
       const bool every = linear_ || passes / kJetStride <= (want + kJetStride - 1) / kJetStride;
       const std::vector<int>& c = every ? all_ : *cols;
       displacement_and_jacobian(*s_, row, theta, c, nullptr, every, dv, jj);

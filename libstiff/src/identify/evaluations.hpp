@@ -95,7 +95,8 @@ struct Setup {
 /// parameter vector. Writes d (s.dim) and the s.dim x cols.size() derivatives (column-major,
 /// leading dimension s.dim) into `out`. With `every`
 /// (cols lists every parameter, no scale) of an analytic model, the passes differentiate only
-/// its jet_parameters() and the other columns come from DeflectionModel::analytic_columns.
+/// its jet_parameters() and the other columns come from DeflectionModel::analytic_columns; an
+/// absolute row of an analytic_absolute() model (dim 3) takes DeflectionModel::absolute_jacobian.
 void displacement_and_jacobian(const Setup& s,
                                int row,
                                const double* theta,

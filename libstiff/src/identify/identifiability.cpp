@@ -169,8 +169,9 @@ Identifiability check_identifiability(const DeflectionModel& model,
                                       const Eigen::VectorXd* theta,
                                       const std::vector<bool>* fitted,
                                       const Eigen::VectorXd* residuals,
-                                      const std::vector<bool>* first) {
-  Identifiability out = structural(model, j, typical, tolerance, first);
+                                      const std::vector<bool>* first,
+                                      const Identifiability* structure) {
+  Identifiability out = structure ? *structure : structural(model, j, typical, tolerance, first);
   out.statistical.assign(out.fixed.size(), false);
   if (!(max_relative_se > 0) || !theta || !(residual_sigma > 0 || residuals)) return out;
   const int p = model.parameter_count();

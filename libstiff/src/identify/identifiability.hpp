@@ -43,6 +43,8 @@ struct Identifiability {
 ///     when its standard error alone exceeds `max_relative_se` times its typical magnitude.
 /// `first` (optional, per parameter): parameters that come first in the priority order, e.g.
 /// those a start fit identified.
+/// `structure`: the structural decision (1.) already made on j, whose held set the statistical
+/// test starts from (it is not made again).
 /// Throws NumericalError when j is not finite.
 Identifiability check_identifiability(const DeflectionModel& model,
                                       const Eigen::MatrixXd& j,
@@ -53,6 +55,7 @@ Identifiability check_identifiability(const DeflectionModel& model,
                                       const Eigen::VectorXd* theta = nullptr,
                                       const std::vector<bool>* fitted = nullptr,
                                       const Eigen::VectorXd* residuals = nullptr,
-                                      const std::vector<bool>* first = nullptr);
+                                      const std::vector<bool>* first = nullptr,
+                                      const Identifiability* structure = nullptr);
 
 }  // namespace stiff::detail

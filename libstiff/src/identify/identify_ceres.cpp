@@ -337,13 +337,14 @@ FitResult identify(const RobotModel& robot,
   // costs the solver most of its iterations (docs/identifiability.md). Ten, not the
   // max_relative_se of the solution's test, because this one cannot weigh a fitted value.
   constexpr double kStartRelativeSe = 10.0;
-  auto prescreen = [&](const Eigen::MatrixXd& jac) {
+  // `structure`: the structural decision check() made on jac (the same columns).
+  auto prescreen = [&](const Eigen::MatrixXd& jac, const Identifiability& structure) {
     const std::vector<bool> fitted(p, true);
     const Eigen::VectorXd e = weighted_residuals(s, theta);
     const Identifiability stat = apart(jac, given_idf, [&](const Eigen::MatrixXd& j) {
       return check_identifiability(model, j, s.typical, opt.rank_tolerance, 0.0,
                                    std::min(kStartRelativeSe, opt.max_relative_se), &theta, &fitted,
-                                   &e, first);
+                                   &e, first, &structure);
     });
     if (std::find(stat.statistical.begin(), stat.statistical.end(), true) != stat.statistical.end())
       idf = stat;
@@ -445,7 +446,7 @@ FitResult identify(const RobotModel& robot,
     {
       const Eigen::MatrixXd jac = weighted_jacobian(s, theta);
       idf = check(jac, theta);
-      if (absolute && opt.max_relative_se > 0) prescreen(jac);
+      if (absolute && opt.max_relative_se > 0) prescreen(jac, idf);
     }
     for (int pass = 0;; ++pass) {
       free.clear();
@@ -486,8 +487,9 @@ FitResult identify(const RobotModel& robot,
       iterations += last.iterations;
       last_jacobian = weighted_jacobian(s, theta);
       last_jacobian_theta = theta;
+      if (absolute) break;  // its set stays the start's (below): no structural re-check
       Identifiability again = check(last_jacobian, theta);
-      if (absolute || again == idf || pass == 2) break;
+      if (again == idf || pass == 2) break;
       // A parameter held so far became visible (or the reverse): solve again from here, a
       // freed parameter from the value it was held at (theta unchanged: the Jacobians cached
       // at this point serve the next solve's first iteration).

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <map>
 #include <set>
+#include <type_traits>
 
 #include "kinematics/fast_chain.hpp"
 #include "stiff/error.hpp"
@@ -85,6 +86,20 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
   for (size_t e = 0; e < effects_.size(); ++e)
     if (!analytic_ || !effects_[e]->has_displacement_derivatives())
       for (int k = 0; k < effects_[e]->size(); ++k) jet_parameters_.push_back(offsets_[e] + k);
+  // Absolute rows: the tangents map what the analytic effects write; an effect without
+  // columns may only change the wrench stage's inputs, which the one pass differentiates.
+  int measuring = 0;
+  analytic_absolute_ = robot.dof() <= 32;
+  for (const auto& e : effects_) {
+    measuring += (e->stages() & kMeasurementStage) != 0;
+    if (!e->has_absolute_columns() && (e->stages() & ~unsigned{kWrenchStage}) != 0)
+      analytic_absolute_ = false;
+  }
+  analytic_absolute_ = analytic_absolute_ && measuring <= 1;
+  for (size_t e = 0; e < effects_.size(); ++e)
+    if (!effects_[e]->has_absolute_columns())
+      for (int k = 0; k < effects_[e]->size(); ++k)
+        absolute_jet_parameters_.push_back(offsets_[e] + k);
 }
 
 std::vector<std::string> DeflectionModel::effect_names() const {
@@ -326,6 +341,40 @@ Vector3<T> corrected_point(const RobotModel& robot,
   return rot * r + pos;
 }
 
+/// The corrected chain corrected_point<Jet> keeps in EvalState::kept (the order of its
+/// `keep`): per joint R_B, R_E, J_r (3 x 3, column-major), p_B, p_E, z_E, then the final
+/// rotation and position (see there).
+struct KeptChain {
+  static constexpr int kPerJoint = 36;
+  static size_t size(int n) { return static_cast<size_t>(kPerJoint * n + 12); }
+  const double* k;
+  int n;
+  Eigen::Map<const Eigen::Matrix3d> rb(int j) const {
+    return Eigen::Map<const Eigen::Matrix3d>(at(j, 0));
+  }
+  Eigen::Map<const Eigen::Matrix3d> re(int j) const {
+    return Eigen::Map<const Eigen::Matrix3d>(at(j, 9));
+  }
+  Eigen::Map<const Eigen::Matrix3d> jr(int j) const {
+    return Eigen::Map<const Eigen::Matrix3d>(at(j, 18));
+  }
+  Eigen::Map<const Eigen::Vector3d> pe(int j) const {
+    return Eigen::Map<const Eigen::Vector3d>(at(j, 30));
+  }
+  Eigen::Map<const Eigen::Vector3d> ze(int j) const {
+    return Eigen::Map<const Eigen::Vector3d>(at(j, 33));
+  }
+  Eigen::Map<const Eigen::Matrix3d> rot() const {
+    return Eigen::Map<const Eigen::Matrix3d>(at(n, 0));
+  }
+  Eigen::Map<const Eigen::Vector3d> pos() const {
+    return Eigen::Map<const Eigen::Vector3d>(at(n, 9));
+  }
+
+ private:
+  const double* at(int j, int i) const { return k + kPerJoint * j + i; }
+};
+
 /// corrected_point for Jets by the chain rule: the chain once in double, then the point's
 /// derivatives with respect to each joint's dq, error translation and error rotation vector
 /// and to r, applied to the Jets' derivative parts. The same first derivatives as the Jet
@@ -355,8 +404,8 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
   Eigen::Vector3d pos = Eigen::Vector3d::Zero();
   // The chain in double depends on the values only: the row's later passes (other derivative
   // directions at the same values) take it from the first.
-  const size_t kept_size = static_cast<size_t>(36 * n + 12);
-  auto keep = [&](bool store) {
+  const size_t kept_size = KeptChain::size(n);
+  auto keep = [&](bool store) {  // in the layout KeptChain reads
     double* k = state->kept.data();
     auto move = [&](double* x, int len) {
       if (store)
@@ -396,13 +445,7 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
     re[j] = rot;
     pe[j] = pos;
     ze[j] = rot * jt.axis;
-    // Right Jacobian of SO(3) at w (series below 1e-4 rad, where the closed form cancels).
-    Eigen::Matrix3d k;
-    k << 0, -w(2), w(1), w(2), 0, -w(0), -w(1), w(0), 0;
-    const double th = w.norm();
-    const double c1 = th < 1e-4 ? 0.5 - th * th / 24 : (1 - std::cos(th)) / (th * th);
-    const double c2 = th < 1e-4 ? 1.0 / 6 - th * th / 120 : (th - std::sin(th)) / (th * th * th);
-    jr[j] = Eigen::Matrix3d::Identity() - c1 * k + c2 * k * k;
+    jr[j] = effects::right_jacobian(w);
     rot = (rot * Eigen::AngleAxisd(q(j) + dq(j).a, jt.axis).toRotationMatrix()).eval();
     pos += rot * jt.post.topRightCorner<3, 1>();
     rot = (rot * jt.post.topLeftCorner<3, 3>()).eval();
@@ -458,6 +501,19 @@ void probe_orientation(EvalState<T>& s, const Matrix3<T>& flange, bool deflected
   if (deflected) s.orientation = (effects::rotation_matrix(s.rot.data()) * s.orientation).eval();
 }
 
+/// Before the measurement stage: absolute_jacobian's first pass asks for the stage's map of
+/// the position it receives (derivative directions 0-2) and for that position.
+template <typename T>
+void seed_instrument(EvalState<T>& s) {
+  if constexpr (std::is_same<T, Jet>::value) {
+    if (!s.seed_instrument) return;
+    for (int k = 0; k < 3; ++k) {
+      s.instrument_input(k) = s.d(k).a;
+      s.d(k).v(k) += 1.0;
+    }
+  }
+}
+
 }  // namespace
 
 template <typename T>
@@ -501,6 +557,7 @@ void DeflectionModel::evaluate_into(const T* theta,
       s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, s.oriented ? &fr : nullptr,
                              &s);
       if (s.oriented) probe_orientation(s, fr, false);
+      seed_instrument(s);
       if (instrument)
         for (size_t e = 0; e < effects_.size(); ++e)
           effects_[e]->measurement(theta + offsets_[e], s);
@@ -540,6 +597,7 @@ void DeflectionModel::evaluate_into(const T* theta,
     s.d +=
         corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, s.oriented ? &fr : nullptr, &s);
     if (s.oriented) probe_orientation(s, fr, true);
+    seed_instrument(s);
   }
   if (instrument)
     for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
@@ -720,6 +778,7 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
     Matrix3<Jet> fr;
     s.d += corrected_point(robot_, m.q, s.dq, s.joint_error, s.r_meas, orient ? &fr : nullptr, &s);
     if (orient) probe_orientation(s, fr, true);
+    seed_instrument(s);
   }
   for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->measurement(theta + offsets_[e], s);
   *d = s.d;
@@ -748,6 +807,87 @@ void DeflectionModel::analytic_columns(const EvalState<Jet>& js,
   for (size_t e = 0; e < effects_.size(); ++e)
     if (effects_[e]->has_displacement_derivatives())
       effects_[e]->displacement_derivatives(ds, jac + 3 * offsets_[e]);
+}
+
+void DeflectionModel::absolute_jacobian(const double* theta,
+                                        const Measurement& m,
+                                        const MeasurementContext& c,
+                                        EvalState<Jet>& s,
+                                        EvalState<double>& ds,
+                                        std::vector<Jet>& t,
+                                        double* d,
+                                        double* jac) const {
+  if (!analytic_absolute_ || !m.absolute)
+    throw InvalidArgument(
+        "absolute_jacobian: needs an absolute row and a model whose effects "
+        "give their columns (analytic_absolute)");
+  const int n = robot_.dof();
+  t.resize(count_);
+  for (int k = 0; k < count_; ++k) t[k] = Jet(theta[k]);
+  std::fill(jac, jac + 3 * count_, 0.0);
+  // The first pass's directions 0-2 are the measurement stage's input, the wrench-stage
+  // parameters take the rest and kJetStride per later pass (which reuse the first's chain).
+  const std::vector<int>& jc = absolute_jet_parameters_;
+  const int nc = static_cast<int>(jc.size());
+  Eigen::Matrix3d instrument;
+  Vector3<Jet> y;
+  for (int pass = 0, done = 0; pass == 0 || done < nc; ++pass) {
+    const int first = pass == 0 ? 3 : 0;
+    const int last = std::min(nc, done + kJetStride - first);
+    for (int i = done; i < last; ++i) t[jc[i]].v(first + i - done) = 1.0;
+    s.same_values = pass > 0;
+    s.seed_instrument = pass == 0;
+    evaluate_jet(t.data(), m, c, s, &y, nullptr);
+    for (int i = done; i < last; ++i) {
+      t[jc[i]].v(first + i - done) = 0.0;
+      for (int r = 0; r < 3; ++r) jac[3 * jc[i] + r] = y(r).v(first + i - done);
+    }
+    if (pass == 0)
+      for (int r = 0; r < 3; ++r)
+        for (int k = 0; k < 3; ++k) instrument(r, k) = y(r).v(k);
+    done = last;
+  }
+  s.seed_instrument = false;
+  s.same_values = false;
+  for (int r = 0; r < 3; ++r) d[r] = y(r).a;
+
+  // The tangents (AbsoluteTangents) at this row's values, from the chain the pass kept.
+  thread_local AbsoluteTangents tg;
+  tg.instrument = instrument;
+  tg.position = s.instrument_input;
+  tg.dq.resize(3, n);
+  tg.joint_error.resize(3, 6 * n);
+  tg.dtheta.resize(3, n);
+  const KeptChain kc{s.kept.data(), n};
+  const Eigen::Vector3d r(s.r_meas(0).a, s.r_meas(1).a, s.r_meas(2).a);
+  const Eigen::Vector3d p = kc.rot() * r + kc.pos();
+  const Eigen::Vector3d pm(s.p_meas(0).a, s.p_meas(1).a, s.p_meas(2).a);
+  for (int j = 0; j < n; ++j) {
+    const Eigen::Vector3d lever = p - kc.pe(j);
+    tg.dq.col(j) = instrument * kc.ze(j).cross(lever);
+    const Eigen::Matrix3d turn = kc.re(j) * kc.jr(j);
+    for (int i = 0; i < 3; ++i) {
+      tg.joint_error.col(6 * j + i) = instrument * kc.rb(j).col(i);
+      tg.joint_error.col(6 * j + 3 + i) = instrument * turn.col(i).cross(lever);
+    }
+    Eigen::Vector3d w;
+    lever_arm(c.chain.axis.col(j), c.chain.origin.col(j), pm, w);
+    tg.dtheta.col(j) = instrument * w;
+  }
+  ds.robot = &robot_;
+  ds.measurement = &m;
+  ds.context = &c;
+  for (int k = 0; k < 3; ++k) {
+    ds.force(k) = s.force(k).a;
+    ds.moment(k) = s.moment(k).a;
+    ds.r_meas(k) = s.r_meas(k).a;
+    ds.r_load(k) = s.r_load(k).a;
+    ds.p_meas(k) = s.p_meas(k).a;
+    ds.p_load(k) = s.p_load(k).a;
+  }
+  for (size_t e = 0; e < effects_.size(); ++e)
+    if (effects_[e]->has_absolute_columns())
+      effects_[e]->absolute_columns(theta + offsets_[e], ds, tg, jac + 3 * offsets_[e]);
 }
 
 Eigen::Matrix<double, 6, 1> DeflectionModel::predict(const Eigen::VectorXd& theta,

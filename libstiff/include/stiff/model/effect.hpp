@@ -113,6 +113,34 @@ struct EvalState {
   /// plain values it kept on the previous pass (`kept`) instead of computing them again.
   bool same_values = false;
   std::vector<double> kept;
+  /// Set by DeflectionModel::absolute_jacobian on an absolute row's first pass: the model
+  /// seeds derivative directions 0-2 on the position the measurement stage receives (their
+  /// derivatives at the end are that stage's map into the instrument frame) and keeps its
+  /// value in `instrument_input`.
+  bool seed_instrument = false;
+  Eigen::Vector3d instrument_input = Eigen::Vector3d::Zero();
+};
+
+/// First-order maps of an absolute row's predicted position y (instrument frame, after every
+/// stage) at the row's values, from a change of what an effect writes in its stage (filled by
+/// DeflectionModel::absolute_jacobian for Effect::absolute_columns):
+///  - `dtheta` (3 x n): dy/d dtheta_j, a joint deflection added in the joint stage (through
+///    the nominal chain's J_p at P, then the measurement stage);
+///  - `dq` (3 x n): dy/d dq_j, a joint angle correction of the geometry stage: z_j x (P - o_j)
+///    of the corrected chain (axis z_j, origin o_j of joint j's error frame);
+///  - `joint_error` (3 x 6n): dy/d joint_error(i, j) in column 6 j + i: translations (i < 3)
+///    move P by R_B e_i (R_B: joint j's frame after `pre`); rotation-vector components w_i
+///    turn it about R_E J_r(w) e_i through o_j (R_E: after the error's rotation, J_r the right
+///    Jacobian of SO(3));
+///  - `instrument` (3 x 3): dy/dx, the measurement stage's map of the base-frame position x it
+///    receives (the registration's rotation), by automatic differentiation of that stage;
+///  - `position`: x itself.
+struct AbsoluteTangents {
+  Eigen::Matrix<double, 3, Eigen::Dynamic> dtheta;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> dq;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> joint_error;
+  Eigen::Matrix3d instrument;
+  Eigen::Vector3d position;
 };
 
 /// What an effect needs from the robot file or the data.
@@ -170,6 +198,20 @@ class Effect {
   /// by DeflectionModel::analytic_columns when every other effect acts only in the wrench
   /// stage.
   virtual void displacement_derivatives(const EvalState<double>& /*s*/, double* /*out*/) const {}
+  /// Optional analytic derivatives of an absolute row's predicted position (one evaluation
+  /// instead of one pass of automatic differentiation per kJetStride parameters): true when
+  /// absolute_columns is provided. Such an effect writes, linearly in its parameters, only
+  /// what AbsoluteTangents maps (dtheta in the joint stage; dq and joint_error in the geometry
+  /// stage; or, as the model's only measurement-stage effect, the position it receives) and
+  /// reads nothing another effect's parameters change but the measured point. The tests
+  /// compare every such effect's columns with automatic differentiation.
+  virtual bool has_absolute_columns() const { return false; }
+  /// dy/dp (3 x size(), column-major, zeroed by the caller) of the absolute row whose values
+  /// are in `s` (after its evaluation at p) through the tangents `t` of that evaluation.
+  virtual void absolute_columns(const double* /*p*/,
+                                const EvalState<double>& /*s*/,
+                                const AbsoluteTangents& /*t*/,
+                                double* /*out*/) const {}
   /// The stages the effect acts in (Stage bits); EffectT finds them from the stage functions
   /// the effect defines.
   virtual unsigned stages() const { return kAllStages; }

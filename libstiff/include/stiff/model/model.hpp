@@ -60,6 +60,28 @@ class DeflectionModel {
   /// derivatives at the state `js` an evaluate_jet pass at theta left (its values; the other
   /// columns are left as they are). `ds` is scratch (one per thread).
   void analytic_columns(const EvalState<Jet>& js, EvalState<double>& ds, double* jac) const;
+  /// An absolute row's Jacobian takes one evaluation (absolute_jacobian): every effect gives
+  /// its columns analytically (Effect::has_absolute_columns) or acts only in the wrench stage
+  /// (differentiated automatically in the same evaluation), at most one acts in the
+  /// measurement stage, and the robot has at most 32 joints.
+  bool analytic_absolute() const { return analytic_absolute_; }
+  /// The parameters absolute_jacobian differentiates automatically (the wrench-stage effects').
+  const std::vector<int>& absolute_jet_parameters() const { return absolute_jet_parameters_; }
+  /// The predicted position d (3) and its derivatives dd/dtheta (3 x P, column-major, into
+  /// `jac`) of the absolute row m at theta when analytic_absolute(): one evaluate_jet pass
+  /// (more only for more than five wrench-stage parameters) whose derivative directions are
+  /// the measurement stage's input and the wrench-stage parameters, then every other column
+  /// from the effects' absolute_columns through the tangents of that pass (AbsoluteTangents).
+  /// Equal to displacement_jacobian up to round-off. `js`, `ds`, `t` are scratch (one per
+  /// thread).
+  void absolute_jacobian(const double* theta,
+                         const Measurement& m,
+                         const MeasurementContext& c,
+                         EvalState<Jet>& js,
+                         EvalState<double>& ds,
+                         std::vector<Jet>& t,
+                         double* d,
+                         double* jac) const;
   /// Offset of effect e's block in theta.
   int offset(int e) const { return offsets_[e]; }
   /// Index of an effect by name, -1 if absent.
@@ -180,6 +202,8 @@ class DeflectionModel {
   bool linear_ = true;
   bool analytic_ = false;
   std::vector<int> jet_parameters_;
+  bool analytic_absolute_ = false;
+  std::vector<int> absolute_jet_parameters_;
   std::map<std::string, int> sessions_;
 };
 

@@ -53,29 +53,47 @@ class GravityLumped : public EffectT<GravityLumped> {
             "weight, not a fixed geometric error)"};
   }
 
+  bool has_absolute_columns() const override { return true; }
+  void absolute_columns(const double* /*p*/,
+                        const EvalState<double>& s,
+                        const AbsoluteTangents& t,
+                        double* out) const override {
+    // dtheta_j is linear in beta_jk: each column is the regressor times joint j's tangent.
+    const ChainState& c = s.context->chain;
+    int i = 0;
+    for (int j = 0; j < n_; ++j)
+      for (int k = j + 1; k <= n_; ++k, ++i)
+        Eigen::Map<Eigen::Vector3d>(out + 3 * i) = t.dtheta.col(j) * regressor(c, j, k, s.p_meas);
+  }
+
   template <typename T>
   void joint_t(const T* p, EvalState<T>& s) const {
     if (!s.measurement->absolute) return;
     const ChainState& c = s.context->chain;
     int i = 0;
-    for (int j = 0; j < n_; ++j) {
-      const Eigen::Vector3d z = c.axis.col(j), o = c.origin.col(j);
-      for (int k = j + 1; k < n_; ++k, ++i) {
-        // Torque on joint j of a unit-gravity weight at the origin of joint k.
-        Eigen::Vector3d lever;
-        lever_arm(z, o, c.origin.col(k), lever);
-        s.dtheta(j) += p[i] * T(force_torque(lever, g_));
-      }
-      // The last weight sits at P, which the tool and point offsets move: keep its
-      // derivatives. z . ((P - o) x g) = (g x z) . (P - o).
-      const Eigen::Vector3d gz = g_.cross(z);
-      T lever = T(-gz.dot(o));
-      for (int a = 0; a < 3; ++a) lever += T(gz(a)) * s.p_meas(a);
-      s.dtheta(j) += p[i++] * lever;
-    }
+    for (int j = 0; j < n_; ++j)
+      for (int k = j + 1; k <= n_; ++k, ++i) s.dtheta(j) += p[i] * regressor(c, j, k, s.p_meas);
   }
 
  private:
+  /// z_j . ((c_k - o_j) x g): the torque on joint j of a unit weight at the origin of joint k
+  /// (k < n) or, k = n, at the measured point pm.
+  template <typename T>
+  T regressor(const ChainState& c, int j, int k, const Vector3<T>& pm) const {
+    const Eigen::Vector3d z = c.axis.col(j), o = c.origin.col(j);
+    if (k < n_) {
+      Eigen::Vector3d lever;
+      lever_arm(z, o, c.origin.col(k), lever);
+      return T(force_torque(lever, g_));
+    }
+    // P moves with the tool and point offsets: keep its derivatives.
+    // z . ((P - o) x g) = (g x z) . (P - o).
+    const Eigen::Vector3d gz = g_.cross(z);
+    T lever = T(-gz.dot(o));
+    for (int a = 0; a < 3; ++a) lever += T(gz(a)) * pm(a);
+    return lever;
+  }
+
   int n_;
   Eigen::Vector3d g_;
   std::string name_ = "gravity_lumped";

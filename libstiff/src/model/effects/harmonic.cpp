@@ -43,6 +43,20 @@ class Harmonic : public EffectT<Harmonic> {
         "periodic error repeats with the angle, a geometric one does not"};
   }
 
+  bool has_absolute_columns() const override { return true; }
+  void absolute_columns(const double* /*p*/,
+                        const EvalState<double>& s,
+                        const AbsoluteTangents& t,
+                        double* out) const override {
+    const Eigen::VectorXd& q = s.measurement->q;
+    for (int j = 0; j < t.dq.cols(); ++j) {
+      const double a = q(j);
+      const double basis[4] = {std::sin(a), std::cos(a), std::sin(2 * a), std::cos(2 * a)};
+      for (int k = 0; k < 4; ++k)
+        Eigen::Map<Eigen::Vector3d>(out + 3 * (4 * j + k)) = t.dq.col(j) * basis[k];
+    }
+  }
+
   template <typename T>
   void geometry_t(const T* p, EvalState<T>& s) const {
     const Eigen::VectorXd& q = s.measurement->q;

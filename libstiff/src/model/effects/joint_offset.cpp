@@ -37,6 +37,14 @@ class JointOffset : public EffectT<JointOffset> {
         "periodic transmission errors of `harmonic` only then)"};
   }
 
+  bool has_absolute_columns() const override { return true; }
+  void absolute_columns(const double* /*p*/,
+                        const EvalState<double>& /*s*/,
+                        const AbsoluteTangents& t,
+                        double* out) const override {
+    Eigen::Map<Eigen::Matrix<double, 3, Eigen::Dynamic>>(out, 3, t.dq.cols()) = t.dq;
+  }
+
   template <typename T>
   void geometry_t(const T* p, EvalState<T>& s) const {
     for (int j = 0; j < s.dq.size(); ++j) s.dq(j) += p[j];

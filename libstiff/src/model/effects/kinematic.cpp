@@ -72,6 +72,23 @@ class Kinematic : public EffectT<Kinematic> {
         "the tool separates them from the tool offset)"};
   }
 
+  bool has_absolute_columns() const override { return true; }
+  void absolute_columns(const double* /*p*/,
+                        const EvalState<double>& /*s*/,
+                        const AbsoluteTangents& t,
+                        double* out) const override {
+    // The translation moves joint_error's rows 0-2 along u, v; the tilt its rows 3-5.
+    for (int j = 0; j < u_.cols(); ++j) {
+      Eigen::Map<Eigen::Matrix<double, 3, 4>> c(out + 12 * j);
+      const auto move = t.joint_error.middleCols<3>(6 * j);
+      const auto turn = t.joint_error.middleCols<3>(6 * j + 3);
+      c.col(0) = move * u_.col(j);
+      c.col(1) = move * v_.col(j);
+      c.col(2) = turn * u_.col(j);
+      c.col(3) = turn * v_.col(j);
+    }
+  }
+
   template <typename T>
   void geometry_t(const T* p, EvalState<T>& s) const {
     for (int j = 0; j < s.joint_error.cols(); ++j) {

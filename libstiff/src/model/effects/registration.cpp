@@ -64,12 +64,28 @@ class Registration : public EffectT<Registration> {
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
 
+  bool has_absolute_columns() const override { return true; }
+  void absolute_columns(const double* p,
+                        const EvalState<double>& s,
+                        const AbsoluteTangents& t,
+                        double* out) const override {
+    // y = R(omega) x + t: R(omega + dw) = R Exp(J_r dw) turns y by R ((J_r dw) x x), i.e.
+    // dy/domega = -R [x]x J_r (the session's block only; the other sessions' columns are 0).
+    const int k = session(s);
+    const Eigen::Map<const Eigen::Vector3d> w(p + 6 * k);
+    const Eigen::Matrix3d r = effects::rotation_matrix(w.data());
+    const Eigen::Vector3d& x = t.position;
+    Eigen::Matrix3d cross;
+    cross << 0, -x(2), x(1), x(2), 0, -x(0), -x(1), x(0), 0;
+    Eigen::Map<Eigen::Matrix<double, 3, 6>> c(out + 18 * k);
+    c.leftCols<3>() = -r * cross * effects::right_jacobian(w);
+    c.rightCols<3>().setIdentity();
+  }
+
   template <typename T>
   void measurement_t(const T* p, EvalState<T>& s) const {
     if (!s.measurement->absolute) return;
-    int k = s.context->session;
-    if (k < 0 || 6 * k >= static_cast<int>(params_.size())) k = 0;
-    const T* w = p + 6 * k;
+    const T* w = p + 6 * session(s);
     const Matrix3<T> r = effects::rotation_matrix(w);
     const Vector3<T> x = s.d;
     for (int a = 0; a < 3; ++a)
@@ -79,6 +95,12 @@ class Registration : public EffectT<Registration> {
   }
 
  private:
+  /// The row's session (the first for a session the model does not know).
+  template <typename T>
+  int session(const EvalState<T>& s) const {
+    const int k = s.context->session;
+    return k < 0 || 6 * k >= static_cast<int>(params_.size()) ? 0 : k;
+  }
   std::string name_ = "registration";
   std::vector<ParameterSpec> params_;
 };

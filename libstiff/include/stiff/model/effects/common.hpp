@@ -90,6 +90,19 @@ Matrix3<T> rotation_matrix(const T* w) {
   return r;
 }
 
+/// Right Jacobian of SO(3) at the rotation vector w: Exp(w + dw) = Exp(w) Exp(J_r(w) dw) to
+/// first order, J_r = I - (1 - cos t) / t^2 [w]x + (t - sin t) / t^3 [w]x^2 with t = |w|
+/// (series below 1e-4 rad, where the closed form cancels; Sola, Deray & Atchuthan, A micro
+/// Lie theory for state estimation in robotics, 2018).
+inline Eigen::Matrix3d right_jacobian(const Eigen::Vector3d& w) {
+  Eigen::Matrix3d k;
+  k << 0, -w(2), w(1), w(2), 0, -w(0), -w(1), w(0), 0;
+  const double th = w.norm();
+  const double c1 = th < 1e-4 ? 0.5 - th * th / 24 : (1 - std::cos(th)) / (th * th);
+  const double c2 = th < 1e-4 ? 1.0 / 6 - th * th / 120 : (th - std::sin(th)) / (th * th * th);
+  return Eigen::Matrix3d::Identity() - c1 * k + c2 * k * k;
+}
+
 /// First alignment of absolute data with the nominal robot: per session the rigid motion
 /// (instrument <- base) and one offset of the measured point (flange frame) that best map the
 /// nominal forward kinematics onto the measured positions (least squares, alternating the
