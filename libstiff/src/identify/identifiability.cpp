@@ -53,18 +53,34 @@ std::vector<int> priority_order(const DeflectionModel& model, const std::vector<
   return order;
 }
 
+/// R (p x p, upper triangular) of a tall J = Q R, by a Householder QR of each block of rows and
+/// one of the blocks' stacked triangles (tall-skinny QR, Demmel, Grigori, Hoemmen & Langou,
+/// SIAM J. Sci. Comput. 34(1), 2012): R^T R = J^T J as from one QR of J (rows of R may differ
+/// in sign), with the same backward stability, but each block's QR runs in cache, where a
+/// panel of the whole J (its height times a few dozen columns) does not fit.
+Eigen::MatrixXd tall_triangle(const Eigen::MatrixXd& j) {
+  const int m = static_cast<int>(j.rows()), p = static_cast<int>(j.cols());
+  const int block = std::max(1024, 4 * p);
+  Eigen::MatrixXd stacked(((m + block - 1) / block) * p, p);
+  int rows = 0;
+  for (int first = 0; first < m; first += block) {
+    const int count = std::min(block, m - first);
+    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(j.middleRows(first, count));
+    const int k = std::min(count, p);
+    stacked.middleRows(rows, k) = qr.matrixQR().topRows(k).triangularView<Eigen::Upper>();
+    rows += k;
+  }
+  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(stacked.topRows(rows));
+  return qr.matrixQR().topRows(p).triangularView<Eigen::Upper>();
+}
+
 Identifiability structural(const DeflectionModel& model,
                            const Eigen::MatrixXd& j,
+                           const Eigen::MatrixXd& g,
                            const Eigen::VectorXd& typical,
                            double tolerance,
                            const std::vector<bool>* first) {
   const int p = model.parameter_count();
-  // Finite but absurd data (a displacement of 1e308 m) overflow the Jacobian; the rank test
-  // below would then run a QR on an empty matrix.
-  if (!j.allFinite())
-    throw NumericalError(
-        "identify: the Jacobian is not finite (overflow): check the units and sizes of the loads "
-        "and displacements (N, N*m, m)");
   Identifiability out;
   out.fixed.assign(p, false);
   out.reason.assign(p, "");
@@ -75,8 +91,6 @@ Identifiability structural(const DeflectionModel& model,
   // Gram-Schmidt below on tall J; taken only when every column is clearly accepted (its
   // rest^2 is resolved to ~1e-15), else the exact path decides.
   {
-    Eigen::MatrixXd g = Eigen::MatrixXd::Zero(p, p);
-    g.selfadjointView<Eigen::Lower>().rankUpdate(j.transpose());
     Eigen::MatrixXd l = Eigen::MatrixXd::Zero(p, p);  // rows: accepted columns' factor
     std::vector<int> acc;
     Identifiability fast = out;
@@ -110,12 +124,9 @@ Identifiability structural(const DeflectionModel& model,
 
   // Column norms, inner products, orthogonal rests and least-squares coefficients are the same
   // for J and for R of J = Q R (Q with orthonormal columns spanning J's range): on tall J the
-  // exact test runs on the p x p triangle of a blocked Householder QR.
+  // exact test runs on the p x p triangle of Householder QRs.
   Eigen::MatrixXd r;
-  if (j.rows() > 2 * j.cols()) {
-    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(j);
-    r = qr.matrixQR().topRows(j.cols()).triangularView<Eigen::Upper>();
-  }
+  if (j.rows() > 2 * j.cols()) r = tall_triangle(j);
   const Eigen::MatrixXd& jr = r.size() ? r : j;
   std::vector<Eigen::VectorXd> basis;
   std::vector<int> accepted;
@@ -170,20 +181,35 @@ Identifiability check_identifiability(const DeflectionModel& model,
                                       const std::vector<bool>* fitted,
                                       const Eigen::VectorXd* residuals,
                                       const std::vector<bool>* first,
-                                      const Identifiability* structure) {
-  Identifiability out = structure ? *structure : structural(model, j, typical, tolerance, first);
+                                      const Identifiability* structure,
+                                      const Eigen::MatrixXd* gram) {
+  // Finite but absurd data (a displacement of 1e308 m) overflow the Jacobian; the rank test
+  // would then run a QR on an empty matrix.
+  if (!j.allFinite())
+    throw NumericalError(
+        "identify: the Jacobian is not finite (overflow): check the units and sizes of the loads "
+        "and displacements (N, N*m, m)");
+  const bool statistical =
+      max_relative_se > 0 && theta && (residual_sigma > 0 || residuals != nullptr);
+  // J^T J once for both tests.
+  Eigen::MatrixXd own;
+  if (!gram && (!structure || statistical)) {
+    own = Eigen::MatrixXd::Zero(j.cols(), j.cols());
+    own.selfadjointView<Eigen::Lower>().rankUpdate(j.transpose());
+    own.triangularView<Eigen::StrictlyUpper>() = own.transpose();
+    gram = &own;
+  }
+  Identifiability out =
+      structure ? *structure : structural(model, j, *gram, typical, tolerance, first);
   out.statistical.assign(out.fixed.size(), false);
-  if (!(max_relative_se > 0) || !theta || !(residual_sigma > 0 || residuals)) return out;
+  if (!statistical) return out;
   const int p = model.parameter_count();
   // Gram matrix of the scaled columns once; each round inverts its free block.
-  const Eigen::MatrixXd js = j * typical.asDiagonal();
+  const Eigen::MatrixXd g = typical.asDiagonal() * *gram * typical.asDiagonal();
   // With the residuals at theta, the residual scale is that of the linear least-squares step
   // over each round's free set.
-  Eigen::VectorXd jtr;  // J^T r
-  if (residuals) jtr = js.transpose() * *residuals;
-  Eigen::MatrixXd g = Eigen::MatrixXd::Zero(p, p);
-  g.selfadjointView<Eigen::Lower>().rankUpdate(js.transpose());
-  g = g.selfadjointView<Eigen::Lower>();
+  Eigen::VectorXd jtr;  // J^T r of the scaled columns
+  if (residuals) jtr = typical.cwiseProduct(j.transpose() * *residuals);
   std::vector<int> rank(p);  // position in the priority order
   {
     const std::vector<int> order = priority_order(model, first);

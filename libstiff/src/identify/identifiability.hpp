@@ -44,7 +44,8 @@ struct Identifiability {
 /// `first` (optional, per parameter): parameters that come first in the priority order, e.g.
 /// those a start fit identified.
 /// `structure`: the structural decision (1.) already made on j, whose held set the statistical
-/// test starts from (it is not made again).
+/// test starts from (it is not made again). `gram`: J^T J of j (symmetric) when the caller has
+/// it; else it is formed once here for both tests.
 /// Throws NumericalError when j is not finite.
 Identifiability check_identifiability(const DeflectionModel& model,
                                       const Eigen::MatrixXd& j,
@@ -56,6 +57,7 @@ Identifiability check_identifiability(const DeflectionModel& model,
                                       const std::vector<bool>* fitted = nullptr,
                                       const Eigen::VectorXd* residuals = nullptr,
                                       const std::vector<bool>* first = nullptr,
-                                      const Identifiability* structure = nullptr);
+                                      const Identifiability* structure = nullptr,
+                                      const Eigen::MatrixXd* gram = nullptr);
 
 }  // namespace stiff::detail

@@ -291,16 +291,25 @@ FitResult identify(const RobotModel& robot,
   given_idf.reason.assign(p, "");
   for (int k = 0; k < p; ++k)
     if (given[k]) given_idf.reason[k] = "given by the start fit";
-  auto apart = [&](const Eigen::MatrixXd& jac, const Identifiability& decided, auto&& run) {
+  // `gram`: J^T J of jac when known (null: formed by check_identifiability).
+  auto apart = [&](const Eigen::MatrixXd& jac, const Eigen::MatrixXd* gram,
+                   const Identifiability& decided, auto&& run) {
     const bool any =
         std::find(decided.fixed.begin(), decided.fixed.end(), true) != decided.fixed.end();
-    Eigen::MatrixXd rest;
+    Eigen::MatrixXd rest, rest_gram;
     if (any) {
       rest = jac;
+      if (gram) rest_gram = *gram;
       for (int k = 0; k < p; ++k)
-        if (decided.fixed[k]) rest.col(k).setZero();
+        if (decided.fixed[k]) {
+          rest.col(k).setZero();
+          if (gram) {
+            rest_gram.col(k).setZero();
+            rest_gram.row(k).setZero();
+          }
+        }
     }
-    Identifiability out = run(any ? rest : jac);
+    Identifiability out = run(any ? rest : jac, any && gram ? &rest_gram : gram);
     for (int k = 0; k < p; ++k)
       if (decided.fixed[k]) {
         out.fixed[k] = true;
@@ -309,12 +318,13 @@ FitResult identify(const RobotModel& robot,
       }
     return out;
   };
-  auto check = [&](const Eigen::MatrixXd& jac, const Eigen::VectorXd& at) {
+  auto check = [&](const Eigen::MatrixXd& jac, const Eigen::VectorXd& at,
+                   const Eigen::MatrixXd* gram = nullptr) {
     std::vector<bool> fitted(p, false);
     for (int k : free) fitted[k] = true;
-    return apart(jac, given_idf, [&](const Eigen::MatrixXd& j) {
+    return apart(jac, gram, given_idf, [&](const Eigen::MatrixXd& j, const Eigen::MatrixXd* g) {
       return check_identifiability(model, j, s.typical, opt.rank_tolerance, residual_sigma,
-                                   opt.max_relative_se, &at, &fitted, nullptr, first);
+                                   opt.max_relative_se, &at, &fitted, nullptr, first, nullptr, g);
     });
   };
   // Residual standard deviation of the weighted fit at theta, as the statistics below: rows
@@ -337,15 +347,18 @@ FitResult identify(const RobotModel& robot,
   // costs the solver most of its iterations (docs/identifiability.md). Ten, not the
   // max_relative_se of the solution's test, because this one cannot weigh a fitted value.
   constexpr double kStartRelativeSe = 10.0;
-  // `structure`: the structural decision check() made on jac (the same columns).
-  auto prescreen = [&](const Eigen::MatrixXd& jac, const Identifiability& structure) {
+  // `structure`: the structural decision check() made on jac (the same columns); `gram` its
+  // J^T J.
+  auto prescreen = [&](const Eigen::MatrixXd& jac, const Eigen::MatrixXd& gram,
+                       const Identifiability& structure) {
     const std::vector<bool> fitted(p, true);
     const Eigen::VectorXd e = weighted_residuals(s, theta);
-    const Identifiability stat = apart(jac, given_idf, [&](const Eigen::MatrixXd& j) {
-      return check_identifiability(model, j, s.typical, opt.rank_tolerance, 0.0,
-                                   std::min(kStartRelativeSe, opt.max_relative_se), &theta, &fitted,
-                                   &e, first, &structure);
-    });
+    const Identifiability stat =
+        apart(jac, &gram, given_idf, [&](const Eigen::MatrixXd& j, const Eigen::MatrixXd* g) {
+          return check_identifiability(model, j, s.typical, opt.rank_tolerance, 0.0,
+                                       std::min(kStartRelativeSe, opt.max_relative_se), &theta,
+                                       &fitted, &e, first, &structure, g);
+        });
     if (std::find(stat.statistical.begin(), stat.statistical.end(), true) != stat.statistical.end())
       idf = stat;
   };
@@ -445,8 +458,11 @@ FitResult identify(const RobotModel& robot,
     for (int k = 0; k < p; ++k) theta(k) = theta(k) / s.typical(k) * s.typical(k);
     {
       const Eigen::MatrixXd jac = weighted_jacobian(s, theta);
-      idf = check(jac, theta);
-      if (absolute && opt.max_relative_se > 0) prescreen(jac, idf);
+      Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(p, p);  // for both tests below
+      gram.selfadjointView<Eigen::Lower>().rankUpdate(jac.transpose());
+      gram.triangularView<Eigen::StrictlyUpper>() = gram.transpose();
+      idf = check(jac, theta, &gram);
+      if (absolute && opt.max_relative_se > 0) prescreen(jac, gram, idf);
     }
     for (int pass = 0;; ++pass) {
       free.clear();
@@ -501,10 +517,12 @@ FitResult identify(const RobotModel& robot,
     // On absolute data the set decided at the start stays: a held column judged again at the
     // solution, where the curvature breaks its exact dependencies by a hair, would only blur
     // its partners.
-    const Identifiability stat =
-        absolute
-            ? apart(last_jacobian, idf, [&](const Eigen::MatrixXd& j) { return check(j, theta); })
-            : check(last_jacobian, theta);
+    const Identifiability stat = absolute
+                                     ? apart(last_jacobian, nullptr, idf,
+                                             [&](const Eigen::MatrixXd& j, const Eigen::MatrixXd*) {
+                                               return check(j, theta);
+                                             })
+                                     : check(last_jacobian, theta);
     residual_sigma = 0.0;
     if (!(absolute ? stat == idf
                    : std::find(stat.statistical.begin(), stat.statistical.end(), true) ==
