@@ -684,10 +684,14 @@ def write_doc(res):
                 per.append(f"{lib_s * 1e4 / v['rows']:.2f} s for {n} ({ls / lib_s:.0f} times "
                            f"scipy)")
         if per:
-            w("Scaled to 10^4 rows, stiff's library time is " + " and ".join(per) + ". Most of "
-              "it is the Jacobian, one pass of automatic differentiation per 8 parameters (the "
-              "passes of a row share the corrected chain's plain values), about five times per "
-              "calibration: at the start, once per solver step, and for the statistics.")
+            w("Scaled to 10^4 rows, stiff's library time is " + " and ".join(per) + ". An "
+              "absolute row's Jacobian takes one evaluation of the model: the registration, the "
+              "joint offsets, the axis errors and the lumped self-weight give their columns "
+              "analytically from the tangents of the corrected chain that evaluation keeps, and "
+              "automatic differentiation carries only the tool's offset and the registration's "
+              "map in the same pass; a calibration evaluates about five Jacobians (at the start "
+              "and once per solver step; the statistics reuse the last) and factors the tall "
+              "Jacobian once, for the identifiability test at the start.")
             w("")
     w("The reference's time covers its identifiability test and the least-squares fit "
       "(scipy's finite-difference Jacobian); stiff's command time is the wall time of "

@@ -461,7 +461,18 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
   auto add = [&](const Eigen::Vector3d& col, const Vec& d) {
     for (int k = 0; k < 3; ++k) v[k] += col(k) * d;
   };
+  // A pass that moves no joint correction (absolute_jacobian's: those columns are analytic)
+  // skips their terms. Exact zeros: the OR of the bits without the sign.
+  std::uint64_t moved = 0;
   for (int j = 0; j < n; ++j) {
+    std::uint64_t b[7 * kJetStride];
+    std::memcpy(b, dq(j).v.data(), sizeof(double) * kJetStride);
+    for (int i = 0; i < 6; ++i)
+      std::memcpy(b + (i + 1) * kJetStride, joint_error(i, j).v.data(),
+                  sizeof(double) * kJetStride);
+    for (int i = 0; i < 7 * kJetStride; ++i) moved |= b[i] << 1;
+  }
+  for (int j = 0; j < n && moved; ++j) {
     const Eigen::Vector3d lever = p - pe[j];
     add(ze[j].cross(lever), dq(j).v);
     // (R_E J_r e_i) x lever for each component i of w.
@@ -476,7 +487,7 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
   for (int k = 0; k < 3; ++k) out(k) = Jet(p(k), v[k]);
   if (flange) {
     Vec phi[3] = {Vec::Zero(), Vec::Zero(), Vec::Zero()};
-    for (int j = 0; j < n; ++j) {
+    for (int j = 0; j < n && moved; ++j) {
       const Eigen::Matrix3d turn = re[j] * jr[j];
       for (int k = 0; k < 3; ++k) {
         phi[k] += ze[j](k) * dq(j).v;
