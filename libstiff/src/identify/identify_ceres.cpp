@@ -274,6 +274,7 @@ FitResult identify(const RobotModel& robot,
   SolveOutcome last;
   Eigen::MatrixXd last_jacobian;
   Eigen::VectorXd last_jacobian_theta;
+  Eigen::MatrixXd last_gram;    // its J^T J, for the checks at the solution and the statistics
   double residual_sigma = 0.0;  // 0: the structural test only (the passes)
   // The statistical test judges only values a solve fitted (`free`): a value held at its
   // null so far is not evidence either way.
@@ -327,6 +328,14 @@ FitResult identify(const RobotModel& robot,
                                    opt.max_relative_se, &at, &fitted, nullptr, first, nullptr, g);
     });
   };
+  // The Jacobian at the solve's solution and its J^T J.
+  auto keep_last_jacobian = [&]() {
+    last_jacobian = weighted_jacobian(s, theta);
+    last_jacobian_theta = theta;
+    last_gram = Eigen::MatrixXd::Zero(p, p);
+    last_gram.selfadjointView<Eigen::Lower>().rankUpdate(last_jacobian.transpose());
+    last_gram.triangularView<Eigen::StrictlyUpper>() = last_gram.transpose();
+  };
   // Residual standard deviation of the weighted fit at theta, as the statistics below: rows
   // down-weighted by the robust loss count that much.
   auto robust_residual_sigma = [&]() {
@@ -377,8 +386,7 @@ FitResult identify(const RobotModel& robot,
                            what);
     last = solve(s, free, theta, opt, loss_scale, nullptr);
     iterations += last.iterations;
-    last_jacobian = weighted_jacobian(s, theta);
-    last_jacobian_theta = theta;
+    keep_last_jacobian();
   };
   // Optional terms (ParameterSpec::optional_term: members of a family of forms that overlap
   // each other) stay only when the data support them: backward elimination by the Bayesian
@@ -501,10 +509,9 @@ FitResult identify(const RobotModel& robot,
       const bool watch = !absolute && pass < 2;
       last = solve(s, free, theta, *solving, loss_scale, watch ? &visible : nullptr);
       iterations += last.iterations;
-      last_jacobian = weighted_jacobian(s, theta);
-      last_jacobian_theta = theta;
+      keep_last_jacobian();
       if (absolute) break;  // its set stays the start's (below): no structural re-check
-      Identifiability again = check(last_jacobian, theta);
+      Identifiability again = check(last_jacobian, theta, &last_gram);
       if (again == idf || pass == 2) break;
       // A parameter held so far became visible (or the reverse): solve again from here, a
       // freed parameter from the value it was held at (theta unchanged: the Jacobians cached
@@ -517,12 +524,12 @@ FitResult identify(const RobotModel& robot,
     // On absolute data the set decided at the start stays: a held column judged again at the
     // solution, where the curvature breaks its exact dependencies by a hair, would only blur
     // its partners.
-    const Identifiability stat = absolute
-                                     ? apart(last_jacobian, nullptr, idf,
-                                             [&](const Eigen::MatrixXd& j, const Eigen::MatrixXd*) {
-                                               return check(j, theta);
-                                             })
-                                     : check(last_jacobian, theta);
+    const Identifiability stat =
+        absolute ? apart(last_jacobian, &last_gram, idf,
+                         [&](const Eigen::MatrixXd& j, const Eigen::MatrixXd* g) {
+                           return check(j, theta, g);
+                         })
+                 : check(last_jacobian, theta, &last_gram);
     residual_sigma = 0.0;
     if (!(absolute ? stat == idf
                    : std::find(stat.statistical.begin(), stat.statistical.end(), true) ==
@@ -607,26 +614,44 @@ FitResult identify(const RobotModel& robot,
   const int nf = static_cast<int>(free.size());
   // The Jacobian of the last identifiability check is the one at the solution unless the
   // clamping above moved theta.
-  const Eigen::MatrixXd jall =
-      last_jacobian_theta.size() == theta.size() && last_jacobian_theta == theta
-          ? std::move(last_jacobian)
-          : weighted_jacobian(s, theta);
-  Eigen::MatrixXd jf(dim * n, nf);
-  for (int i = 0; i < nf; ++i) jf.col(i) = jall.col(free[i]);
+  const bool at_last = last_jacobian_theta.size() == theta.size() && last_jacobian_theta == theta;
+  const Eigen::MatrixXd jall = at_last ? std::move(last_jacobian) : weighted_jacobian(s, theta);
   // Residual variance of the (robustly) weighted problem: sum w^2 |e|^2 / (sum 3 w - p), which
   // is the usual RSS / (3N - p) without a loss and bounded for down-weighted rows.
   double wsum = 0, wrss = 0;
   for (int r = 0; r < n; ++r) {
     const double w = f.weights(r);
-    jf.middleRows(dim * r, dim) *= std::sqrt(w);
     wsum += s.components(r) * w;
     wrss += w * w * e.segment(dim * r, dim).squaredNorm();
   }
   const double s2 = wsum > nf ? wrss / (wsum - nf) : NAN;
-  Eigen::VectorXd norms = jf.colwise().norm().transpose();
-  for (int i = 0; i < nf; ++i)
-    if (!(norms(i) > 0)) norms(i) = 1.0;
-  const Eigen::MatrixXd js = jf * norms.cwiseInverse().asDiagonal();
+  // The free columns, rows scaled by the root of their robust weight, and normalised (js):
+  // their Gram matrix from the solution's J^T J when no row is down-weighted, the tall js
+  // itself only when needed.
+  const bool from_gram = at_last && (f.weights.array() == 1.0).all();
+  Eigen::VectorXd norms(nf);
+  Eigen::MatrixXd gf(nf, nf);
+  if (from_gram) {
+    for (int a = 0; a < nf; ++a)
+      for (int b = 0; b < nf; ++b) gf(a, b) = last_gram(free[a], free[b]);
+    norms = gf.diagonal().cwiseSqrt();
+  }
+  Eigen::MatrixXd js;
+  auto tall = [&]() {
+    Eigen::MatrixXd jf(dim * n, nf);
+    for (int i = 0; i < nf; ++i) jf.col(i) = jall.col(free[i]);
+    for (int r = 0; r < n; ++r) jf.middleRows(dim * r, dim) *= std::sqrt(f.weights(r));
+    if (!from_gram) norms = jf.colwise().norm().transpose();
+    for (int i = 0; i < nf; ++i)
+      if (!(norms(i) > 0)) norms(i) = 1.0;
+    js = jf * norms.cwiseInverse().asDiagonal();
+  };
+  if (from_gram) {
+    for (int i = 0; i < nf; ++i)
+      if (!(norms(i) > 0)) norms(i) = 1.0;
+  } else {
+    tall();
+  }
   // Singular values and V of the tall js: from the eigen-decomposition of js^T js when it is
   // well conditioned (cond(js) < 1e5, far from the rank threshold below and within the
   // normal equations' accuracy), else from its QR: js = Q R, R = U S V^T.
@@ -634,15 +659,19 @@ FitResult identify(const RobotModel& robot,
   Eigen::MatrixXd v;
   {
     Eigen::MatrixXd gs = Eigen::MatrixXd::Zero(nf, nf);
-    gs.selfadjointView<Eigen::Lower>().rankUpdate(js.transpose());
+    if (from_gram)
+      gs = norms.cwiseInverse().asDiagonal() * gf * norms.cwiseInverse().asDiagonal();
+    else
+      gs.selfadjointView<Eigen::Lower>().rankUpdate(js.transpose());
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(gs, Eigen::ComputeEigenvectors);
     const Eigen::VectorXd lam = es.eigenvalues();  // ascending
-    if (nf > 0 && js.rows() >= nf && lam(0) > 1e-10 * lam(nf - 1)) {
+    if (nf > 0 && jall.rows() >= nf && lam(0) > 1e-10 * lam(nf - 1)) {
       sv = lam.reverse().cwiseSqrt();
       v = es.eigenvectors().rowwise().reverse();
     }
   }
   if (sv.size() == 0) {
+    if (js.size() == 0) tall();
     Eigen::MatrixXd rs = Eigen::MatrixXd::Zero(nf, nf);
     if (js.rows() >= nf) {
       Eigen::HouseholderQR<Eigen::MatrixXd> qr(js);

@@ -517,6 +517,21 @@ void probe_orientation(EvalState<T>& s, const Matrix3<T>& flange, bool deflected
   if (deflected) s.orientation = (effects::rotation_matrix(s.rot.data()) * s.orientation).eval();
 }
 
+/// m = I: a Jet's value and derivative part written directly (Eigen's generic identity builds a
+/// temporary Jet per element, a measurable share of a Jacobian pass).
+template <typename T>
+void set_identity(Matrix3<T>& m) {
+  if constexpr (std::is_same<T, Jet>::value) {
+    for (int c = 0; c < 3; ++c)
+      for (int u = 0; u < 3; ++u) {
+        m(u, c).a = u == c ? 1.0 : 0.0;
+        m(u, c).v.setZero();
+      }
+  } else {
+    m.setIdentity();
+  }
+}
+
 /// Before the measurement stage: absolute_jacobian's first pass asks for the stage's map of
 /// the position it receives (derivative directions 0-2) and for that position.
 template <typename T>
@@ -542,8 +557,8 @@ void DeflectionModel::evaluate_into(const T* theta,
   const int n = robot_.dof();
   s.oriented = orient && m.absolute;
   if (m.absolute) {
-    s.probe.setIdentity();
-    s.orientation.setIdentity();
+    set_identity(s.probe);
+    set_identity(s.orientation);
   }
   s.robot = &robot_;
   s.measurement = &m;
@@ -655,8 +670,8 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
   }
   s.oriented = orient;
   if (m.absolute) {
-    s.probe.setIdentity();
-    s.orientation.setIdentity();
+    set_identity(s.probe);
+    set_identity(s.orientation);
   }
   const bool gravity = m.absolute && c.tau_gravity.size() == n;
   s.robot = &robot_;
