@@ -89,7 +89,7 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
   // Absolute rows: the tangents map what the analytic effects write; an effect without
   // columns may only change the wrench stage's inputs, which the one pass differentiates.
   int measuring = 0;
-  analytic_absolute_ = robot.dof() <= 32;
+  analytic_absolute_ = robot.dof() <= kMaxTangentJoints;  // within corrected_point<Jet>'s too
   for (const auto& e : effects_) {
     measuring += (e->stages() & kMeasurementStage) != 0;
     if (!e->has_absolute_columns() && (e->stages() & ~unsigned{kWrenchStage}) != 0)
@@ -402,6 +402,7 @@ Vector3<Jet> corrected_point(const RobotModel& robot,
                              EvalState<Jet>* state) {
   const int n = robot.dof();
   constexpr int kMax = 32;
+  static_assert(kMax >= kMaxTangentJoints, "absolute_jacobian reads the chain kept here");
   if (n > kMax) return corrected_point<Jet>(robot, q, dq, joint_error, r, flange);
   Eigen::Matrix3d rb[kMax], re[kMax], jr[kMax];
   Eigen::Vector3d pb[kMax], pe[kMax], ze[kMax];
@@ -883,7 +884,7 @@ void DeflectionModel::absolute_jacobian(const double* theta,
   for (int r = 0; r < 3; ++r) d[r] = y(r).a;
 
   // The tangents (AbsoluteTangents) at this row's values, from the chain the pass kept.
-  thread_local AbsoluteTangents tg;
+  AbsoluteTangents tg;
   tg.instrument = instrument;
   tg.position = s.instrument_input;
   tg.dq.resize(3, n);

@@ -135,10 +135,13 @@ struct EvalState {
 ///  - `instrument` (3 x 3): dy/dx, the measurement stage's map of the base-frame position x it
 ///    receives (the registration's rotation), by automatic differentiation of that stage;
 ///  - `position`: x itself.
+/// (Fixed capacity, kMaxTangentJoints joints: no allocation per row.)
+constexpr int kMaxTangentJoints = 32;
 struct AbsoluteTangents {
-  Eigen::Matrix<double, 3, Eigen::Dynamic> dtheta;
-  Eigen::Matrix<double, 3, Eigen::Dynamic> dq;
-  Eigen::Matrix<double, 3, Eigen::Dynamic> joint_error;
+  using PerJoint = Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::ColMajor, 3, kMaxTangentJoints>;
+  PerJoint dtheta;
+  PerJoint dq;
+  Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::ColMajor, 3, 6 * kMaxTangentJoints> joint_error;
   Eigen::Matrix3d instrument;
   Eigen::Vector3d position;
 };
