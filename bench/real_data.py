@@ -29,6 +29,12 @@ import re
 import time
 from pathlib import Path
 
+# One thread for the reference's linear algebra, as stiff's solver runs (Ceres, one thread):
+# the ratios compare the methods, not the number of cores; threaded BLAS on a shared machine
+# also makes the reference's times erratic. Set before numpy loads its BLAS.
+for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
@@ -693,7 +699,8 @@ def write_doc(res):
               "and once per solver step; the statistics reuse the last) and factors the tall "
               "Jacobian once, for the identifiability test at the start.")
             w("")
-    w("The reference's time covers its identifiability test and the least-squares fit "
+    w("Both run on one thread (the reference's BLAS is limited to one, as stiff's solver uses "
+      "one). The reference's time covers its identifiability test and the least-squares fit "
       "(scipy's finite-difference Jacobian); stiff's command time is the wall time of "
       "`stiff identify` including the start of the process (Python, about 0.2 s), its library "
       "time the identification alone (`stiff.identify` in this process, best of three: "
