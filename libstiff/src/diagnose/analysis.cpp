@@ -230,14 +230,17 @@ Analysis analyse(const Context& cx,
   }
   if (cx.validation) {
     const Dataset& v = *cx.validation;
-    double ss = 0, session_leverage = 0;
-    int aligned = 0;
-    for (const Eigen::Vector3d& e :
-         validation_errors(*a.model, a.theta, *cx.split, &aligned, &session_leverage)) {
+    double ss = 0, ss_closest = 0, session_leverage = 0;
+    int aligned = 0, uncertain = 0;
+    std::vector<Eigen::Vector3d> closest;
+    for (const Eigen::Vector3d& e : validation_errors(*a.model, a.theta, *cx.split, &aligned,
+                                                      &session_leverage, &closest, &uncertain)) {
       q.validation_error_m.push_back(e.norm());
       ss += e.squaredNorm();
     }
+    for (const Eigen::Vector3d& e : closest) ss_closest += e.squaredNorm();
     q.has_validation = true;
+    q.validation_uncertain_rows = uncertain;
     q.validation_session_parameters = aligned;
     q.validation_session_leverage = session_leverage;
     const double vdof = 3.0 * v.rows.size();
@@ -248,10 +251,16 @@ Analysis analyse(const Context& cx,
     // and E[validation SS] = s^2 3m (1 + p/n) for a right model (mean leverage p/n), so the
     // ratio of the two mean squares is ~ F(3m, n - p) (unweighted: no stated noise needed).
     // The validation session's own parameters, cross-fitted on its other half, add their
-    // prediction variance (mean leverage session_leverage).
+    // prediction variance (mean leverage session_leverage). A row whose prediction the
+    // calibration leaves undecided between values (a parameter decided from the data, anywhere
+    // in its confidence interval: a backlash jump near the torque reversal) is scored by the
+    // value closest to it: when the true parameter lies in the interval, that error is at most
+    // the right model's, so the test keeps its level (conservatively) instead of rejecting the
+    // right model for what the calibration could not decide.
     if (q.dof > 0 && ss_m > 0) {
       const double fit_ms = ss_m / q.dof;
-      const double f = (ss / vdof) / (fit_ms * (1.0 + double(a.p) / a.n + session_leverage));
+      const double f =
+          (ss_closest / vdof) / (fit_ms * (1.0 + double(a.p) / a.n + session_leverage));
       q.validation_to_fit = std::sqrt(f);
       // A validation session's noise is not the calibration's (another day, another thermal
       // state): allowed to differ by the same relative uncertainty as a stated noise level.

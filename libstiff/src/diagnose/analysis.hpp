@@ -45,12 +45,17 @@ ValidationSplit split_validation(const Dataset& calibration,
 /// cross-fitted (DeflectionModel::align_sessions on the rows of odd position predicts those of
 /// even position, and the other way round); `*session_parameters` receives how many
 /// directions were estimated, `*session_leverage` the mean leverage this adds to a scored
-/// component (its prediction variance over sigma^2).
+/// component (its prediction variance over sigma^2). `*closest` (optional) receives per scored
+/// row the error of the prediction closest to it among those the calibration does not exclude
+/// (parameters decided from the data, anywhere in their confidence interval:
+/// ParameterSpec::confidence_lower/upper), `*uncertain_rows` how many rows have more than one.
 std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
                                                const VectorXd& theta,
                                                const ValidationSplit& split,
                                                int* session_parameters = nullptr,
-                                               double* session_leverage = nullptr);
+                                               double* session_leverage = nullptr,
+                                               std::vector<Eigen::Vector3d>* closest = nullptr,
+                                               int* uncertain_rows = nullptr);
 
 struct Context {
   const RobotModel* robot;

@@ -40,6 +40,7 @@ nlohmann::json quality_json(const ModelQuality& q) {
     j["validation_to_fit"] = finite(q.validation_to_fit);
     j["validation_to_fit_p"] = q.validation_to_fit_p;
     j["validation_session_parameters"] = q.validation_session_parameters;
+    j["validation_uncertain_rows"] = q.validation_uncertain_rows;
   }
   if (!q.cross_validation_error_m.empty()) {
     nlohmann::json cv = nlohmann::json::array();

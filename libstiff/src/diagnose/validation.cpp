@@ -18,6 +18,56 @@ namespace stiff::diagnose_detail {
 namespace {
 constexpr int kMinRegistering = 6;  // a rigid motion from 6 points: 12 redundant equations
 constexpr int kMinScored = 3;
+/// The error of the prediction closest to the observation among those the calibration data do
+/// not exclude: each parameter decided from the data with a confidence interval
+/// (ParameterSpec::confidence_lower/upper) is set to either end of it where that changes the
+/// prediction (a backlash jump decided on one side of the reversal or the other), every
+/// combination of those ends tried (of the six parameters that move it most). A decision is the
+/// sign of a function monotone in each parameter, so the ends give every decision the interval
+/// allows. `e` is the error of the point prediction (which may carry the validation session's
+/// own cross-fitted parameters: the alternatives enter as changes of the prediction at `theta`,
+/// which those additive terms do not alter); `*uncertain` is set when the prediction changes.
+Eigen::Vector3d closest_error(const DeflectionModel& model,
+                              const VectorXd& theta,
+                              const Measurement& m,
+                              const MeasurementContext& c,
+                              const Eigen::Vector3d& e,
+                              bool* uncertain) {
+  constexpr double kChange = 1e-12;  // m: a prediction that moves (not tanh's far tail)
+  // Decisions of one row combined exhaustively (2^6 predictions); beyond that the parameters
+  // that move its prediction most.
+  constexpr size_t kMaxCombined = 6;
+  const Eigen::Vector3d point = model.predict(theta, m, c).head<3>();
+  std::vector<std::pair<double, int>> moves;  // (largest change of the prediction, parameter)
+  VectorXd t = theta;
+  for (int k = 0; k < model.parameter_count(); ++k) {
+    const ParameterSpec& sp = model.spec(k);
+    if (!sp.from_data || !std::isfinite(sp.confidence_lower) || !std::isfinite(sp.confidence_upper))
+      continue;
+    double change = 0;
+    for (const double v : {sp.confidence_lower, sp.confidence_upper}) {
+      t(k) = v;
+      change = std::max(change, (model.predict(t, m, c).head<3>() - point).norm());
+    }
+    t(k) = theta(k);
+    if (change > kChange) moves.emplace_back(change, k);
+  }
+  std::sort(moves.begin(), moves.end(),
+            [](const auto& a, const auto& b) { return a.first > b.first; });
+  if (moves.size() > kMaxCombined) moves.resize(kMaxCombined);
+  *uncertain = !moves.empty();
+  Eigen::Vector3d best = e;
+  for (unsigned mask = 0; !moves.empty() && mask < (1u << moves.size()); ++mask) {
+    for (size_t i = 0; i < moves.size(); ++i) {
+      const ParameterSpec& sp = model.spec(moves[i].second);
+      t(moves[i].second) = (mask >> i) & 1u ? sp.confidence_upper : sp.confidence_lower;
+    }
+    const Eigen::Vector3d ei = e - (model.predict(t, m, c).head<3>() - point);
+    if (ei.squaredNorm() < best.squaredNorm()) best = ei;
+  }
+  return best;
+}
+
 }  // namespace
 
 ValidationSplit split_validation(const Dataset& calibration,
@@ -77,9 +127,22 @@ std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
                                                const VectorXd& theta,
                                                const ValidationSplit& split,
                                                int* session_parameters,
-                                               double* session_leverage) {
+                                               double* session_leverage,
+                                               std::vector<Eigen::Vector3d>* closest,
+                                               int* uncertain_rows) {
   if (session_parameters) *session_parameters = 0;
   if (session_leverage) *session_leverage = 0.0;
+  if (closest) closest->clear();
+  if (uncertain_rows) *uncertain_rows = 0;
+  bool decided = false;  // the model has parameters decided from the data, with a range
+  for (int k = 0; k < model.parameter_count(); ++k)
+    decided |= model.spec(k).from_data && std::isfinite(model.spec(k).confidence_lower);
+  auto close = [&](const Measurement& m, const MeasurementContext& c, const Eigen::Vector3d& e) {
+    if (!closest) return;
+    bool u = false;
+    closest->push_back(decided ? closest_error(model, theta, m, c, e, &u) : e);
+    if (u && uncertain_rows) ++*uncertain_rows;
+  };
   // The validation file is another session: the parameters of the session itself (its drift:
   // a warm-up restarts, and its course depends on the day and the protocol) are its own and
   // only its own readings tell them; the robot's are carried over. They are cross-fitted: the
@@ -90,10 +153,12 @@ std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
   const bool displacement = std::none_of(split.scored.rows.begin(), split.scored.rows.end(),
                                          [](const Measurement& m) { return m.absolute; });
   if (displacement) {
-    const auto p = model.predict_cross_fitted(theta, split.scored, model.contexts(split.scored),
-                                              session_parameters, session_leverage);
+    const auto ctx = model.contexts(split.scored);
+    const auto p =
+        model.predict_cross_fitted(theta, split.scored, ctx, session_parameters, session_leverage);
     std::vector<Eigen::Vector3d> e(p.size());
     for (size_t r = 0; r < p.size(); ++r) e[r] = split.scored.rows[r].observed() - p[r];
+    for (size_t r = 0; r < p.size(); ++r) close(split.scored.rows[r], ctx[r], e[r]);
     return e;
   }
   // A new session is predicted with some other session's registration; the rigid motion
@@ -127,6 +192,8 @@ std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
     }
   }
   const auto p = predicted(split.scored);
+  const auto ctx =
+      closest && decided ? model.contexts(split.scored) : std::vector<MeasurementContext>();
   std::vector<Eigen::Vector3d> e(p.size());
   for (size_t r = 0; r < p.size(); ++r) {
     const Measurement& m = split.scored.rows[r];
@@ -134,6 +201,17 @@ std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
     const Eigen::Vector3d q =
         it == motion.end() ? p[r] : it->second.first * p[r] + it->second.second;
     e[r] = m.observed() - q;
+    if (!closest) continue;
+    if (!decided) {
+      closest->push_back(e[r]);
+      continue;
+    }
+    // The alternatives change the model's prediction, which the registration turns: the
+    // error in the model's frame is R^T e.
+    const Eigen::Matrix3d rot = it == motion.end() ? Eigen::Matrix3d::Identity() : it->second.first;
+    bool u = false;
+    closest->push_back(rot * closest_error(model, theta, m, ctx[r], rot.transpose() * e[r], &u));
+    if (u && uncertain_rows) ++*uncertain_rows;
   }
   return e;
 }

@@ -162,6 +162,10 @@ struct ModelQuality {
   /// structure predicts new poses worse than it fits them.
   double validation_to_fit = NAN;
   double validation_to_fit_p = 1.0;
+  /// Validation rows whose prediction the calibration leaves undecided (a parameter decided
+  /// from the data, e.g. backlash's preload error, anywhere in its confidence interval changes
+  /// it): the fit-versus-validation test scores each by the prediction closest to it.
+  int validation_uncertain_rows = 0;
   std::vector<double> validation_error_m;  ///< per validation row, norm of the error
   /// Absolute data in the loop: per calibration row, the norm of its K-fold cross-validated
   /// prediction error [m] (NaN for rows not used); empty when not computed.

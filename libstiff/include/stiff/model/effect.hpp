@@ -26,6 +26,7 @@
 
 #include <ceres/jet.h>
 
+#include <limits>
 #include <memory>
 #include <string>
 #include <type_traits>
@@ -59,6 +60,12 @@ struct ParameterSpec {
   /// are that decision, the model has no derivative with respect to it, and a fit holds it
   /// (backlash's preload errors, found by threshold regression).
   bool from_data = false;
+  /// For a parameter decided from the data: the values the data do not exclude (a confidence
+  /// set, as an interval), NaN when not known. A prediction on new data that changes across
+  /// it (a backlash row near its torque reversal) is uncertain between the values it takes
+  /// there; the diagnosis's fit-versus-validation test takes the one closest to the row.
+  double confidence_lower = std::numeric_limits<double>::quiet_NaN();
+  double confidence_upper = std::numeric_limits<double>::quiet_NaN();
   /// A parameter of the measurement session (its thermal state, its instrument set-up), not of
   /// the robot: another session has its own value (a warm-up restarts, its course depends on
   /// the day and on the protocol), which only that session's own readings can tell. A

@@ -1,6 +1,8 @@
 // backlash: lost motion of the reducers with a gravity preload (docs/effects.md).
 #include <Eigen/SVD>
 #include <algorithm>
+#include <cmath>
+#include <limits>
 
 #include "stiff/kinematics/joint_torque.hpp"
 #include "stiff/model/effects/common.hpp"
@@ -26,19 +28,31 @@ class Backlash : public EffectT<Backlash> {
  public:
   explicit Backlash(const EffectSetup& s) {
     const int n = s.robot->dof();
-    const Eigen::VectorXd s0 = preload_correction(s);
+    const Preload s0 = preload_correction(s);
     for (int j = 0; j < n; ++j)
       params_.push_back(effects::parameter(
           "b" + std::to_string(j + 1), "rad",
           "backlash (lost motion) of joint " + std::to_string(j + 1) + ", full gap width", 0.0,
           0.05, 1.5e-4, 0.0, 0.0));
     for (int j = 0; j < n; ++j) {
-      params_.push_back(effects::parameter("s" + std::to_string(j + 1), "1",
-                                           "relative error of the gravity preload of joint " +
-                                               std::to_string(j + 1) +
-                                               " (where its backlash jumps), from the data",
-                                           kScaleLow, kScaleHigh, kMassUncertainty, s0(j), s0(j)));
+      params_.push_back(effects::parameter(
+          "s" + std::to_string(j + 1), "1",
+          "relative error of the gravity preload of joint " + std::to_string(j + 1) +
+              " (where its backlash jumps), from the data",
+          kScaleLow, kScaleHigh, kMassUncertainty, s0.s(j), s0.s(j)));
       params_.back().from_data = true;
+      params_.back().confidence_lower = s0.lower(j);
+      params_.back().confidence_upper = s0.upper(j);
+    }
+    for (int j = 0; j < n; ++j) {
+      params_.push_back(effects::parameter(
+          "g" + std::to_string(j + 1), "1",
+          "turn of the lumped centre of mass that loads joint " + std::to_string(j + 1) +
+              " about its axis (tangent), held at 0; its range is what the data do not exclude",
+          -kMassUncertainty, kMassUncertainty, kMassUncertainty, 0.0, 0.0));
+      params_.back().from_data = true;
+      params_.back().confidence_lower = s0.turn_lower(j);
+      params_.back().confidence_upper = s0.turn_upper(j);
     }
   }
   const std::string& name() const override { return name_; }
@@ -77,9 +91,11 @@ class Backlash : public EffectT<Backlash> {
     const auto& tg = s.context->tau_gravity;
     const int n = static_cast<int>(s.dtheta.size());
     for (int j = 0; j < n; ++j) {
-      // s_j by its value only: the threshold regression decides it, not a derivative.
-      const T loaded = tanh((T((1 + scalar(p[n + j])) * tg(j)) + s.tau(j)) / T(kEps));
-      const T preload = T(std::tanh(tg(j) / kEps));
+      // s_j, g_j by their value only: the threshold regression decides them, not a derivative.
+      double pre = tg(j);
+      if (scalar(p[2 * n + j]) != 0.0) pre += scalar(p[2 * n + j]) * quadrature(s, j);
+      const T loaded = tanh((T((1 + scalar(p[n + j])) * pre) + s.tau(j)) / T(kEps));
+      const T preload = T(std::tanh(pre / kEps));
       s.dtheta(j) += T(0.5) * p[j] * (loaded - preload);
     }
   }
@@ -95,7 +111,44 @@ class Backlash : public EffectT<Backlash> {
     }
     return lo * lo;
   }
+  /// Critical value of the likelihood-ratio confidence set of a threshold at level 1 - alpha,
+  /// c = -2 ln(1 - sqrt(1 - alpha)) (Hansen 2000, eq. 17: the LR statistic's limit law
+  /// P(xi <= x) = (1 - exp(-x/2))^2 under a small threshold effect; conservative for a large
+  /// one). 7.35 at alpha = 5 %.
+  static double threshold_lr_critical(double alpha) {
+    return -2.0 * std::log(1.0 - std::sqrt(1.0 - alpha));
+  }
+  /// tanh(x / eps), exactly +-1 in double precision beyond 20 eps (tanh 20 = 1 - 8.5e-18)
+  /// without evaluating it: the searches below take it for every row and threshold.
+  static double smooth_sign(double x) {
+    return std::abs(x) > 20 * kEps ? std::copysign(1.0, x) : std::tanh(x / kEps);
+  }
   static double scalar(double x) { return x; }
+  /// The gravity torques of joint `j`'s lumped masses with their centre of mass turned by 90
+  /// degrees about the joint axis: the direction a centre-of-mass error off the file's line
+  /// adds to the preload (the file's torque is sum m z.(l x g), this one sum m z.((z x l) x g)).
+  static Eigen::VectorXd quadrature_torques(const RobotModel& robot, const ChainState& c) {
+    const int n = robot.dof();
+    Eigen::VectorXd tq = Eigen::VectorXd::Zero(n);
+    auto add = [&](int link, double mass, const Eigen::Vector3d& com) {
+      if (mass <= 0.0) return;
+      const Eigen::Matrix4d& t = c.link[link];
+      const Eigen::Vector3d p = t.block<3, 3>(0, 0) * com + t.block<3, 1>(0, 3);
+      const Eigen::Vector3d w = mass * robot.gravity;
+      for (int j = 0; j <= link; ++j) {
+        const Eigen::Vector3d z = c.axis.col(j);
+        const Eigen::Vector3d l = p - c.origin.col(j);
+        tq(j) += z.dot(z.cross(l).cross(w));
+      }
+    };
+    for (int i = 0; i < n; ++i) add(i, robot.joints[i].mass, robot.joints[i].com);
+    if (n > 0) add(n - 1, robot.tool_mass, robot.tool_com);
+    return tq;
+  }
+  template <typename T>
+  static double quadrature(const EvalState<T>& s, int j) {
+    return quadrature_torques(*s.robot, s.context->chain)(j);
+  }
   static double scalar(const Jet& x) { return x.a; }
 
   /// The preload errors s_j that the data support: coordinate-wise threshold regression of
@@ -103,14 +156,23 @@ class Backlash : public EffectT<Backlash> {
   /// (weighted least squares in c, b) over s_j in the band of the mass uncertainty. Between two
   /// rows' thresholds the decisions, hence the fit, do not change: the candidates are the
   /// midpoints. Zero where the data (displacement rows) cannot tell, and without data.
-  static Eigen::VectorXd preload_correction(const EffectSetup& setup) {
+  /// The estimate s and the confidence interval [lower, upper] of each joint's preload error
+  /// (NaN without data).
+  struct Preload {
+    Eigen::VectorXd s, lower, upper, turn_lower, turn_upper;
+  };
+  static Preload preload_correction(const EffectSetup& setup) {
     const RobotModel& robot = *setup.robot;
     const int n = robot.dof();
-    Eigen::VectorXd s = Eigen::VectorXd::Zero(n);
-    if (!setup.data || !robot.has_masses()) return s;
+    Preload out;
+    out.s = Eigen::VectorXd::Zero(n);
+    out.lower = out.upper = out.turn_lower = out.turn_upper =
+        Eigen::VectorXd::Constant(n, std::numeric_limits<double>::quiet_NaN());
+    Eigen::VectorXd& s = out.s;
+    if (!setup.data || !robot.has_masses()) return out;
     struct Row {
       Eigen::Matrix3Xd jp;  // J_j(P), translational columns
-      Eigen::VectorXd tau, tg;
+      Eigen::VectorXd tau, tg, tq;
     };
     std::vector<Row> rows;
     std::vector<Eigen::Vector3d> obs;
@@ -134,12 +196,13 @@ class Backlash : public EffectT<Backlash> {
         r.tau(j) = joint_torque(wl, z, m.force, m.moment);
       }
       r.tg = gravity_torques(robot, c);
+      r.tq = quadrature_torques(robot, c);
       rows.push_back(std::move(r));
       obs.push_back(m.displacement);
       wt.push_back(sigma ? 1.0 / m.sigma_d : 1.0);
     }
     const int N = static_cast<int>(rows.size());
-    if (N < 2 * n) return s;
+    if (N < 2 * n) return out;
     // Weighted design: joint compliance columns, then one backlash column per joint.
     Eigen::MatrixXd x(3 * N, 2 * n);
     Eigen::VectorXd y(3 * N);
@@ -148,27 +211,20 @@ class Backlash : public EffectT<Backlash> {
       for (int j = 0; j < n; ++j)
         x.block<3, 1>(3 * i, j) = wt[i] * rows[i].tau(j) * rows[i].jp.col(j);
     }
-    auto column = [&](int j, double sj, Eigen::Ref<Eigen::VectorXd> out) {
+    auto column = [&](int j, double sj, Eigen::Ref<Eigen::VectorXd> dst, double gj = 0.0) {
       for (int i = 0; i < N; ++i) {
         const Row& r = rows[i];
+        const double pre = r.tg(j) + gj * r.tq(j);
         const double jump =
-            0.5 * (std::tanh(((1 + sj) * r.tg(j) + r.tau(j)) / kEps) - std::tanh(r.tg(j) / kEps));
-        out.segment<3>(3 * i) = wt[i] * jump * r.jp.col(j);
+            0.5 * (std::tanh(((1 + sj) * pre + r.tau(j)) / kEps) - std::tanh(pre / kEps));
+        dst.segment<3>(3 * i) = wt[i] * jump * r.jp.col(j);
       }
     };
     for (int j = 0; j < n; ++j) column(j, 0.0, x.col(n + j));
-    Eigen::VectorXd cand_col(3 * N);
-    for (int sweep = 0; sweep < 2; ++sweep) {
+    // Two coordinate sweeps decide s; a third, with every s decided, gives the confidence sets.
+    for (int sweep = 0; sweep < 3; ++sweep) {
+      const bool last = sweep == 2;
       for (int j = 0; j < n; ++j) {
-        // Rows whose decision changes within the band: (1 + s) tau_g + tau_F = 0 there.
-        std::vector<double> cut;
-        for (const auto& r : rows)
-          if (std::abs(r.tg(j)) > kEps) {
-            const double v = -r.tau(j) / r.tg(j) - 1;
-            if (v > kScaleLow && v < kScaleHigh) cut.push_back(v);
-          }
-        if (cut.empty()) continue;
-        std::sort(cut.begin(), cut.end());
         // Orthonormal basis of every other column (rank-revealing: joint 6 and its gap have no
         // lever arm with P and L on the flange axis); RSS(x) = |r0|^2 - (x~.r0)^2 / |x~|^2.
         Eigen::MatrixXd other(3 * N, 2 * n - 1);
@@ -179,21 +235,99 @@ class Backlash : public EffectT<Backlash> {
         while (rank < sv.size() && sv(rank) > 1e-10 * sv(0)) ++rank;
         const Eigen::MatrixXd q = svd.matrixU().leftCols(rank);
         const Eigen::VectorXd r0 = y - q * (q.transpose() * y);
-        auto gain = [&](double sj) {
-          column(j, sj, cand_col);
-          cand_col -= q * (q.transpose() * cand_col);
-          const double nn = cand_col.squaredNorm();
-          if (!(nn > 1e-20 * y.squaredNorm())) return 0.0;
-          const double u = cand_col.dot(r0);
+        const int dof = 3 * N - rank - 1;
+        // Per row, the column's block u_i = w_i J_j(P_i) times the row's jump: u_i.r0,
+        // |u_i|^2 and Q_i^T u_i, so that a candidate costs O(N rank) (the confidence set tries
+        // many).
+        Eigen::VectorXd along(N), sq(N);
+        Eigen::MatrixXd proj(rank, N);
+        for (int i = 0; i < N; ++i) {
+          const Eigen::Vector3d u = wt[i] * rows[i].jp.col(j);
+          along(i) = u.dot(r0.segment<3>(3 * i));
+          sq(i) = u.squaredNorm();
+          proj.col(i) = q.middleRows(3 * i, 3).transpose() * u;
+        }
+        Eigen::VectorXd jump(N);
+        const double tiny = 1e-20 * y.squaredNorm();
+        auto gain = [&](double sj, double gj) {
+          for (int i = 0; i < N; ++i) {
+            const Row& r = rows[i];
+            const double pre = r.tg(j) + gj * r.tq(j);
+            jump(i) = 0.5 * (smooth_sign((1 + sj) * pre + r.tau(j)) - smooth_sign(pre));
+          }
+          // |(I - Q Q^T) c|^2 = |c|^2 - |Q^T c|^2, and (I - Q Q^T) c . r0 = c . r0.
+          const double cc = jump.cwiseAbs2().dot(sq);
+          const double nn = cc - (proj * jump).squaredNorm();
+          // A column (nearly) inside the others' span: no gain (and no cancellation noise).
+          if (!(nn > tiny) || !(nn > 1e-9 * cc)) return 0.0;
+          const double u = jump.dot(along);
           return u * u / nn;
         };
-        std::vector<double> cand = {0.0, 0.5 * (kScaleLow + cut.front())};
-        for (size_t k = 0; k + 1 < cut.size(); ++k) cand.push_back(0.5 * (cut[k] + cut[k + 1]));
-        cand.push_back(0.5 * (cut.back() + kScaleHigh));
-        const double at_file = gain(0.0);
+        // Edges of the intervals of s between the rows' thresholds, with the preload's lumped
+        // centre of mass turned by gj: (1 + s)(tau_g + gj tau_q) + tau_F = 0 there.
+        auto edges = [&](double gj) {
+          std::vector<double> e = {kScaleLow};
+          for (const auto& r : rows) {
+            const double pre = r.tg(j) + gj * r.tq(j);
+            if (std::abs(pre) > kEps) {
+              const double v = -r.tau(j) / pre - 1;
+              if (v > kScaleLow && v < kScaleHigh) e.push_back(v);
+            }
+          }
+          std::sort(e.begin() + 1, e.end());
+          e.push_back(kScaleHigh);
+          return e;
+        };
+        if (last) {
+          // What the data do not exclude: the likelihood-ratio confidence set of the threshold
+          // (Hansen 2000) over the preload's scale s and the turn g of its lumped centre of
+          // mass (a centre of mass off the file's line, which no scale reproduces), both in
+          // the band of the mass uncertainty: every (s, g) whose residual sum of squares exceeds
+          // the best by less than c times the residual variance, with the decided value; as
+          // the box spanning them. g only widens what is uncertain: the model holds it at 0
+          // (estimating it over-fits: docs/effects.md).
+          constexpr int kTurns = 12;  // g on a grid of steps 2u/12 = 0.05
+          struct Cell {
+            double s_lo, s_hi, g, gain;
+          };
+          std::vector<Cell> cells;
+          double top = gain(s(j), 0.0);
+          for (int t = 0; t <= kTurns; ++t) {
+            const double gj = -kMassUncertainty + 2.0 * kMassUncertainty * t / kTurns;
+            const std::vector<double> e = edges(gj);
+            for (size_t k = 0; k + 1 < e.size(); ++k) {
+              const double g = gain(0.5 * (e[k] + e[k + 1]), gj);
+              cells.push_back({e[k], e[k + 1], gj, g});
+              top = std::max(top, g);
+            }
+          }
+          const double var = (r0.squaredNorm() - top) / std::max(dof, 1);
+          const double c = threshold_lr_critical(0.05) * var;
+          double lo = s(j), hi = s(j), glo = 0.0, ghi = 0.0;
+          for (const Cell& cl : cells) {
+            const bool decided = cl.g == 0.0 && cl.s_lo <= s(j) && s(j) <= cl.s_hi;
+            if (decided || top - cl.gain <= c) {
+              lo = std::min(lo, cl.s_lo);
+              hi = std::max(hi, cl.s_hi);
+              glo = std::min(glo, cl.g);
+              ghi = std::max(ghi, cl.g);
+            }
+          }
+          out.lower(j) = lo;
+          out.upper(j) = hi;
+          out.turn_lower(j) = glo;
+          out.turn_upper(j) = ghi;
+          continue;
+        }
+        const std::vector<double> edge = edges(0.0);
+        if (edge.size() == 2) continue;  // no calibration row tells where joint j reverses
+        // A candidate per interval (its midpoint) and the file's preload, s = 0.
+        std::vector<double> cand = {0.0};
+        for (size_t k = 0; k + 1 < edge.size(); ++k) cand.push_back(0.5 * (edge[k] + edge[k + 1]));
+        const double at_file = gain(0.0, 0.0);
         double best = at_file, best_s = 0.0;
         for (const double sj : cand) {
-          const double g = gain(sj);
+          const double g = gain(sj, 0.0);
           // A larger gain wins; on a tie (the same decisions) the smaller correction.
           if (g > best * (1 + 1e-12) ||
               (g >= best * (1 - 1e-12) && std::abs(sj) < std::abs(best_s))) {
@@ -205,13 +339,12 @@ class Backlash : public EffectT<Backlash> {
         // sum of squares from s = 0 to the best threshold, in units of the residual variance,
         // against the chi2(1) quantile at alpha / (number of thresholds tried) (Bonferroni:
         // the search picks the best of them; alpha = 5 %).
-        const int dof = 3 * N - rank - 1;
         const double var = (r0.squaredNorm() - best) / std::max(dof, 1);
         s(j) = dof > 0 && best - at_file > chi2_1_quantile(0.05 / cand.size()) * var ? best_s : 0.0;
-        column(j, best_s, x.col(n + j));
+        column(j, s(j), x.col(n + j));
       }
     }
-    return s;
+    return out;
   }
 
   std::string name_ = "backlash";
