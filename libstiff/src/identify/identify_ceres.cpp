@@ -740,7 +740,15 @@ FitResult identify(const RobotModel& robot,
       continue;
     }
     f.parameters.push_back(fp);
-    if (!fp.identified) {
+    if (!fp.identified && sp.from_data) {
+      // Decided by the effect from the data before the fit (no derivative): not a failure.
+      f.warnings.push_back(qualified(model, k) + " is decided from the data, not fitted: " +
+                           num(theta(k)) + (sp.unit == "1" ? std::string() : " " + sp.unit) +
+                           (std::isfinite(sp.confidence_lower) && std::isfinite(sp.confidence_upper)
+                                ? " (the data do not exclude " + num(sp.confidence_lower) + " to " +
+                                      num(sp.confidence_upper) + ")"
+                                : std::string()));
+    } else if (!fp.identified) {
       f.warnings.push_back(
           qualified(model, k) +
           (left_out[k] ? " is left out: " : " is not identifiable from this data: ") +

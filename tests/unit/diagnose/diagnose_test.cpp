@@ -16,6 +16,7 @@
 
 #include "../effects/effect_truths.hpp"
 #include "stiff/error.hpp"
+#include "stiff/identify/identify.hpp"
 #include "stiff/io/robot_io.hpp"
 #include "stiff/kinematics/joint_torque.hpp"
 #include "stiff/model/model.hpp"
@@ -360,6 +361,17 @@ TEST(DiagnoseMassModel, BacklashFindsThePreloadScale) {
     EXPECT_LE(turn.confidence_lower, 0.0) << "joint " << j + 1;
     EXPECT_GE(turn.confidence_upper, 0.0) << "joint " << j + 1;
   }
+  // The fit reports them as decided from the data, with their range: not as parameters the
+  // data cannot identify.
+  const FitResult f = identify(file, s.calib, {"joint", "backlash"});
+  int decided = 0;
+  for (const auto& w : f.warnings) {
+    const bool preload = w.rfind("backlash.s", 0) == 0 || w.rfind("backlash.g", 0) == 0;
+    if (!preload) continue;
+    EXPECT_NE(w.find(" is decided from the data, not fitted"), std::string::npos) << w;
+    decided += w.find("do not exclude") != std::string::npos;
+  }
+  EXPECT_EQ(decided, 2 * n);
 }
 
 int control_claims(int seeds, double outlier_rate, int* adequate, int* missed_outliers) {
