@@ -817,11 +817,10 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
   if (o) *o = orient ? orientation_discrepancy(s.orientation, m.orientation) : Vector3<Jet>::Zero();
 }
 
-void DeflectionModel::analytic_columns(const EvalState<Jet>& js,
-                                       EvalState<double>& ds,
-                                       double* jac) const {
-  if (!analytic_) return;
-  const int n = robot_.dof();
+namespace {
+/// The plain values of a pass (the wrench, the points) into the state an effect's analytic
+/// derivatives read.
+void plain_values(const EvalState<Jet>& js, EvalState<double>& ds) {
   ds.robot = js.robot;
   ds.measurement = js.measurement;
   ds.context = js.context;
@@ -833,6 +832,15 @@ void DeflectionModel::analytic_columns(const EvalState<Jet>& js,
     ds.p_meas(k) = js.p_meas(k).a;
     ds.p_load(k) = js.p_load(k).a;
   }
+}
+}  // namespace
+
+void DeflectionModel::analytic_columns(const EvalState<Jet>& js,
+                                       EvalState<double>& ds,
+                                       double* jac) const {
+  if (!analytic_) return;
+  const int n = robot_.dof();
+  plain_values(js, ds);
   ds.jac_meas = robot_.jacobian_at(js.context->chain, ds.p_meas);
   ds.tau.resize(n);
   for (int j = 0; j < n; ++j) ds.tau(j) = js.tau(j).a;
@@ -906,17 +914,7 @@ void DeflectionModel::absolute_jacobian(const double* theta,
     lever_arm(c.chain.axis.col(j), c.chain.origin.col(j), pm, w);
     tg.dtheta.col(j) = instrument * w;
   }
-  ds.robot = &robot_;
-  ds.measurement = &m;
-  ds.context = &c;
-  for (int k = 0; k < 3; ++k) {
-    ds.force(k) = s.force(k).a;
-    ds.moment(k) = s.moment(k).a;
-    ds.r_meas(k) = s.r_meas(k).a;
-    ds.r_load(k) = s.r_load(k).a;
-    ds.p_meas(k) = s.p_meas(k).a;
-    ds.p_load(k) = s.p_load(k).a;
-  }
+  plain_values(s, ds);
   for (size_t e = 0; e < effects_.size(); ++e)
     if (effects_[e]->has_absolute_columns())
       effects_[e]->absolute_columns(theta + offsets_[e], ds, tg, jac + 3 * offsets_[e]);
