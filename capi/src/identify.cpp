@@ -18,11 +18,13 @@ const FitResult& fit_of(const stiff_result* r) {
   return r->fit;
 }
 
-/// stiff_predict_dataset (positions or displacements) and stiff_predict_dataset_orientation
-/// (the probe's orientation of absolute rows, NaN on the others): the checks, then
-/// DeflectionModel::predict of every row, 3 values each.
 /// What predict_rows returns per row.
 enum class RowPrediction { position, orientation, cross_fitted };
+
+/// stiff_predict_dataset (positions or displacements), stiff_predict_dataset_orientation (the
+/// probe's orientation of absolute rows, NaN on the others) and
+/// stiff_predict_dataset_cross_fitted (DeflectionModel::predict_cross_fitted): the checks,
+/// then the prediction of every row, 3 values each.
 
 stiff_status predict_rows(double* out,
                           size_t capacity,

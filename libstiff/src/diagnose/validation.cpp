@@ -157,8 +157,10 @@ std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
     const auto p =
         model.predict_cross_fitted(theta, split.scored, ctx, session_parameters, session_leverage);
     std::vector<Eigen::Vector3d> e(p.size());
-    for (size_t r = 0; r < p.size(); ++r) e[r] = split.scored.rows[r].observed() - p[r];
-    for (size_t r = 0; r < p.size(); ++r) close(split.scored.rows[r], ctx[r], e[r]);
+    for (size_t r = 0; r < p.size(); ++r) {
+      e[r] = split.scored.rows[r].observed() - p[r];
+      close(split.scored.rows[r], ctx[r], e[r]);
+    }
     return e;
   }
   // A new session is predicted with some other session's registration; the rigid motion

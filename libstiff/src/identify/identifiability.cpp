@@ -12,6 +12,13 @@
 
 namespace stiff::detail {
 
+Eigen::MatrixXd gram_of(const Eigen::MatrixXd& j) {
+  Eigen::MatrixXd g = Eigen::MatrixXd::Zero(j.cols(), j.cols());
+  g.selfadjointView<Eigen::Lower>().rankUpdate(j.transpose());
+  g.triangularView<Eigen::StrictlyUpper>() = g.transpose();
+  return g;
+}
+
 std::string qualified(const DeflectionModel& model, int k) {
   return model.owner(k).name() + "." + model.spec(k).name;
 }
@@ -194,9 +201,7 @@ Identifiability check_identifiability(const DeflectionModel& model,
   // J^T J once for both tests.
   Eigen::MatrixXd own;
   if (!gram && (!structure || statistical)) {
-    own = Eigen::MatrixXd::Zero(j.cols(), j.cols());
-    own.selfadjointView<Eigen::Lower>().rankUpdate(j.transpose());
-    own.triangularView<Eigen::StrictlyUpper>() = own.transpose();
+    own = gram_of(j);
     gram = &own;
   }
   Identifiability out =

@@ -14,6 +14,9 @@ namespace stiff::detail {
 /// "effect.parameter" of theta's k-th parameter.
 std::string qualified(const DeflectionModel& model, int k);
 
+/// J^T J of `j`, both triangles (a rank update of the lower one, then mirrored).
+Eigen::MatrixXd gram_of(const Eigen::MatrixXd& j);
+
 struct Identifiability {
   std::vector<bool> fixed;          ///< per parameter: held (not determined by the data)
   std::vector<std::string> reason;  ///< per held parameter: why, naming its partners

@@ -40,6 +40,7 @@ std::string num(double v, int precision = 3) {
 
 using detail::check_identifiability;
 using detail::Evaluations;
+using detail::gram_of;
 using detail::held_has_effect;
 using detail::Identifiability;
 using detail::known_losses;
@@ -332,9 +333,7 @@ FitResult identify(const RobotModel& robot,
   auto keep_last_jacobian = [&]() {
     last_jacobian = weighted_jacobian(s, theta);
     last_jacobian_theta = theta;
-    last_gram = Eigen::MatrixXd::Zero(p, p);
-    last_gram.selfadjointView<Eigen::Lower>().rankUpdate(last_jacobian.transpose());
-    last_gram.triangularView<Eigen::StrictlyUpper>() = last_gram.transpose();
+    last_gram = gram_of(last_jacobian);
   };
   // Residual standard deviation of the weighted fit at theta, as the statistics below: rows
   // down-weighted by the robust loss count that much.
@@ -466,9 +465,7 @@ FitResult identify(const RobotModel& robot,
     for (int k = 0; k < p; ++k) theta(k) = theta(k) / s.typical(k) * s.typical(k);
     {
       const Eigen::MatrixXd jac = weighted_jacobian(s, theta);
-      Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(p, p);  // for both tests below
-      gram.selfadjointView<Eigen::Lower>().rankUpdate(jac.transpose());
-      gram.triangularView<Eigen::StrictlyUpper>() = gram.transpose();
+      const Eigen::MatrixXd gram = gram_of(jac);  // for both tests below
       idf = check(jac, theta, &gram);
       if (absolute && opt.max_relative_se > 0) prescreen(jac, gram, idf);
     }
