@@ -38,6 +38,21 @@ ValidationSplit split_validation(const Dataset& calibration,
                                  const std::vector<std::string>& model,
                                  double fraction);
 
+/// The error of the prediction closest to the observation among those the calibration data do
+/// not exclude: each parameter decided from the data with a confidence interval
+/// (ParameterSpec::confidence_lower/upper) is set to either end of it where that changes the
+/// prediction (a backlash jump decided on one side of the reversal or the other), every
+/// combination of those ends tried (of the six parameters that move it most). `e` is the error
+/// of the point prediction at `theta` (which may carry a validation session's own cross-fitted
+/// parameters: the alternatives enter as changes of the prediction, which those additive terms
+/// do not alter); `*uncertain` is set when the prediction changes.
+Eigen::Vector3d closest_error(const DeflectionModel& model,
+                              const VectorXd& theta,
+                              const Measurement& m,
+                              const MeasurementContext& c,
+                              const Eigen::Vector3d& e,
+                              bool* uncertain);
+
 /// Prediction errors (observed - predicted position) [m] of `split.scored`'s rows under
 /// `model` at `theta`, each new session first registered by the rigid motion that best maps
 /// its registering rows' predictions onto their measurements (least squares). On displacement

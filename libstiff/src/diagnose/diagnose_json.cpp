@@ -25,6 +25,7 @@ nlohmann::json quality_json(const ModelQuality& q) {
   j["model"] = q.model;
   j["measurements"] = q.measurements;
   j["used"] = q.used;
+  j["uncertain_rows"] = q.uncertain_rows;
   j["parameters"] = q.parameters;
   j["rms_m"] = q.fit_rms_m;
   j["chi2"] = q.chi2;

@@ -25,7 +25,7 @@ MatrixXd candidate_regressors(const Analysis& a, const DeflectionModel& mg, Vect
   MatrixXd z(a.n, pg);
   for (size_t i = 0; i < a.used.rows.size(); ++i)
     z.middleRows(3 * i, 3) =
-        mg.displacement_jacobian(theta, a.used.rows[i], ctx[i]).rightCols(pg) * a.w(i);
+        mg.displacement_jacobian(theta, a.used.rows[i], ctx[i], pc).rightCols(pg) * a.w(i);
   typical->resize(pg);
   for (int k = 0; k < pg; ++k) {
     const double t = std::abs(mg.spec(pc + k).typical);

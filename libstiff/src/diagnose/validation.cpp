@@ -18,15 +18,10 @@ namespace stiff::diagnose_detail {
 namespace {
 constexpr int kMinRegistering = 6;  // a rigid motion from 6 points: 12 redundant equations
 constexpr int kMinScored = 3;
-/// The error of the prediction closest to the observation among those the calibration data do
-/// not exclude: each parameter decided from the data with a confidence interval
-/// (ParameterSpec::confidence_lower/upper) is set to either end of it where that changes the
-/// prediction (a backlash jump decided on one side of the reversal or the other), every
-/// combination of those ends tried (of the six parameters that move it most). A decision is the
-/// sign of a function monotone in each parameter, so the ends give every decision the interval
-/// allows. `e` is the error of the point prediction (which may carry the validation session's
-/// own cross-fitted parameters: the alternatives enter as changes of the prediction at `theta`,
-/// which those additive terms do not alter); `*uncertain` is set when the prediction changes.
+}  // namespace
+
+// Every combination of the interval ends: a decision is the sign of a function monotone in each
+// parameter, so the ends give every decision the interval allows.
 Eigen::Vector3d closest_error(const DeflectionModel& model,
                               const VectorXd& theta,
                               const Measurement& m,
@@ -67,8 +62,6 @@ Eigen::Vector3d closest_error(const DeflectionModel& model,
   }
   return best;
 }
-
-}  // namespace
 
 ValidationSplit split_validation(const Dataset& calibration,
                                  const Dataset& validation,

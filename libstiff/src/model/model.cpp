@@ -41,6 +41,13 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
                                  const std::vector<std::string>& effects,
                                  const Dataset* data,
                                  const std::vector<std::string>& sessions)
+    : DeflectionModel(robot, effects, data, sessions, true) {}
+
+DeflectionModel::DeflectionModel(const RobotModel& robot,
+                                 const std::vector<std::string>& effects,
+                                 const Dataset* data,
+                                 const std::vector<std::string>& sessions,
+                                 bool backfit)
     : robot_(robot) {
   if (robot.dof() == 0) throw InvalidArgument("robot has no joints");
   if (effects.empty()) throw InvalidArgument("model has no effect (e.g. 'joint')");
@@ -67,6 +74,16 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
     if (!seen.insert(name).second)
       throw InvalidArgument("model: effect '" + name + "' given twice");
     auto e = make_effect(name, setup);
+    // An effect that decides parameters from the data decides them on what the others leave.
+    if (backfit && data && effects.size() > 1) {
+      bool decides = false;
+      for (const auto& p : e->parameters()) decides = decides || p.from_data;
+      if (decides) {
+        EffectSetup with_others = setup;
+        with_others.companion_columns = companion_columns(robot_, effects, name, *data, sessions);
+        e = make_effect(name, with_others);
+      }
+    }
     jet_jacobians_ = jet_jacobians_ || e->reads_jacobians();
     deflects_ = deflects_ || e->reads_jacobians() ||
                 (e->stages() & (unsigned{kJointStage} | unsigned{kCartesianStage}));
@@ -142,6 +159,32 @@ Eigen::VectorXd DeflectionModel::start_parameters() const {
   Eigen::VectorXd t(count_);
   for (int k = 0; k < count_; ++k) t(k) = spec(k).start;
   return t;
+}
+
+Eigen::MatrixXd DeflectionModel::companion_columns(const RobotModel& robot,
+                                                   const std::vector<std::string>& effects,
+                                                   const std::string& skip,
+                                                   const Dataset& data,
+                                                   const std::vector<std::string>& sessions) {
+  std::vector<std::string> others;
+  for (const auto& name : effects)
+    if (name != skip) others.push_back(name);
+  const DeflectionModel model(robot, others, &data, sessions, false);
+  const Eigen::VectorXd theta = model.start_parameters();
+  const int n = static_cast<int>(data.rows.size());
+  Eigen::MatrixXd all = Eigen::MatrixXd::Zero(3 * n, model.parameter_count());
+  for (int r = 0; r < n; ++r) {
+    const Measurement& m = data.rows[r];
+    if (m.absolute || m.q.size() != robot.dof() || !m.q.allFinite()) continue;
+    all.middleRows<3>(3 * r) = model.displacement_jacobian(theta, m, model.context(m, r));
+  }
+  std::vector<int> keep;
+  for (int k = 0; k < model.parameter_count(); ++k)
+    if (!model.spec(k).from_data && all.col(k).allFinite() && all.col(k).squaredNorm() > 0)
+      keep.push_back(k);
+  Eigen::MatrixXd out(3 * n, keep.size());
+  for (size_t i = 0; i < keep.size(); ++i) out.col(i) = all.col(keep[i]);
+  return out;
 }
 
 std::vector<std::string> DeflectionModel::session_labels() const {
@@ -982,12 +1025,13 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> jet_jacobian(const DeflectionModel& mod
                                                       const Eigen::VectorXd& theta,
                                                       const Measurement& m,
                                                       const MeasurementContext& c,
-                                                      bool orientation) {
+                                                      bool orientation,
+                                                      int from = 0) {
   const int count = model.parameter_count();
-  Eigen::Matrix<double, 3, Eigen::Dynamic> out(3, count);
+  Eigen::Matrix<double, 3, Eigen::Dynamic> out = Eigen::Matrix3Xd::Zero(3, count);
   std::vector<Jet> t(count);
   for (int k = 0; k < count; ++k) t[k] = Jet(theta(k));
-  for (int first = 0; first < count; first += kJetStride) {
+  for (int first = std::max(0, from); first < count; first += kJetStride) {
     for (int k = 0; k < count; ++k) t[k].v.setZero();
     const int last = std::min(count, first + kJetStride);
     for (int k = first; k < last; ++k) t[k].v(k - first) = 1.0;
@@ -1007,8 +1051,11 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> DeflectionModel::orientation_jacobian(
 }
 
 Eigen::Matrix<double, 3, Eigen::Dynamic> DeflectionModel::displacement_jacobian(
-    const Eigen::VectorXd& theta, const Measurement& m, const MeasurementContext& c) const {
-  return jet_jacobian(*this, theta, m, c, false);
+    const Eigen::VectorXd& theta,
+    const Measurement& m,
+    const MeasurementContext& c,
+    int from) const {
+  return jet_jacobian(*this, theta, m, c, false, from);
 }
 
 Eigen::VectorXd DeflectionModel::align_sessions(const Eigen::VectorXd& theta,

@@ -310,6 +310,48 @@ TEST(DiagnoseMassModel, BacklashWithPreloadOffAndNoiseUnknown) {
   EXPECT_GT(uncertain, 0);
 }
 
+/// Rows x joints 2-5 (those with a gravity preload) whose backlash jump the model `m`, built on
+/// `data` with the robot file `file`, decides otherwise than the true masses (`truth`) do:
+/// `*by_file` with the file's preload, `*by_found` with the preload errors s_j that m's backlash
+/// effect found from the data; `*moved` counts the joints whose s_j is not 0.
+void jump_decisions(const RobotModel& truth,
+                    const RobotModel& file,
+                    const Dataset& data,
+                    const DeflectionModel& m,
+                    int* by_file,
+                    int* by_found,
+                    int* moved) {
+  const int off = m.offset(m.find("backlash")), n = file.dof();
+  const auto ctx_true = DeflectionModel(truth, {"joint"}).contexts(data);
+  const auto ctx_file = m.contexts(data);
+  *by_file = *by_found = *moved = 0;
+  for (int j = 1; j < 5; ++j) {
+    const double sj = m.spec(off + n + j).null_value;
+    EXPECT_GE(sj, 0.0) << "joint " << j + 1;
+    *moved += sj > 0;
+    for (size_t r = 0; r < data.rows.size(); ++r) {
+      const ChainState c = file.chain(data.rows[r].q);
+      const Eigen::Vector3d l = file.point_position(c, file.load_point);
+      Eigen::Vector3d w;
+      lever_arm(c.axis.col(j), c.origin.col(j), l, w);
+      const double tau = force_torque(w, data.rows[r].force);
+      const double tg_true = ctx_true[r].tau_gravity(j), tg_file = ctx_file[r].tau_gravity(j);
+      const bool jump = (tg_true + tau) * tg_true < 0;
+      *by_file += jump != ((tg_file + tau) * tg_file < 0);
+      *by_found += jump != (((1 + sj) * tg_file + tau) * tg_file < 0);
+    }
+  }
+}
+
+/// The robot file of an arm whose every mass is 1.3 times what the file says (centres of mass
+/// right): the true preload of each joint is 1.3 times the file's.
+RobotModel light_file(const RobotModel& truth) {
+  RobotModel file = truth;
+  for (auto& j : file.joints) j.mass /= 1.3;
+  file.tool_mass /= 1.3;
+  return file;
+}
+
 // What the data tell about the preload: with every mass 30 % heavier than the robot file says
 // (the centres of mass right), the true preload of each joint is 1.3 times the file's. The
 // preload error the backlash effect finds from the calibration data must reproduce the true
@@ -317,31 +359,12 @@ TEST(DiagnoseMassModel, BacklashWithPreloadOffAndNoiseUnknown) {
 // (where the data cannot reject the file's preload, it stands: s = 0).
 TEST(DiagnoseMassModel, BacklashFindsThePreloadScale) {
   const RobotModel truth = test::rokae();
-  RobotModel file = truth;
-  for (auto& j : file.joints) j.mass /= 1.3;
-  file.tool_mass /= 1.3;
+  const RobotModel file = light_file(truth);
   const Scenario s = make_scenario("backlash", 5);
   const DeflectionModel m(file, {"joint", "backlash"}, &s.calib);
   const int off = m.offset(1), n = file.dof();
-  const auto ctx_true = DeflectionModel(truth, {"joint"}).contexts(s.calib);
-  const auto ctx_file = m.contexts(s.calib);
   int wrong_file = 0, wrong_found = 0, moved = 0;
-  for (int j = 1; j < 5; ++j) {  // joints 2-5 carry a gravity preload
-    const double sj = m.spec(off + n + j).null_value;
-    EXPECT_GE(sj, 0.0) << "joint " << j + 1;
-    moved += sj > 0;
-    for (size_t r = 0; r < s.calib.rows.size(); ++r) {
-      const ChainState c = file.chain(s.calib.rows[r].q);
-      const Eigen::Vector3d l = file.point_position(c, file.load_point);
-      Eigen::Vector3d w;
-      lever_arm(c.axis.col(j), c.origin.col(j), l, w);
-      const double tau = force_torque(w, s.calib.rows[r].force);
-      const double tg_true = ctx_true[r].tau_gravity(j), tg_file = ctx_file[r].tau_gravity(j);
-      const bool jump = (tg_true + tau) * tg_true < 0;
-      wrong_file += jump != ((tg_file + tau) * tg_file < 0);
-      wrong_found += jump != (((1 + sj) * tg_file + tau) * tg_file < 0);
-    }
-  }
+  jump_decisions(truth, file, s.calib, m, &wrong_file, &wrong_found, &moved);
   std::printf("  rows x joints with the wrong jump decision: file preload %d, found %d\n",
               wrong_file, wrong_found);
   EXPECT_GT(moved, 0);
@@ -372,6 +395,43 @@ TEST(DiagnoseMassModel, BacklashFindsThePreloadScale) {
     decided += w.find("do not exclude") != std::string::npos;
   }
   EXPECT_EQ(decided, 2 * n);
+}
+
+// Two effects at once: an SMR offset and backlash, the file's masses 30 % light. The preload
+// is decided on what the model's other effects leave (their columns among the threshold
+// regression's regressors): regressed on joint compliance and backlash alone, the offset's
+// signal inflates the residual variance, no threshold beats the file's preload, and the jump
+// decisions stay those of the wrong preload (every joint's s = 0 on these 8 seeds before the
+// other effects were regressors). 60 poses decide few rows' jumps, so the test asks for a
+// preload moved towards the truth, not for every decision right.
+TEST(DiagnoseMassModel, BacklashPreloadDecidedOnWhatTheOtherEffectsLeave) {
+  const RobotModel truth = test::rokae();
+  const RobotModel file = light_file(truth);
+  const std::vector<std::string> effects = {"joint", "point_offset", "backlash"};
+  const DeflectionModel full(truth, effects);
+  Truth t;
+  t.effects = effects;
+  t.theta = full.null_parameters();
+  const Eigen::VectorXd c = test::effect_truth("joint", truth).theta;
+  t.theta.head(c.size()) = c;
+  for (int e = 1; e < 3; ++e)
+    ASSERT_TRUE(full.effects()[e]->example_parameters(c, t.theta.data() + full.offset(e)));
+  int moved_total = 0, file_total = 0, found_total = 0;
+  for (uint64_t seed = 1; seed <= 8; ++seed) {
+    const Dataset calib =
+        simulate(truth, t, test::design60(seed, 60), realistic_noise(7000 + seed));
+    const DeflectionModel m(file, effects, &calib);
+    int by_file = 0, by_found = 0, moved = 0;
+    jump_decisions(truth, file, calib, m, &by_file, &by_found, &moved);
+    std::printf("  seed %d: wrong jump decisions: file preload %d, found %d; %d joints moved\n",
+                static_cast<int>(seed), by_file, by_found, moved);
+    EXPECT_LE(by_found, by_file) << "seed " << seed;
+    moved_total += moved;
+    file_total += by_file;
+    found_total += by_found;
+  }
+  EXPECT_GE(moved_total, 2);
+  EXPECT_LT(found_total, file_total);
 }
 
 int control_claims(int seeds, double outlier_rate, int* adequate, int* missed_outliers) {
@@ -564,6 +624,47 @@ TEST(DiagnoseAuto, FindsTwoEffectsInSequence) {
   // Re-running with the suggested model: the error has fallen and nothing more is missing.
   const Diagnosis again = diagnose(robot, calib, &valid, parse_model_string(d.final_model));
   EXPECT_EQ(again.verdict, "adequate");
+}
+
+// Two effects of which one is backlash, as a user has them: an SMR offset and backlash, the
+// robot file's masses 30 % light, no noise statement. The preload is decided on what the
+// offset leaves, and the calibration rows whose jump the data leave undecided enter the tests by
+// their closest prediction (docs/diagnosis.md, section 1). Before both, 2 of these 4 seeds named
+// both, one ended with `nonlinear_joint` in place of backlash and one stopped at `unexplained`;
+// with them 3 of 4 name both and none names another effect.
+TEST(DiagnoseAuto, SlowFindsOffsetAndBacklashWithMassesOff) {
+  const RobotModel truth = test::rokae();
+  const RobotModel file = light_file(truth);
+  const std::vector<std::string> effects = {"joint", "point_offset", "backlash"};
+  const DeflectionModel full(truth, effects);
+  Truth t;
+  t.effects = effects;
+  t.theta = full.null_parameters();
+  const Eigen::VectorXd c = test::effect_truth("joint", truth).theta;
+  t.theta.head(c.size()) = c;
+  for (int e = 1; e < 3; ++e)
+    ASSERT_TRUE(full.effects()[e]->example_parameters(c, t.theta.data() + full.offset(e)));
+  DiagnosisOptions o;
+  o.auto_loop = true;
+  const int seeds = 4;
+  int both = 0, wrong = 0;
+  for (int seed = 1; seed <= seeds; ++seed) {
+    Dataset calib = simulate(truth, t, test::design60(seed, 60), realistic_noise(7100 + seed));
+    Dataset valid =
+        simulate(truth, t, test::design60(60000 + seed, 40), realistic_noise(9100 + seed));
+    hide_noise(calib);
+    hide_noise(valid);
+    const Diagnosis d = diagnose(file, calib, &valid, {"joint"}, o);
+    std::set<std::string> added;
+    for (const auto& st : d.steps)
+      if (!st.added.empty()) added.insert(st.added);
+    std::printf("  seed %d: %s, final model %s\n", seed, d.final_verdict.c_str(),
+                d.final_model.c_str());
+    both += added.count("point_offset") && added.count("backlash");
+    for (const auto& a : added) wrong += a != "point_offset" && a != "backlash";
+  }
+  EXPECT_GE(both, seeds - 1);
+  EXPECT_EQ(wrong, 0);
 }
 
 // Without any stated noise the partial F-tests still find a large effect; the absolute check

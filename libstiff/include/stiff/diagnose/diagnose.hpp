@@ -166,6 +166,10 @@ struct ModelQuality {
   /// from the data, e.g. backlash's preload error, anywhere in its confidence interval changes
   /// it): the fit-versus-validation test scores each by the prediction closest to it.
   int validation_uncertain_rows = 0;
+  /// Calibration rows (used) whose prediction the data leave undecided in the same way: the
+  /// tests (chi2, the candidates' F tests, the residual structure) take each by the prediction
+  /// closest to it; the fit RMS is the point prediction's.
+  int uncertain_rows = 0;
   std::vector<double> validation_error_m;  ///< per validation row, norm of the error
   /// Absolute data in the loop: per calibration row, the norm of its K-fold cross-validated
   /// prediction error [m] (NaN for rows not used); empty when not computed.

@@ -313,6 +313,11 @@ struct EffectSetup {
   int sessions = 1;               ///< number of distinct sessions in the data
   /// Their labels in the model's session order (from the data, else from a fit).
   std::vector<std::string> session_labels;
+  /// For an effect that decides parameters from the data (ParameterSpec::from_data): the
+  /// displacement columns dd/dtheta of the model's other effects at their start values, a
+  /// 3-row block per row of `data` (zero for absolute rows), so that it decides on what those
+  /// effects leave (backfitting) and not on the raw displacements. Empty otherwise.
+  Eigen::MatrixXd companion_columns;
 };
 
 using EffectFactory = std::unique_ptr<Effect> (*)(const EffectSetup&);

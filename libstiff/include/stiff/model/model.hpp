@@ -144,10 +144,12 @@ class DeflectionModel {
                             const Measurement& m,
                             const MeasurementContext& c) const;
   /// Jacobian of the predicted displacement d (3 x P) with respect to theta at theta
-  /// (automatic differentiation).
+  /// (automatic differentiation); with `from` > 0 only the columns from `from` on (the others
+  /// zero): a candidate effect's columns after those of the model it extends.
   Eigen::Matrix<double, 3, Eigen::Dynamic> displacement_jacobian(const Eigen::VectorXd& theta,
                                                                  const Measurement& m,
-                                                                 const MeasurementContext& c) const;
+                                                                 const MeasurementContext& c,
+                                                                 int from = 0) const;
   /// Jacobian (3 x P) of the orientation discrepancy of an absolute row with a measured
   /// orientation (evaluate's `o`; zeros on other rows), by automatic differentiation.
   Eigen::Matrix<double, 3, Eigen::Dynamic> orientation_jacobian(const Eigen::VectorXd& theta,
@@ -186,6 +188,18 @@ class DeflectionModel {
   std::vector<std::string> session_labels() const;
 
  private:
+  /// `backfit` false: the effects decide from the data alone (the companions' own model).
+  DeflectionModel(const RobotModel& robot,
+                  const std::vector<std::string>& effects,
+                  const Dataset* data,
+                  const std::vector<std::string>& sessions,
+                  bool backfit);
+  /// EffectSetup::companion_columns of the effect `skip` in a model of `effects` on `data`.
+  static Eigen::MatrixXd companion_columns(const RobotModel& robot,
+                                           const std::vector<std::string>& effects,
+                                           const std::string& skip,
+                                           const Dataset& data,
+                                           const std::vector<std::string>& sessions);
   template <typename T>
   void evaluate_into(const T* theta,
                      const Measurement& m,

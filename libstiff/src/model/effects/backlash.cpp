@@ -1,5 +1,5 @@
 // backlash: lost motion of the reducers with a gravity preload (docs/effects.md).
-#include <Eigen/SVD>
+#include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -177,9 +177,11 @@ class Backlash : public EffectT<Backlash> {
     std::vector<Row> rows;
     std::vector<Eigen::Vector3d> obs;
     std::vector<double> wt;
+    std::vector<int> at;  // the row's index in the data
     bool sigma = true;
     for (const auto& m : setup.data->rows) sigma = sigma && (m.absolute || m.sigma_d > 0);
-    for (const auto& m : setup.data->rows) {
+    for (size_t k = 0; k < setup.data->rows.size(); ++k) {
+      const Measurement& m = setup.data->rows[k];
       if (m.absolute || m.q.size() != n || !m.q.allFinite()) continue;
       const ChainState c = robot.chain(m.q);
       const Eigen::Vector3d p = robot.point_position(c, robot.measured_point);
@@ -200,40 +202,52 @@ class Backlash : public EffectT<Backlash> {
       rows.push_back(std::move(r));
       obs.push_back(m.displacement);
       wt.push_back(sigma ? 1.0 / m.sigma_d : 1.0);
+      at.push_back(static_cast<int>(k));
     }
     const int N = static_cast<int>(rows.size());
     if (N < 2 * n) return out;
-    // Weighted design: joint compliance columns, then one backlash column per joint.
-    Eigen::MatrixXd x(3 * N, 2 * n);
+    // Weighted design: what the model's other effects do (EffectSetup::companion_columns: a
+    // point offset, a force frame, the joint compliance, ...), so that the thresholds are decided
+    // on what they leave; alone in its model, the joint compliance it acts with. Then one
+    // backlash column per joint.
+    const Eigen::MatrixXd& cols = setup.companion_columns;
+    const bool companions = cols.rows() == 3 * static_cast<int>(setup.data->rows.size());
+    Eigen::MatrixXd lin(3 * N, companions ? cols.cols() : n), x(3 * N, n);
     Eigen::VectorXd y(3 * N);
     for (int i = 0; i < N; ++i) {
       y.segment<3>(3 * i) = wt[i] * obs[i];
-      for (int j = 0; j < n; ++j)
-        x.block<3, 1>(3 * i, j) = wt[i] * rows[i].tau(j) * rows[i].jp.col(j);
+      if (companions)
+        lin.middleRows<3>(3 * i) = wt[i] * cols.middleRows<3>(3 * at[i]);
+      else
+        for (int j = 0; j < n; ++j)
+          lin.block<3, 1>(3 * i, j) = wt[i] * rows[i].tau(j) * rows[i].jp.col(j);
     }
     auto column = [&](int j, double sj, Eigen::Ref<Eigen::VectorXd> dst, double gj = 0.0) {
       for (int i = 0; i < N; ++i) {
         const Row& r = rows[i];
         const double pre = r.tg(j) + gj * r.tq(j);
-        const double jump =
-            0.5 * (std::tanh(((1 + sj) * pre + r.tau(j)) / kEps) - std::tanh(pre / kEps));
+        const double jump = 0.5 * (smooth_sign((1 + sj) * pre + r.tau(j)) - smooth_sign(pre));
         dst.segment<3>(3 * i) = wt[i] * jump * r.jp.col(j);
       }
     };
-    for (int j = 0; j < n; ++j) column(j, 0.0, x.col(n + j));
+    for (int j = 0; j < n; ++j) column(j, 0.0, x.col(j));
     // Two coordinate sweeps decide s; a third, with every s decided, gives the confidence sets.
     for (int sweep = 0; sweep < 3; ++sweep) {
       const bool last = sweep == 2;
       for (int j = 0; j < n; ++j) {
         // Orthonormal basis of every other column (rank-revealing: joint 6 and its gap have no
         // lever arm with P and L on the flange axis); RSS(x) = |r0|^2 - (x~.r0)^2 / |x~|^2.
-        Eigen::MatrixXd other(3 * N, 2 * n - 1);
-        other << x.leftCols(n + j), x.rightCols(n - j - 1);
-        const Eigen::JacobiSVD<Eigen::MatrixXd> svd(other, Eigen::ComputeThinU);
-        const auto& sv = svd.singularValues();
-        int rank = 0;
-        while (rank < sv.size() && sv(rank) > 1e-10 * sv(0)) ++rank;
-        const Eigen::MatrixXd q = svd.matrixU().leftCols(rank);
+        Eigen::MatrixXd other(3 * N, lin.cols() + n - 1);
+        other << lin, x.leftCols(j), x.rightCols(n - j - 1);
+        // Unit columns: the span is the same, and the rank threshold compares like with like.
+        for (int c = 0; c < other.cols(); ++c) {
+          const double norm = other.col(c).norm();
+          if (norm > 0) other.col(c) /= norm;
+        }
+        Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(other);
+        qr.setThreshold(1e-10);
+        const int rank = static_cast<int>(qr.rank());
+        const Eigen::MatrixXd q = qr.householderQ() * Eigen::MatrixXd::Identity(3 * N, rank);
         const Eigen::VectorXd r0 = y - q * (q.transpose() * y);
         const int dof = 3 * N - rank - 1;
         // Per row, the column's block u_i = w_i J_j(P_i) times the row's jump: u_i.r0,
@@ -341,7 +355,7 @@ class Backlash : public EffectT<Backlash> {
         // the search picks the best of them; alpha = 5 %).
         const double var = (r0.squaredNorm() - best) / std::max(dof, 1);
         s(j) = dof > 0 && best - at_file > chi2_1_quantile(0.05 / cand.size()) * var ? best_s : 0.0;
-        column(j, s(j), x.col(n + j));
+        column(j, s(j), x.col(j));
       }
     }
     return out;
