@@ -249,7 +249,15 @@ Analysis analyse(const Context& cx,
       q.validation_error_m.push_back(e.norm());
       ss += e.squaredNorm();
     }
-    for (const Eigen::Vector3d& e : closest) ss_closest += e.squaredNorm();
+    // Weighted by the validation rows' stated sigma (the calibration's floor when they state
+    // none): the pooled floor test below.
+    double chi2_closest = 0;
+    for (size_t r = 0; r < closest.size(); ++r) {
+      const double sr =
+          cx.vnoise->known ? cx.vnoise->sigma(static_cast<Eigen::Index>(r)) : noise.floor_m;
+      ss_closest += closest[r].squaredNorm();
+      chi2_closest += closest[r].squaredNorm() / (sr * sr);
+    }
     q.has_validation = true;
     q.validation_uncertain_rows = uncertain;
     q.validation_session_parameters = aligned;
@@ -268,6 +276,19 @@ Analysis analyse(const Context& cx,
     // value closest to it: when the true parameter lies in the interval, that error is at most
     // the right model's, so the test keeps its level (conservatively) instead of rejecting the
     // right model for what the calibration could not decide.
+    // With a stated noise the floor test pools the validation rows: their weighted squared
+    // errors over the prediction variance a right model has there, sigma^2 (1 + p/n) plus the
+    // validation session's own cross-fitted parameters, are chi2(3m). A chain that mimics an
+    // effect outside the library (a pedestal tilting under the base moment, mimicked by link
+    // compliance and a force-frame rotation) can fit the calibration poses within the noise
+    // allowance and still predict new poses 1.2-1.3 times the floor; 3m more degrees of
+    // freedom see it.
+    if (noise.known && q.dof > 0 && vdof > 0) {
+      const double u = 1.0 + cx.opt->noise_uncertainty;
+      const double vchi2 = chi2_closest / (1.0 + double(a.p) / a.n + session_leverage);
+      q.validation_to_floor = std::sqrt(vchi2 / vdof);
+      q.floor_p = stats::chi2_sf((a.rss + vchi2) / (u * u), q.dof + vdof);
+    }
     if (q.dof > 0 && ss_m > 0) {
       const double fit_ms = ss_m / q.dof;
       const double f =

@@ -35,8 +35,12 @@ bool Chain::at_floor(const Level& L, std::string* why) const {
   const double alpha = cx->opt->alpha;
   if (cx->noise->known) {
     if (q.floor_p >= alpha) return true;
-    *why = "the residual is " + num(q.residual_to_floor, 3) + " times the stated noise floor (" +
-           "improbable even for a noise " + num(100 * cx->opt->noise_uncertainty, 2) +
+    const std::string held_out =
+        std::isfinite(q.validation_to_floor)
+            ? " and the validation errors " + num(q.validation_to_floor, 3) + " times"
+            : "";
+    *why = "the residual is " + num(q.residual_to_floor, 3) + " times the stated noise floor" +
+           held_out + " (improbable even for a noise " + num(100 * cx->opt->noise_uncertainty, 2) +
            " % above the stated one, p = " + num(q.floor_p, 2) + ")";
     return false;
   }

@@ -34,6 +34,7 @@ nlohmann::json quality_json(const ModelQuality& q) {
   j["sigma_hat_m"] = q.sigma_hat_m;
   j["residual_to_floor"] = finite(q.residual_to_floor);
   j["floor_p"] = q.floor_p;
+  j["validation_to_floor"] = finite(q.validation_to_floor);
   if (q.has_validation) {
     j["validation_rms_m"] = q.validation_rms_m;
     j["validation_floor_m"] = q.validation_floor_m;

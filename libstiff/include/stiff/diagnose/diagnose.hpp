@@ -150,9 +150,16 @@ struct ModelQuality {
   int dof = 0;
   double chi2_p = 1.0;  ///< P(chi2_dof > chi2); 1 without a noise level
   /// With a stated noise: sqrt(chi2 / dof), how far the residual sits from the floor, and
-  /// P(chi2_dof > chi2 / (1 + u)^2), the floor test allowing for the noise uncertainty u.
+  /// P(chi2_dof > chi2 / (1 + u)^2), the floor test allowing for the noise uncertainty u. With
+  /// validation rows the test pools them (their weighted squared errors over their expected
+  /// prediction variance, 3m more degrees of freedom): a model that explains the data predicts
+  /// new poses at the floor too.
   double residual_to_floor = NAN;
   double floor_p = 1.0;
+  /// With a stated noise and validation rows: sqrt of their weighted mean squared error over its
+  /// expectation for a right model (1 + p/n + the session's leverage), how far the validation
+  /// errors sit from the floor (NaN otherwise).
+  double validation_to_floor = NAN;
   double sigma_hat_m = 0.0;
   bool has_validation = false;
   double validation_rms_m = 0.0;
