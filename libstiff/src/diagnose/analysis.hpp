@@ -53,6 +53,11 @@ Eigen::Vector3d closest_error(const DeflectionModel& model,
                               const Eigen::Vector3d& e,
                               bool* uncertain);
 
+/// One-sided p-value of a paired t test that the squared errors `b` (per row, norms) are lower
+/// than `a` on the same rows (the common prefix; NaN entries skipped): 1 with fewer than 3
+/// pairs or no fall on average, 0 when every pair falls by the same amount.
+double paired_fall_p(const std::vector<double>& a, const std::vector<double>& b);
+
 /// Prediction errors (observed - predicted position) [m] of `split.scored`'s rows under
 /// `model` at `theta`, each new session first registered by the rigid motion that best maps
 /// its registering rows' predictions onto their measurements (least squares). On displacement

@@ -230,19 +230,7 @@ Diagnosis diagnose(const RobotModel& robot,
     // pairs are the common prefix: the validation rows, then the cross-validated calibration
     // rows when both levels have them (NaN: a row that is not used).
     auto falls = [&](const std::vector<double>& a, const std::vector<double>& b) {
-      std::vector<double> dif;
-      for (size_t r = 0; r < std::min(a.size(), b.size()); ++r)
-        if (std::isfinite(a[r]) && std::isfinite(b[r])) dif.push_back(a[r] * a[r] - b[r] * b[r]);
-      const size_t m = dif.size();
-      if (m < 3) return false;
-      double mean = 0, sq = 0;
-      for (double x : dif) mean += x / m;
-      for (double x : dif) sq += (x - mean) * (x - mean);
-      const double se = std::sqrt(sq / (m - 1) / m);
-      if (!(mean > 0)) return false;
-      if (!(se > 0)) return true;
-      const double t = mean / se;
-      return 0.5 * stats::f_sf(t * t, 1.0, static_cast<double>(m - 1)) < options.alpha;
+      return diagnose_detail::paired_fall_p(a, b) < options.alpha;
     };
     auto mean_square = [](const std::vector<double>& e) {
       double s2 = 0;

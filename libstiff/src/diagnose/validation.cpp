@@ -63,6 +63,22 @@ Eigen::Vector3d closest_error(const DeflectionModel& model,
   return best;
 }
 
+double paired_fall_p(const std::vector<double>& a, const std::vector<double>& b) {
+  std::vector<double> dif;
+  for (size_t r = 0; r < std::min(a.size(), b.size()); ++r)
+    if (std::isfinite(a[r]) && std::isfinite(b[r])) dif.push_back(a[r] * a[r] - b[r] * b[r]);
+  const size_t m = dif.size();
+  if (m < 3) return 1.0;
+  double mean = 0, sq = 0;
+  for (double x : dif) mean += x / m;
+  for (double x : dif) sq += (x - mean) * (x - mean);
+  const double se = std::sqrt(sq / (m - 1) / m);
+  if (!(mean > 0)) return 1.0;
+  if (!(se > 0)) return 0.0;
+  const double t = mean / se;
+  return 0.5 * stats::f_sf(t * t, 1.0, static_cast<double>(m - 1));
+}
+
 ValidationSplit split_validation(const Dataset& calibration,
                                  const Dataset& validation,
                                  const std::vector<std::string>& model,
