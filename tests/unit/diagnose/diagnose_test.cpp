@@ -13,6 +13,7 @@
 #include <map>
 #include <random>
 #include <set>
+#include <stdexcept>
 
 #include "../effects/effect_truths.hpp"
 #include "stiff/error.hpp"
@@ -352,6 +353,22 @@ RobotModel light_file(const RobotModel& truth) {
   return file;
 }
 
+/// The truth of `effects` on `robot` ("joint" first): the paper's joint compliances and every
+/// other effect's example parameters.
+Truth examples_of(const RobotModel& robot, const std::vector<std::string>& effects) {
+  const DeflectionModel full(robot, effects);
+  Truth t;
+  t.effects = effects;
+  t.theta = full.null_parameters();
+  const Eigen::VectorXd c = test::effect_truth("joint", robot).theta;
+  t.theta.head(c.size()) = c;
+  for (size_t e = 1; e < effects.size(); ++e)
+    if (!full.effects()[e]->example_parameters(c,
+                                               t.theta.data() + full.offset(static_cast<int>(e))))
+      throw std::runtime_error("effect '" + effects[e] + "' gives no example_parameters()");
+  return t;
+}
+
 // What the data tell about the preload: with every mass 30 % heavier than the robot file says
 // (the centres of mass right), the true preload of each joint is 1.3 times the file's. The
 // preload error the backlash effect finds from the calibration data must reproduce the true
@@ -408,14 +425,7 @@ TEST(DiagnoseMassModel, BacklashPreloadDecidedOnWhatTheOtherEffectsLeave) {
   const RobotModel truth = test::rokae();
   const RobotModel file = light_file(truth);
   const std::vector<std::string> effects = {"joint", "point_offset", "backlash"};
-  const DeflectionModel full(truth, effects);
-  Truth t;
-  t.effects = effects;
-  t.theta = full.null_parameters();
-  const Eigen::VectorXd c = test::effect_truth("joint", truth).theta;
-  t.theta.head(c.size()) = c;
-  for (int e = 1; e < 3; ++e)
-    ASSERT_TRUE(full.effects()[e]->example_parameters(c, t.theta.data() + full.offset(e)));
+  const Truth t = examples_of(truth, effects);
   int moved_total = 0, file_total = 0, found_total = 0;
   for (uint64_t seed = 1; seed <= 8; ++seed) {
     const Dataset calib =
@@ -636,14 +646,7 @@ TEST(DiagnoseAuto, SlowFindsOffsetAndBacklashWithMassesOff) {
   const RobotModel truth = test::rokae();
   const RobotModel file = light_file(truth);
   const std::vector<std::string> effects = {"joint", "point_offset", "backlash"};
-  const DeflectionModel full(truth, effects);
-  Truth t;
-  t.effects = effects;
-  t.theta = full.null_parameters();
-  const Eigen::VectorXd c = test::effect_truth("joint", truth).theta;
-  t.theta.head(c.size()) = c;
-  for (int e = 1; e < 3; ++e)
-    ASSERT_TRUE(full.effects()[e]->example_parameters(c, t.theta.data() + full.offset(e)));
+  const Truth t = examples_of(truth, effects);
   DiagnosisOptions o;
   o.auto_loop = true;
   const int seeds = 4;
