@@ -191,9 +191,7 @@ Analysis analyse(const Context& cx,
   MatrixXd x(a.n, pc);
   a.r.resize(a.n);
   double ss_m = 0;
-  bool decided = false;  // parameters decided from the data, with a range
-  for (int k = 0; k < pc; ++k)
-    decided |= a.model->spec(k).from_data && std::isfinite(a.model->spec(k).confidence_lower);
+  const bool decided = has_confidence_sets(*a.model);
   for (int i = 0; i < nu; ++i) {
     const auto& m = a.used.rows[i];
     x.middleRows(3 * i, 3) = a.model->displacement_jacobian(a.theta, m, a.ctx[i]) * a.w(i);

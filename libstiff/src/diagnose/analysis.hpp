@@ -52,6 +52,9 @@ Eigen::Vector3d closest_error(const DeflectionModel& model,
                               const MeasurementContext& c,
                               const Eigen::Vector3d& e,
                               bool* uncertain);
+/// True when `model` has a parameter decided from the data with a confidence interval: only
+/// then can closest_error differ from the point prediction's error.
+bool has_confidence_sets(const DeflectionModel& model);
 
 /// One-sided p-value of a paired t test that the squared errors `b` (per row, norms) are lower
 /// than `a` on the same rows (the common prefix; NaN entries skipped): 1 with fewer than 3

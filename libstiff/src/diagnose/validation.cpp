@@ -63,6 +63,12 @@ Eigen::Vector3d closest_error(const DeflectionModel& model,
   return best;
 }
 
+bool has_confidence_sets(const DeflectionModel& model) {
+  for (int k = 0; k < model.parameter_count(); ++k)
+    if (model.spec(k).from_data && std::isfinite(model.spec(k).confidence_lower)) return true;
+  return false;
+}
+
 double paired_fall_p(const std::vector<double>& a, const std::vector<double>& b) {
   std::vector<double> dif;
   for (size_t r = 0; r < std::min(a.size(), b.size()); ++r)
@@ -143,9 +149,7 @@ std::vector<Eigen::Vector3d> validation_errors(const DeflectionModel& model,
   if (session_leverage) *session_leverage = 0.0;
   if (closest) closest->clear();
   if (uncertain_rows) *uncertain_rows = 0;
-  bool decided = false;  // the model has parameters decided from the data, with a range
-  for (int k = 0; k < model.parameter_count(); ++k)
-    decided |= model.spec(k).from_data && std::isfinite(model.spec(k).confidence_lower);
+  const bool decided = has_confidence_sets(model);
   auto close = [&](const Measurement& m, const MeasurementContext& c, const Eigen::Vector3d& e) {
     if (!closest) return;
     bool u = false;

@@ -45,9 +45,12 @@ Joint standard_dh_joint(double alpha, double a, double d, double theta_offset) {
   return j;
 }
 
-Eigen::VectorXd gravity_torques(const RobotModel& robot, const ChainState& s) {
+Eigen::VectorXd gravity_torques(const RobotModel& robot,
+                                const ChainState& s,
+                                Eigen::VectorXd* quadrature) {
   const int n = robot.dof();
   Eigen::VectorXd tau = Eigen::VectorXd::Zero(n);
+  if (quadrature) quadrature->setZero(n);
   auto add_weight = [&](int link, double mass, const Eigen::Vector3d& com_local) {
     if (mass <= 0.0) return;
     const Eigen::Matrix4d& t = s.link[link];
@@ -58,6 +61,7 @@ Eigen::VectorXd gravity_torques(const RobotModel& robot, const ChainState& s) {
       Eigen::Vector3d lever;
       lever_arm(s.axis.col(j), s.origin.col(j), c, lever);
       tau(j) += force_torque(lever, w);
+      if (quadrature) (*quadrature)(j) += s.axis.col(j).dot(lever.cross(w));
     }
   };
   for (int i = 0; i < n; ++i) add_weight(i, robot.joints[i].mass, robot.joints[i].com);

@@ -3,6 +3,7 @@
 #include <ceres/rotation.h>
 
 #include <Eigen/QR>
+#include <algorithm>
 #include <cstdint>
 #include <cstring>
 #include <map>
@@ -73,17 +74,18 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
   for (const auto& name : effects) {
     if (!seen.insert(name).second)
       throw InvalidArgument("model: effect '" + name + "' given twice");
-    auto e = make_effect(name, setup);
-    // An effect that decides parameters from the data decides them on what the others leave.
+    // An effect that decides parameters from the data decides them on what the others leave:
+    // which effects do is read from one built without data (cheap: nothing to decide), so that
+    // the decision itself runs once.
+    EffectSetup with_others = setup;
     if (backfit && data && effects.size() > 1) {
-      bool decides = false;
-      for (const auto& p : e->parameters()) decides = decides || p.from_data;
-      if (decides) {
-        EffectSetup with_others = setup;
+      EffectSetup bare = setup;
+      bare.data = nullptr;
+      const auto& ps = make_effect(name, bare)->parameters();
+      if (std::any_of(ps.begin(), ps.end(), [](const ParameterSpec& p) { return p.from_data; }))
         with_others.companion_columns = companion_columns(robot_, effects, name, *data, sessions);
-        e = make_effect(name, with_others);
-      }
     }
+    auto e = make_effect(name, with_others);
     jet_jacobians_ = jet_jacobians_ || e->reads_jacobians();
     deflects_ = deflects_ || e->reads_jacobians() ||
                 (e->stages() & (unsigned{kJointStage} | unsigned{kCartesianStage}));

@@ -158,7 +158,13 @@ Joint standard_dh_joint(double alpha, double a, double d, double theta_offset);
 
 /// Gravity torques tau_g [N*m] that the link and tool weights exert on the joints at q
 /// (external torques, same sign convention as tau = J^T F). Zero when no masses are given.
-Eigen::VectorXd gravity_torques(const RobotModel& robot, const ChainState& s);
+/// `quadrature` (optional) receives, per joint j, the torque of the same weights with their
+/// lever arms turned by 90 degrees about its axis, sum z_j . ((z_j x l) x w): how tau_g,j
+/// changes when the centres of mass it carries turn about the axis (a centre of mass off the
+/// file's line).
+Eigen::VectorXd gravity_torques(const RobotModel& robot,
+                                const ChainState& s,
+                                Eigen::VectorXd* quadrature = nullptr);
 
 /// Smallest singular value and condition number of the translational 3 x n Jacobian at q.
 struct JacobianConditioning {

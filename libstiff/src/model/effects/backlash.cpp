@@ -90,10 +90,14 @@ class Backlash : public EffectT<Backlash> {
     using std::tanh;
     const auto& tg = s.context->tau_gravity;
     const int n = static_cast<int>(s.dtheta.size());
+    // The turns g_j are 0 but where the diagnosis tries the ends of their confidence sets.
+    Eigen::VectorXd tq;
+    for (int j = 0; j < n && tq.size() == 0; ++j)
+      if (scalar(p[2 * n + j]) != 0.0) gravity_torques(*s.robot, s.context->chain, &tq);
     for (int j = 0; j < n; ++j) {
       // s_j, g_j by their value only: the threshold regression decides them, not a derivative.
       double pre = tg(j);
-      if (scalar(p[2 * n + j]) != 0.0) pre += scalar(p[2 * n + j]) * quadrature(s, j);
+      if (scalar(p[2 * n + j]) != 0.0) pre += scalar(p[2 * n + j]) * tq(j);
       const T loaded = tanh((T((1 + scalar(p[n + j])) * pre) + s.tau(j)) / T(kEps));
       const T preload = T(std::tanh(pre / kEps));
       s.dtheta(j) += T(0.5) * p[j] * (loaded - preload);
@@ -124,31 +128,6 @@ class Backlash : public EffectT<Backlash> {
     return std::abs(x) > 20 * kEps ? std::copysign(1.0, x) : std::tanh(x / kEps);
   }
   static double scalar(double x) { return x; }
-  /// The gravity torques of joint `j`'s lumped masses with their centre of mass turned by 90
-  /// degrees about the joint axis: the direction a centre-of-mass error off the file's line
-  /// adds to the preload (the file's torque is sum m z.(l x g), this one sum m z.((z x l) x g)).
-  static Eigen::VectorXd quadrature_torques(const RobotModel& robot, const ChainState& c) {
-    const int n = robot.dof();
-    Eigen::VectorXd tq = Eigen::VectorXd::Zero(n);
-    auto add = [&](int link, double mass, const Eigen::Vector3d& com) {
-      if (mass <= 0.0) return;
-      const Eigen::Matrix4d& t = c.link[link];
-      const Eigen::Vector3d p = t.block<3, 3>(0, 0) * com + t.block<3, 1>(0, 3);
-      const Eigen::Vector3d w = mass * robot.gravity;
-      for (int j = 0; j <= link; ++j) {
-        const Eigen::Vector3d z = c.axis.col(j);
-        const Eigen::Vector3d l = p - c.origin.col(j);
-        tq(j) += z.dot(z.cross(l).cross(w));
-      }
-    };
-    for (int i = 0; i < n; ++i) add(i, robot.joints[i].mass, robot.joints[i].com);
-    if (n > 0) add(n - 1, robot.tool_mass, robot.tool_com);
-    return tq;
-  }
-  template <typename T>
-  static double quadrature(const EvalState<T>& s, int j) {
-    return quadrature_torques(*s.robot, s.context->chain)(j);
-  }
   static double scalar(const Jet& x) { return x.a; }
 
   /// The preload errors s_j that the data support: coordinate-wise threshold regression of
@@ -197,8 +176,7 @@ class Backlash : public EffectT<Backlash> {
         r.jp.col(j) = wp;
         r.tau(j) = joint_torque(wl, z, m.force, m.moment);
       }
-      r.tg = gravity_torques(robot, c);
-      r.tq = quadrature_torques(robot, c);
+      r.tg = gravity_torques(robot, c, &r.tq);
       rows.push_back(std::move(r));
       obs.push_back(m.displacement);
       wt.push_back(sigma ? 1.0 / m.sigma_d : 1.0);
