@@ -25,7 +25,6 @@ enum class RowPrediction { position, orientation, cross_fitted };
 /// probe's orientation of absolute rows, NaN on the others) and
 /// stiff_predict_dataset_cross_fitted (DeflectionModel::predict_cross_fitted): the checks,
 /// then the prediction of every row, 3 values each.
-
 stiff_status predict_rows(double* out,
                           size_t capacity,
                           size_t* needed,
