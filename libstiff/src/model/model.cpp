@@ -81,7 +81,8 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
     if (backfit && data && effects.size() > 1) {
       EffectSetup bare = setup;
       bare.data = nullptr;
-      const auto& ps = make_effect(name, bare)->parameters();
+      const auto probe = make_effect(name, bare);  // owns what ps refers to
+      const auto& ps = probe->parameters();
       if (std::any_of(ps.begin(), ps.end(), [](const ParameterSpec& p) { return p.from_data; }))
         with_others.companion_columns = companion_columns(robot_, effects, name, *data, sessions);
     }
