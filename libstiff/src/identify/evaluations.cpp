@@ -18,8 +18,8 @@ void displacement_and_jacobian(const Setup& s,
   const int p = model.parameter_count();
   auto& t = s.theta_jet;
   const Measurement& m = s.data->rows[row];
-  if (every && dim == 3 && m.absolute && model.analytic_absolute()) {
-    model.absolute_jacobian(theta, m, s.ctx[row], s.scratch, s.dscratch, t, d, out);
+  if (every && m.absolute && model.analytic_absolute()) {
+    model.absolute_jacobian(theta, m, s.ctx[row], s.scratch, s.dscratch, t, d, out, dim);
     return;
   }
   t.resize(p);
@@ -123,7 +123,7 @@ void Evaluations::get(int row,
       // Every column when that takes no more passes of the model than the ones asked for.
       const int want = cols ? static_cast<int>(cols->size()) : 0;
       const DeflectionModel& model = *s_->model;
-      const bool absolute = s_->data->rows[row].absolute && model.analytic_absolute() && dim == 3;
+      const bool absolute = s_->data->rows[row].absolute && model.analytic_absolute();
       const int passes = (absolute ? 3 + static_cast<int>(model.absolute_jet_parameters().size())
                                    : static_cast<int>(model.jet_parameters().size())) +
                          kJetStride - 1;

@@ -96,7 +96,7 @@ struct Setup {
 /// leading dimension s.dim) into `out`. With `every`
 /// (cols lists every parameter, no scale) of an analytic model, the passes differentiate only
 /// its jet_parameters() and the other columns come from DeflectionModel::analytic_columns; an
-/// absolute row of an analytic_absolute() model (dim 3) takes DeflectionModel::absolute_jacobian.
+/// absolute row of an analytic_absolute() model takes DeflectionModel::absolute_jacobian.
 void displacement_and_jacobian(const Setup& s,
                                int row,
                                const double* theta,

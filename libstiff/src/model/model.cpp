@@ -589,6 +589,20 @@ void seed_instrument(EvalState<T>& s) {
       s.instrument_input(k) = s.d(k).a;
       s.d(k).v(k) += 1.0;
     }
+    if (!s.oriented) return;
+    // The same directions on the orientation, R -> Exp(phi) R (d R / d phi_i = e_i x R, column
+    // by column): the stage maps the position and the orientation each from itself alone.
+    for (int c = 0; c < 3; ++c)
+      for (int u = 0; u < 3; ++u) s.instrument_orientation(u, c) = s.orientation(u, c).a;
+    const Eigen::Matrix3d& r = s.instrument_orientation;
+    for (int c = 0; c < 3; ++c) {
+      s.orientation(1, c).v(0) -= r(2, c);
+      s.orientation(2, c).v(0) += r(1, c);
+      s.orientation(0, c).v(1) += r(2, c);
+      s.orientation(2, c).v(1) -= r(0, c);
+      s.orientation(0, c).v(2) -= r(1, c);
+      s.orientation(1, c).v(2) += r(0, c);
+    }
   }
 }
 
@@ -902,68 +916,93 @@ void DeflectionModel::absolute_jacobian(const double* theta,
                                         EvalState<double>& ds,
                                         std::vector<Jet>& t,
                                         double* d,
-                                        double* jac) const {
-  if (!analytic_absolute_ || !m.absolute)
+                                        double* jac,
+                                        int dim) const {
+  if (!analytic_absolute_ || !m.absolute || (dim != 3 && dim != 6))
     throw InvalidArgument(
-        "absolute_jacobian: needs an absolute row and a model whose effects "
+        "absolute_jacobian: needs an absolute row, 3 or 6 rows and a model whose effects "
         "give their columns (analytic_absolute)");
   const int n = robot_.dof();
+  const bool orient = dim == 6 && m.has_orientation;
   t.resize(count_);
   for (int k = 0; k < count_; ++k) t[k] = Jet(theta[k]);
-  std::fill(jac, jac + 3 * count_, 0.0);
-  // The first pass's directions 0-2 are the measurement stage's input, the wrench-stage
-  // parameters take the rest and kJetStride per later pass (which reuse the first's chain).
+  std::fill(jac, jac + dim * count_, 0.0);
+  // The first pass's directions 0-2 are the measurement stage's inputs (the position and, on a
+  // row with orientation, the orientation), the wrench-stage parameters take the rest and
+  // kJetStride per later pass (which reuse the first's chain).
   const std::vector<int>& jc = absolute_jet_parameters_;
   const int nc = static_cast<int>(jc.size());
-  Eigen::Matrix3d instrument;
-  Vector3<Jet> y;
+  Eigen::Matrix3d instrument, turn = Eigen::Matrix3d::Zero();
+  Vector3<Jet> y, o;
   for (int pass = 0, done = 0; pass == 0 || done < nc; ++pass) {
     const int first = pass == 0 ? 3 : 0;
     const int last = std::min(nc, done + kJetStride - first);
     for (int i = done; i < last; ++i) t[jc[i]].v(first + i - done) = 1.0;
     s.same_values = pass > 0;
     s.seed_instrument = pass == 0;
-    evaluate_jet(t.data(), m, c, s, &y, nullptr);
+    evaluate_jet(t.data(), m, c, s, &y, dim == 6 ? &o : nullptr);
     for (int i = done; i < last; ++i) {
       t[jc[i]].v(first + i - done) = 0.0;
-      for (int r = 0; r < 3; ++r) jac[3 * jc[i] + r] = y(r).v(first + i - done);
+      for (int r = 0; r < 3; ++r) jac[dim * jc[i] + r] = y(r).v(first + i - done);
+      if (dim == 6)
+        for (int r = 0; r < 3; ++r) jac[dim * jc[i] + 3 + r] = o(r).v(first + i - done);
     }
     if (pass == 0)
       for (int r = 0; r < 3; ++r)
-        for (int k = 0; k < 3; ++k) instrument(r, k) = y(r).v(k);
+        for (int k = 0; k < 3; ++k) {
+          instrument(r, k) = y(r).v(k);
+          if (orient) turn(r, k) = o(r).v(k);
+        }
     done = last;
   }
   s.seed_instrument = false;
   s.same_values = false;
   for (int r = 0; r < 3; ++r) d[r] = y(r).a;
+  if (dim == 6)
+    for (int r = 0; r < 3; ++r) d[3 + r] = o(r).a;
 
   // The tangents (AbsoluteTangents) at this row's values, from the chain the pass kept.
   AbsoluteTangents tg;
   tg.instrument = instrument;
   tg.position = s.instrument_input;
-  tg.dq.resize(3, n);
-  tg.joint_error.resize(3, 6 * n);
-  tg.dtheta.resize(3, n);
+  tg.turn = turn;
+  tg.orientation = s.instrument_orientation;
+  tg.dq.resize(dim, n);
+  tg.joint_error.resize(dim, 6 * n);
+  tg.dtheta.resize(dim, n);
   const KeptChain kc{s.kept.data(), n};
   const Eigen::Vector3d r(s.r_meas(0).a, s.r_meas(1).a, s.r_meas(2).a);
   const Eigen::Vector3d p = kc.rot() * r + kc.pos();
   const Eigen::Vector3d pm(s.p_meas(0).a, s.p_meas(1).a, s.p_meas(2).a);
+  // The orientation Exp(rot) F P: a turn phi of the flange F reaches it as Exp(rot) phi, a
+  // change of the deflection's rotation vector as J_l(rot) (left Jacobian, J_r(-rot)).
+  const Eigen::Vector3d rot(s.rot(0).a, s.rot(1).a, s.rot(2).a);
+  const Eigen::Matrix3d flange_turn = turn * effects::rotation_matrix(rot.data());
+  const Eigen::Matrix3d deflection_turn = turn * effects::right_jacobian(-rot);
   for (int j = 0; j < n; ++j) {
     const Eigen::Vector3d lever = p - kc.pe(j);
-    tg.dq.col(j) = instrument * kc.ze(j).cross(lever);
-    const Eigen::Matrix3d turn = kc.re(j) * kc.jr(j);
+    tg.dq.col(j).head<3>() = instrument * kc.ze(j).cross(lever);
+    const Eigen::Matrix3d axes = kc.re(j) * kc.jr(j);
     for (int i = 0; i < 3; ++i) {
-      tg.joint_error.col(6 * j + i) = instrument * kc.rb(j).col(i);
-      tg.joint_error.col(6 * j + 3 + i) = instrument * turn.col(i).cross(lever);
+      tg.joint_error.col(6 * j + i).head<3>() = instrument * kc.rb(j).col(i);
+      tg.joint_error.col(6 * j + 3 + i).head<3>() = instrument * axes.col(i).cross(lever);
     }
     Eigen::Vector3d w;
     lever_arm(c.chain.axis.col(j), c.chain.origin.col(j), pm, w);
-    tg.dtheta.col(j) = instrument * w;
+    tg.dtheta.col(j).head<3>() = instrument * w;
+    if (dim == 6) {
+      tg.dq.col(j).tail<3>() = flange_turn * kc.ze(j);
+      for (int i = 0; i < 3; ++i) {
+        tg.joint_error.col(6 * j + i).tail<3>().setZero();
+        tg.joint_error.col(6 * j + 3 + i).tail<3>() = flange_turn * axes.col(i);
+      }
+      tg.dtheta.col(j).tail<3>() = deflection_turn * c.chain.axis.col(j);
+    }
   }
   plain_values(s, ds);
   for (size_t e = 0; e < effects_.size(); ++e)
     if (effects_[e]->has_absolute_columns())
-      effects_[e]->absolute_columns(theta + offsets_[e], ds, tg, jac + 3 * offsets_[e]);
+      effects_[e]->absolute_columns(theta + offsets_[e], ds, tg, jac + dim * offsets_[e]);
 }
 
 Eigen::Matrix<double, 6, 1> DeflectionModel::predict(const Eigen::VectorXd& theta,

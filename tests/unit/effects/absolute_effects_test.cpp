@@ -202,12 +202,39 @@ TEST(AbsoluteEffects, FastJetEvaluationEqualsTheGenericOne) {
   }
 }
 
+/// A 6-D probe on the flange turned by `probe` (rotation vector, flange frame): the rows of
+/// `data` get the orientation the instrument measures, R_s R_06(true chain) R(probe), turned by
+/// a random small rotation of sigma_o [rad] per axis.
+void add_orientation(const RobotModel& nominal,
+                     const Geometry& g,
+                     const Eigen::Vector3d& probe,
+                     double sigma_o,
+                     std::mt19937_64& rng,
+                     Dataset* data) {
+  const RobotModel truth = perturbed(nominal, g);
+  const Eigen::Matrix3d rp = probe.norm() > 0
+                                 ? Eigen::AngleAxisd(probe.norm(), probe.normalized()).matrix()
+                                 : Eigen::Matrix3d::Identity();
+  std::normal_distribution<double> z(0.0, 1.0);
+  data->has_orientation = true;
+  for (auto& m : data->rows) {
+    const int s = std::stoi(m.session.substr(1));
+    const Eigen::Vector3d n(sigma_o * z(rng), sigma_o * z(rng), sigma_o * z(rng));
+    const Eigen::Matrix3d noise = n.norm() > 0
+                                      ? Eigen::AngleAxisd(n.norm(), n.normalized()).matrix()
+                                      : Eigen::Matrix3d::Identity();
+    m.has_orientation = true;
+    m.orientation = noise * g.rot[s] * truth.tool_pose(m.q + g.dq).topLeftCorner<3, 3>() * rp;
+  }
+}
+
 // Every registered effect that gives its absolute columns analytically
 // (Effect::has_absolute_columns) against automatic differentiation of the whole model
-// (displacement_jacobian): alone, after a wrench-stage effect that the same pass
-// differentiates automatically (the tool), and with every other such effect and every
-// wrench-stage effect, at random poses and parameter values. A new effect is covered without
-// editing this test.
+// (displacement_jacobian, orientation_jacobian): alone, after a wrench-stage effect that the
+// same pass differentiates automatically (the tool), and with every other such effect and every
+// wrench-stage effect, at random poses and parameter values, on positions and on a 6-D probe's
+// poses (a second measurement with its own rows). A new effect is covered without editing this
+// test.
 TEST(AbsoluteEffects, AnalyticColumnsEqualAutomaticDerivatives) {
   const RobotModel robot = ur5();
   std::mt19937_64 rng(23);
@@ -218,6 +245,9 @@ TEST(AbsoluteEffects, AnalyticColumnsEqualAutomaticDerivatives) {
     data.rows[r].time = 30.0 * static_cast<double>(r);
     data.rows[r].temperature = 20.0 + 6.0 * std::sin(0.7 * static_cast<double>(r));
   }
+  Dataset posed = data;
+  add_orientation(robot, g, Eigen::Vector3d(0.2, -0.1, 0.4), 1e-3, rng, &posed);
+  posed.rows[1].has_orientation = false;  // a position-only row among them
   EffectSetup setup;
   setup.robot = &robot;
   setup.data = &data;
@@ -239,40 +269,69 @@ TEST(AbsoluteEffects, AnalyticColumnsEqualAutomaticDerivatives) {
   std::vector<std::string> all = wrench;
   all.insert(all.end(), analytic.begin(), analytic.end());
   models.push_back(all);
+  models.push_back(analytic);
   std::normal_distribution<double> z(0.0, 1.0);
-  for (const auto& effects : models) {
-    const DeflectionModel m(robot, effects, &data);
-    std::string label;
-    for (const auto& e : effects) label += (label.empty() ? "" : "+") + e;
-    // Every analytic effect alone or after a wrench-stage one qualifies; a combination may
-    // not (two measurement-stage effects), and then the automatic path is the only one.
-    if (effects.size() <= 2) {
-      ASSERT_TRUE(m.analytic_absolute()) << label;
-    }
-    if (!m.analytic_absolute()) continue;
-    const int p = m.parameter_count();
-    Eigen::VectorXd theta = m.start_parameters();
-    for (size_t e = 0; e < m.effects().size(); ++e)
-      m.effects()[e]->example_parameters(Eigen::VectorXd::Constant(robot.dof(), 1e-6),
-                                         theta.data() + m.offset(static_cast<int>(e)));
-    for (int k = 0; k < p; ++k) theta(k) += 0.3 * m.spec(k).typical * z(rng);
-    const auto ctx = m.contexts(data);
-    EvalState<Jet> js;
-    EvalState<double> ds;
-    std::vector<Jet> t;
-    Eigen::Matrix<double, 3, Eigen::Dynamic> fast(3, p);
-    for (size_t r = 0; r < data.size(); ++r) {
-      Eigen::Vector3d d;
-      m.absolute_jacobian(theta.data(), data.rows[r], ctx[r], js, ds, t, d.data(), fast.data());
-      const auto ad = m.displacement_jacobian(theta, data.rows[r], ctx[r]);
-      const Eigen::Vector3d y = m.predict(theta, data.rows[r], ctx[r]).head<3>();
-      EXPECT_LT((d - y).norm(), 1e-12 * y.norm()) << label << " row " << r;
-      for (int k = 0; k < p; ++k)
-        EXPECT_LE((fast.col(k) - ad.col(k)).norm(), 1e-12 * ad.col(k).norm())
-            << label << ": " << m.owner(k).name() << "." << m.spec(k).name << " row " << r
-            << ": analytic " << fast.col(k).transpose() << ", automatic " << ad.col(k).transpose();
+  int compared = 0, together = 0;
+  for (const Dataset* rows : {&data, &posed}) {
+    const int dim = rows->has_orientation ? 6 : 3;
+    for (const auto& effects : models) {
+      const DeflectionModel m(robot, effects, rows);
+      std::string label;
+      for (const auto& e : effects) label += (label.empty() ? "" : "+") + e;
+      if (dim == 6) label = "6-D " + label;
+      // Every analytic effect alone or after a wrench-stage one qualifies; a combination may
+      // not (two measurement-stage effects), and then the automatic path is the only one.
+      if (effects.size() <= 2) {
+        ASSERT_TRUE(m.analytic_absolute()) << label;
+      }
+      if (!m.analytic_absolute()) continue;
+      const int p = m.parameter_count();
+      Eigen::VectorXd theta = m.start_parameters();
+      for (size_t e = 0; e < m.effects().size(); ++e)
+        m.effects()[e]->example_parameters(Eigen::VectorXd::Constant(robot.dof(), 1e-6),
+                                           theta.data() + m.offset(static_cast<int>(e)));
+      for (int k = 0; k < p; ++k) theta(k) += 0.3 * m.spec(k).typical * z(rng);
+      const auto ctx = m.contexts(*rows);
+      EvalState<Jet> js;
+      EvalState<double> ds;
+      std::vector<Jet> t;
+      Eigen::MatrixXd fast(dim, p);
+      for (size_t r = 0; r < rows->size(); ++r) {
+        const Measurement& row = rows->rows[r];
+        Eigen::VectorXd d(dim);
+        m.absolute_jacobian(theta.data(), row, ctx[r], js, ds, t, d.data(), fast.data(), dim);
+        Eigen::MatrixXd ad = Eigen::MatrixXd::Zero(dim, p);
+        ad.topRows(3) = m.displacement_jacobian(theta, row, ctx[r]);
+        Eigen::VectorXd y = Eigen::VectorXd::Zero(dim);
+        Vector3<double> yp, yo;
+        m.evaluate<double>(theta.data(), row, ctx[r], &yp, nullptr, dim == 6 ? &yo : nullptr);
+        y.head<3>() = yp;
+        if (dim == 6) {
+          y.tail<3>() = yo;
+          ad.bottomRows(3) = m.orientation_jacobian(theta, row, ctx[r]);
+        }
+        EXPECT_LT((d - y).norm(), 1e-12 * y.norm()) << label << " row " << r;
+        for (int k = 0; k < p; ++k) {
+          // Positions and orientations apart: the two are in different units. The automatic
+          // derivative of the deflection's Exp(rot) goes through Rodrigues' (1 - cos t) / t^2
+          // at t ~ 1e-3 rad, which keeps about eps / t^2 ~ 1e-10 of its digits.
+          for (int part = 0; part < dim / 3; ++part) {
+            const Eigen::Vector3d a = fast.col(k).segment<3>(3 * part);
+            const Eigen::Vector3d b = ad.col(k).segment<3>(3 * part);
+            const double rel = part ? 1e-10 : 1e-12;
+            EXPECT_LE((a - b).norm(), rel * std::max(b.norm(), ad.col(k).norm() * 1e-3))
+                << label << ": " << m.owner(k).name() << "." << m.spec(k).name << " row " << r
+                << (part ? " orientation" : " position") << ": analytic " << a.transpose()
+                << ", automatic " << b.transpose();
+          }
+        }
+        compared += row.has_orientation;
+        together += row.has_orientation && effects.size() == analytic.size();
+      }
     }
   }
+  EXPECT_GT(compared, 0);
+  EXPECT_GT(together, 0);  // the analytic effects all in one model (one measurement stage)
 }
 
 // The loop on absolute data (stiff diagnose --auto from the nominal registration and tool)
@@ -644,32 +703,6 @@ TEST(AbsoluteData, FarAwayFrameWithoutRegistrationIsAnError) {
   } catch (const InvalidArgument& e) {
     EXPECT_NE(std::string(e.what()).find("metres away"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("registration"), std::string::npos) << e.what();
-  }
-}
-
-/// A 6-D probe on the flange turned by `probe` (rotation vector, flange frame): the rows of
-/// `data` get the orientation the instrument measures, R_s R_06(true chain) R(probe), turned by
-/// a random small rotation of sigma_o [rad] per axis.
-void add_orientation(const RobotModel& nominal,
-                     const Geometry& g,
-                     const Eigen::Vector3d& probe,
-                     double sigma_o,
-                     std::mt19937_64& rng,
-                     Dataset* data) {
-  const RobotModel truth = perturbed(nominal, g);
-  const Eigen::Matrix3d rp = probe.norm() > 0
-                                 ? Eigen::AngleAxisd(probe.norm(), probe.normalized()).matrix()
-                                 : Eigen::Matrix3d::Identity();
-  std::normal_distribution<double> z(0.0, 1.0);
-  data->has_orientation = true;
-  for (auto& m : data->rows) {
-    const int s = std::stoi(m.session.substr(1));
-    const Eigen::Vector3d n(sigma_o * z(rng), sigma_o * z(rng), sigma_o * z(rng));
-    const Eigen::Matrix3d noise = n.norm() > 0
-                                      ? Eigen::AngleAxisd(n.norm(), n.normalized()).matrix()
-                                      : Eigen::Matrix3d::Identity();
-    m.has_orientation = true;
-    m.orientation = noise * g.rot[s] * truth.tool_pose(m.q + g.dq).topLeftCorner<3, 3>() * rp;
   }
 }
 

@@ -126,31 +126,46 @@ struct EvalState {
   /// value in `instrument_input`.
   bool seed_instrument = false;
   Eigen::Vector3d instrument_input = Eigen::Vector3d::Zero();
+  /// With `oriented` too, the same directions are a small rotation phi (base frame) of the
+  /// predicted orientation the stage receives, R -> Exp(phi) R, whose value R is kept here (a
+  /// measurement stage maps the position and the orientation each from itself alone).
+  Eigen::Matrix3d instrument_orientation = Eigen::Matrix3d::Identity();
 };
 
 /// First-order maps of an absolute row's predicted position y (instrument frame, after every
-/// stage) at the row's values, from a change of what an effect writes in its stage (filled by
-/// DeflectionModel::absolute_jacobian for Effect::absolute_columns):
-///  - `dtheta` (3 x n): dy/d dtheta_j, a joint deflection added in the joint stage (through
-///    the nominal chain's J_p at P, then the measurement stage);
-///  - `dq` (3 x n): dy/d dq_j, a joint angle correction of the geometry stage: z_j x (P - o_j)
-///    of the corrected chain (axis z_j, origin o_j of joint j's error frame);
-///  - `joint_error` (3 x 6n): dy/d joint_error(i, j) in column 6 j + i: translations (i < 3)
-///    move P by R_B e_i (R_B: joint j's frame after `pre`); rotation-vector components w_i
-///    turn it about R_E J_r(w) e_i through o_j (R_E: after the error's rotation, J_r the right
-///    Jacobian of SO(3));
+/// stage) and, on rows with a measured orientation, of its orientation discrepancy o (rows
+/// 3-5; `rows()` is then 6), at the row's values, from a change of what an effect writes in
+/// its stage (filled by DeflectionModel::absolute_jacobian for Effect::absolute_columns):
+///  - `dtheta` (rows x n): d(y, o)/d dtheta_j, a joint deflection added in the joint stage
+///    (through the nominal chain's J_p at P and its axis z_j, then the measurement stage);
+///  - `dq` (rows x n): d(y, o)/d dq_j, a joint angle correction of the geometry stage:
+///    z_j x (P - o_j) and z_j of the corrected chain (axis z_j, origin o_j of joint j's error
+///    frame);
+///  - `joint_error` (rows x 6n): d(y, o)/d joint_error(i, j) in column 6 j + i: translations
+///    (i < 3) move P by R_B e_i (R_B: joint j's frame after `pre`); rotation-vector
+///    components w_i turn P and the flange about R_E J_r(w) e_i through o_j (R_E: after the
+///    error's rotation, J_r the right Jacobian of SO(3));
 ///  - `instrument` (3 x 3): dy/dx, the measurement stage's map of the base-frame position x it
 ///    receives (the registration's rotation), by automatic differentiation of that stage;
-///  - `position`: x itself.
+///  - `position`: x itself;
+///  - `turn` (3 x 3, oriented rows): do/dphi, the map of a small rotation phi (base frame) of
+///    the predicted orientation the measurement stage receives, R -> Exp(phi) R, through that
+///    stage and the discrepancy (automatic differentiation); zero on rows without one;
+///  - `orientation`: that R.
 /// (Fixed capacity, kMaxTangentJoints joints: no allocation per row.)
 constexpr int kMaxTangentJoints = 32;
 struct AbsoluteTangents {
-  using PerJoint = Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::ColMajor, 3, kMaxTangentJoints>;
+  using PerJoint =
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, 6, kMaxTangentJoints>;
   PerJoint dtheta;
   PerJoint dq;
-  Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::ColMajor, 3, 6 * kMaxTangentJoints> joint_error;
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, 6, 6 * kMaxTangentJoints>
+      joint_error;
   Eigen::Matrix3d instrument;
   Eigen::Vector3d position;
+  Eigen::Matrix3d turn = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d orientation = Eigen::Matrix3d::Identity();
+  int rows() const { return static_cast<int>(dq.rows()); }
 };
 
 /// What an effect needs from the robot file or the data.
@@ -208,16 +223,18 @@ class Effect {
   /// by DeflectionModel::analytic_columns when every other effect acts only in the wrench
   /// stage.
   virtual void displacement_derivatives(const EvalState<double>& /*s*/, double* /*out*/) const {}
-  /// Optional analytic derivatives of an absolute row's predicted position (one evaluation
-  /// instead of one pass of automatic differentiation per kJetStride parameters): true when
-  /// absolute_columns is provided. Such an effect writes, linearly in its parameters, only
-  /// what AbsoluteTangents maps (dtheta in the joint stage; dq and joint_error in the geometry
-  /// stage; or, as the model's only measurement-stage effect, the position it receives) and
-  /// reads nothing another effect's parameters change but the measured point. The tests
+  /// Optional analytic derivatives of an absolute row's predicted position and orientation
+  /// (one evaluation instead of one pass of automatic differentiation per kJetStride
+  /// parameters): true when absolute_columns is provided. Such an effect writes only what
+  /// AbsoluteTangents maps (dtheta in the joint stage, linearly in its parameters; dq and
+  /// joint_error, linearly, or the probe's rotation on the flange in the geometry stage; or,
+  /// as the model's only measurement-stage effect, the position and orientation it receives)
+  /// and reads nothing another effect's parameters change but the measured point. The tests
   /// compare every such effect's columns with automatic differentiation.
   virtual bool has_absolute_columns() const { return false; }
-  /// dy/dp (3 x size(), column-major, zeroed by the caller) of the absolute row whose values
-  /// are in `s` (after its evaluation at p) through the tangents `t` of that evaluation.
+  /// d(y, o)/dp (t.rows() x size(), column-major, zeroed by the caller) of the absolute row
+  /// whose values are in `s` (after its evaluation at p) through the tangents `t` of that
+  /// evaluation.
   virtual void absolute_columns(const double* /*p*/,
                                 const EvalState<double>& /*s*/,
                                 const AbsoluteTangents& /*t*/,

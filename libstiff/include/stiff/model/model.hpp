@@ -72,8 +72,10 @@ class DeflectionModel {
   /// (more only for more than five wrench-stage parameters) whose derivative directions are
   /// the measurement stage's input and the wrench-stage parameters, then every other column
   /// from the effects' absolute_columns through the tangents of that pass (AbsoluteTangents).
-  /// Equal to displacement_jacobian up to round-off. `js`, `ds`, `t` are scratch (one per
-  /// thread).
+  /// With dim 6, d and each column also hold the orientation discrepancy (rows 3-5, zero on a
+  /// row without a measured orientation), and the pass's directions 0-2 also the measurement
+  /// stage's map of the orientation it receives. Equal to displacement_jacobian and
+  /// orientation_jacobian up to round-off. `js`, `ds`, `t` are scratch (one per thread).
   void absolute_jacobian(const double* theta,
                          const Measurement& m,
                          const MeasurementContext& c,
@@ -81,7 +83,8 @@ class DeflectionModel {
                          EvalState<double>& ds,
                          std::vector<Jet>& t,
                          double* d,
-                         double* jac) const;
+                         double* jac,
+                         int dim = 3) const;
   /// Offset of effect e's block in theta.
   int offset(int e) const { return offsets_[e]; }
   /// Index of an effect by name, -1 if absent.

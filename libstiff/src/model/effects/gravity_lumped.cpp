@@ -60,10 +60,12 @@ class GravityLumped : public EffectT<GravityLumped> {
                         double* out) const override {
     // dtheta_j is linear in beta_jk: each column is the regressor times joint j's tangent.
     const ChainState& c = s.context->chain;
+    const int rows = t.rows();
     int i = 0;
     for (int j = 0; j < n_; ++j)
       for (int k = j + 1; k <= n_; ++k, ++i)
-        Eigen::Map<Eigen::Vector3d>(out + 3 * i) = t.dtheta.col(j) * regressor(c, j, k, s.p_meas);
+        Eigen::Map<Eigen::VectorXd>(out + rows * i, rows) =
+            t.dtheta.col(j) * regressor(c, j, k, s.p_meas);
   }
 
   template <typename T>

@@ -49,11 +49,12 @@ class Harmonic : public EffectT<Harmonic> {
                         const AbsoluteTangents& t,
                         double* out) const override {
     const Eigen::VectorXd& q = s.measurement->q;
+    const int rows = t.rows();
     for (int j = 0; j < t.dq.cols(); ++j) {
       const double a = q(j);
       const double basis[4] = {std::sin(a), std::cos(a), std::sin(2 * a), std::cos(2 * a)};
       for (int k = 0; k < 4; ++k)
-        Eigen::Map<Eigen::Vector3d>(out + 3 * (4 * j + k)) = t.dq.col(j) * basis[k];
+        Eigen::Map<Eigen::VectorXd>(out + rows * (4 * j + k), rows) = t.dq.col(j) * basis[k];
     }
   }
 

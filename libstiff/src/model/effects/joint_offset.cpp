@@ -42,7 +42,7 @@ class JointOffset : public EffectT<JointOffset> {
                         const EvalState<double>& /*s*/,
                         const AbsoluteTangents& t,
                         double* out) const override {
-    Eigen::Map<Eigen::Matrix<double, 3, Eigen::Dynamic>>(out, 3, t.dq.cols()) = t.dq;
+    Eigen::Map<Eigen::MatrixXd>(out, t.rows(), t.dq.cols()) = t.dq;
   }
 
   template <typename T>

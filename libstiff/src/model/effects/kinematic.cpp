@@ -78,8 +78,9 @@ class Kinematic : public EffectT<Kinematic> {
                         const AbsoluteTangents& t,
                         double* out) const override {
     // The translation moves joint_error's rows 0-2 along u, v; the tilt its rows 3-5.
+    const int rows = t.rows();
     for (int j = 0; j < u_.cols(); ++j) {
-      Eigen::Map<Eigen::Matrix<double, 3, 4>> c(out + 12 * j);
+      Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 4>> c(out + 4 * rows * j, rows, 4);
       const auto move = t.joint_error.middleCols<3>(6 * j);
       const auto turn = t.joint_error.middleCols<3>(6 * j + 3);
       c.col(0) = move * u_.col(j);

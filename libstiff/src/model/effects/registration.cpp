@@ -71,15 +71,20 @@ class Registration : public EffectT<Registration> {
                         double* out) const override {
     // y = R(omega) x + t: R(omega + dw) = R Exp(J_r dw) turns y by R ((J_r dw) x x), i.e.
     // dy/domega = -R [x]x J_r (the session's block only; the other sessions' columns are 0).
+    // The orientation R(omega) R_base turns the same way: as R_base -> Exp(J_r dw) R_base,
+    // which t.turn maps.
     const int k = session(s);
+    const int rows = t.rows();
     const Eigen::Map<const Eigen::Vector3d> w(p + 6 * k);
     const Eigen::Matrix3d r = effects::rotation_matrix(w.data());
+    const Eigen::Matrix3d jr = effects::right_jacobian(w);
     const Eigen::Vector3d& x = t.position;
     Eigen::Matrix3d cross;
     cross << 0, -x(2), x(1), x(2), 0, -x(0), -x(1), x(0), 0;
-    Eigen::Map<Eigen::Matrix<double, 3, 6>> c(out + 18 * k);
-    c.leftCols<3>() = -r * cross * effects::right_jacobian(w);
-    c.rightCols<3>().setIdentity();
+    Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 6>> c(out + 6 * rows * k, rows, 6);
+    c.topLeftCorner<3, 3>() = -r * cross * jr;
+    c.topRightCorner<3, 3>().setIdentity();
+    if (rows == 6) c.bottomLeftCorner<3, 3>() = t.turn * jr;
   }
 
   template <typename T>

@@ -47,6 +47,19 @@ class ToolOrientation : public EffectT<ToolOrientation> {
         "frame sits on the flange"};
   }
 
+  bool has_absolute_columns() const override { return true; }
+  void absolute_columns(const double* p,
+                        const EvalState<double>& /*s*/,
+                        const AbsoluteTangents& t,
+                        double* out) const override {
+    // R(w + dw) = R(w) Exp(J_r dw) turns the predicted orientation R as Exp(R J_r dw) R (the
+    // probe's rotation is the last factor); positions do not see it.
+    if (t.rows() < 6) return;
+    const Eigen::Map<const Eigen::Vector3d> w(p);
+    Eigen::Map<Eigen::Matrix<double, 6, 3>> c(out);
+    c.bottomRows<3>() = t.turn * t.orientation * effects::right_jacobian(w);
+  }
+
   template <typename T>
   void geometry_t(const T* p, EvalState<T>& s) const {
     if (s.oriented) s.probe = (s.probe * effects::rotation_matrix(p)).eval();
