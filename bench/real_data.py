@@ -692,10 +692,11 @@ def write_doc(res):
         if per:
             w("Scaled to 10^4 rows, stiff's library time is " + " and ".join(per) + ". An "
               "absolute row's Jacobian takes one evaluation of the model: the registration, the "
-              "joint offsets, the axis errors and the lumped self-weight give their columns "
-              "analytically from the tangents of the corrected chain that evaluation keeps, and "
-              "automatic differentiation carries only the tool's offset and the registration's "
-              "map in the same pass; a calibration evaluates about five Jacobians (at the start "
+              "joint offsets, the axis errors, the lumped self-weight and the 6-D probe's frame "
+              "give their columns analytically from the tangents of the corrected chain that "
+              "evaluation keeps (positions and, with a 6-D probe, orientations), and automatic "
+              "differentiation carries only the tool's offset and the registration's maps of "
+              "the position and orientation in the same pass; a calibration evaluates about five Jacobians (at the start "
               "and once per solver step; the statistics reuse the last) and factors the tall "
               "Jacobian once, for the identifiability test at the start.")
             w("")
