@@ -696,9 +696,13 @@ def write_doc(res):
               "give their columns analytically from the tangents of the corrected chain that "
               "evaluation keeps (positions and, with a 6-D probe, orientations), and automatic "
               "differentiation carries only the tool's offset and the registration's maps of "
-              "the position and orientation in the same pass; a calibration evaluates about five Jacobians (at the start "
-              "and once per solver step; the statistics reuse the last) and factors the tall "
-              "Jacobian once, for the identifiability test at the start.")
+              "the position and orientation in the same pass; a calibration evaluates about five "
+              "Jacobians (at the start and once per solver step; the statistics reuse the last) "
+              "and factors the tall Jacobian once, for the identifiability test at the start. "
+              "On a 6-D probe's poses it fits again once the orientation residuals' weight is "
+              "estimated from them (variance components, docs/identifiability.md): 8 Jacobians "
+              "for geometry, 14 for geometry+gravity on series C, about twice a position-only "
+              "calibration's.")
             w("")
     w("Both run on one thread (the reference's BLAS is limited to one, as stiff's solver uses "
       "one) and are timed in CPU seconds of this process, which a busy machine disturbs less "
