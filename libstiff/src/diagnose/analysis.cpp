@@ -289,13 +289,38 @@ Analysis analyse(const Context& cx,
     }
     if (q.dof > 0 && ss_m > 0) {
       const double fit_ms = ss_m / q.dof;
-      const double f =
-          (ss_closest / vdof) / (fit_ms * (1.0 + double(a.p) / a.n + session_leverage));
+      const double pred_ms = fit_ms * (1.0 + double(a.p) / a.n + session_leverage);
+      // The fit's mean square is over the rows the outlier rule kept. A model that predicts by
+      // a discrete decision taken from the data (a backlash jump's side, `decided`) has rows
+      // the calibration decides wrongly beyond its interval when the file's masses are off: a
+      // jump of several sigma on an isolated row, which that rule excluded from the fit. The
+      // validation rows it calls improbable (same Bonferroni level, at most a fifth of the
+      // rows) then leave the ratio too, so that both sides are judged alike. A smooth model's
+      // heavy tails stay: there they are structure (an effect outside the library).
+      double ss_kept = ss_closest, vdof_kept = vdof;
+      const bool excluded =
+          decided && std::any_of(a.outlier.begin(), a.outlier.end(), [](bool b) { return b; });
+      if (excluded && cx.opt->outlier_alpha > 0 && !closest.empty()) {
+        const double level = std::log(cx.opt->outlier_alpha / closest.size());
+        int flagged = 0;
+        double ss_flagged = 0;
+        for (const auto& e : closest)
+          if (stats::log_chi2_sf(e.squaredNorm() / pred_ms, 3.0) < level) {
+            ++flagged;
+            ss_flagged += e.squaredNorm();
+          }
+        if (flagged > 0 && 5 * flagged <= static_cast<int>(closest.size())) {
+          q.validation_outliers = flagged;
+          ss_kept -= ss_flagged;
+          vdof_kept -= 3.0 * flagged;
+        }
+      }
+      const double f = (ss_kept / vdof_kept) / pred_ms;
       q.validation_to_fit = std::sqrt(f);
       // A validation session's noise is not the calibration's (another day, another thermal
       // state): allowed to differ by the same relative uncertainty as a stated noise level.
       const double u = 1.0 + cx.opt->noise_uncertainty;
-      q.validation_to_fit_p = stats::f_sf(f / (u * u), vdof, q.dof);
+      q.validation_to_fit_p = stats::f_sf(f / (u * u), vdof_kept, q.dof);
     }
   }
   return a;

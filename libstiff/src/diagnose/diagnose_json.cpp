@@ -41,6 +41,7 @@ nlohmann::json quality_json(const ModelQuality& q) {
     j["validation_error_m"] = q.validation_error_m;
     j["validation_to_fit"] = finite(q.validation_to_fit);
     j["validation_to_fit_p"] = q.validation_to_fit_p;
+    j["validation_outliers"] = q.validation_outliers;
     j["validation_session_parameters"] = q.validation_session_parameters;
     j["validation_uncertain_rows"] = q.validation_uncertain_rows;
   }

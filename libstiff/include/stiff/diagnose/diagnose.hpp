@@ -169,6 +169,12 @@ struct ModelQuality {
   /// structure predicts new poses worse than it fits them.
   double validation_to_fit = NAN;
   double validation_to_fit_p = 1.0;
+  /// Validation rows the fit-versus-validation test leaves out: for a model that predicts by a
+  /// decision taken from the data (a backlash jump's side) whose calibration excluded rows as
+  /// outliers, the validation rows that the same rule (P(chi2_3) < alpha / m under the fit's
+  /// residual scale, at most m/5 of them) calls improbable, so that both sides of the ratio
+  /// are judged alike.
+  int validation_outliers = 0;
   /// Validation rows whose prediction the calibration leaves undecided (a parameter decided
   /// from the data, e.g. backlash's preload error, anywhere in its confidence interval changes
   /// it): the fit-versus-validation test scores each by the prediction closest to it.
