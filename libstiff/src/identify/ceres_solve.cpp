@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "identify/ceres_quiet.hpp"
 #include "identify/identifiability.hpp"
@@ -188,8 +189,10 @@ class CompressedResidual final : public ceres::CostFunction {
         jac, nf + 1, nf);
     jout.setZero();
     double top = 0.0;
+    int rank = 0;
     for (int i = 0; i < nf; ++i) {
       if (!(lam(i) > 1e-13 * lam(nf - 1))) continue;
+      ++rank;
       const double root = std::sqrt(lam(i));
       jout.row(i) = root * v.col(i).transpose();
       out(i) = v.col(i).dot(grad) / root;
@@ -198,14 +201,49 @@ class CompressedResidual final : public ceres::CostFunction {
     // |r'|^2 = |r|^2 also when round-off puts the projection above the norm.
     if (top > sq) out.head(nf) *= std::sqrt(sq / top);
     out(nf) = std::sqrt(std::max(0.0, sq - top));
+    // The relative offset at this point (see RelativeOffset): the part of the residual in the
+    // tangent plane, per direction, over the residual's scale in the others.
+    const double m = static_cast<double>(rs_.setup->dim) * rows_;
+    const double rest = sq - top;
+    offset_ = rank > 0 && m > rank && rest > 0 ? std::sqrt((top / rank) / (rest / (m - rank)))
+                                               : std::numeric_limits<double>::infinity();
     return std::isfinite(top) && std::isfinite(sq);
   }
+  /// The relative offset at the point of the last Jacobian evaluation (infinite before one,
+  /// or without a residual to compare with).
+  double offset() const { return offset_; }
 
  private:
   ResidualSetup rs_;
   int rows_;
   mutable Eigen::VectorXd r_;
   mutable Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> j_;
+  mutable double offset_ = std::numeric_limits<double>::infinity();
+};
+
+/// Stops the minimizer once the iterate is statistically converged: the relative offset of
+/// Bates & Watts (1981, Technometrics 23:179), sqrt((|Q1^T r|^2 / p) / (|Q2^T r|^2 / (m - p)))
+/// with Q1 the tangent plane of the p parameter directions, is below kTolerance. It compares
+/// what one more Gauss-Newton step can still gain with the residual scale, so below 0.001 the
+/// iterate lies within a thousandth of the radius of any confidence region of the parameters
+/// from the least-squares solution; the steps that Ceres's relative cost tolerance (1e-12)
+/// would still take change nothing a user can see. A problem without residual (noise-free
+/// data) or with a parameter on its bound, where the offset does not vanish, keeps Ceres's
+/// own tolerances.
+class RelativeOffset : public ceres::IterationCallback {
+ public:
+  static constexpr double kTolerance = 1e-3;
+  explicit RelativeOffset(const CompressedResidual& r) : r_(r) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& it) override {
+    if (!it.step_is_successful || it.iteration == 0 || !(r_.offset() < kTolerance))
+      return ceres::SOLVER_CONTINUE;
+    fired = true;
+    return ceres::SOLVER_TERMINATE_SUCCESSFULLY;
+  }
+  bool fired = false;
+
+ private:
+  const CompressedResidual& r_;
 };
 
 /// Ceres iteration callback forwarding to the user's progress function.
@@ -327,8 +365,10 @@ SolveOutcome solve_once(const Setup& s,
   // Tall problems as one compressed block (Ceres would take the normal equations anyway);
   // else chunks of 64 measurements, solved by QR.
   const bool tall = s.dim * n >= 10 * nf;
+  CompressedResidual* compressed = nullptr;  // owned by `problem`
   if (tall) {
-    problem.AddResidualBlock(new CompressedResidual(rs, n), nullptr, z.data());
+    compressed = new CompressedResidual(rs, n);
+    problem.AddResidualBlock(compressed, nullptr, z.data());
   } else {
     constexpr int kChunk = 64;  // measurements per residual block
     for (int r = 0; r < n; r += kChunk)
@@ -373,6 +413,11 @@ SolveOutcome solve_once(const Setup& s,
     so.callbacks.push_back(seen.get());
     so.update_state_every_iteration = true;
   }
+  std::unique_ptr<RelativeOffset> settled;
+  if (compressed) {
+    settled = std::make_unique<RelativeOffset>(*compressed);
+    so.callbacks.push_back(settled.get());
+  }
   ceres::Solver::Summary summary;
   std::string why;
   if (!so.IsValid(&why)) throw InvalidArgument("identify: invalid solver options: " + why);
@@ -395,7 +440,7 @@ SolveOutcome solve_once(const Setup& s,
     for (int f : watch.pinned) pinned->push_back(free[f]);
   out.restart = seen && seen->fired;
   out.iterations = static_cast<int>(summary.iterations.size());
-  out.converged = summary.termination_type == ceres::CONVERGENCE;
+  out.converged = summary.termination_type == ceres::CONVERGENCE || (settled && settled->fired);
   out.message = summary.message;
   return out;
 }
