@@ -19,9 +19,10 @@ It is what stiff's geometric calibration is checked against on real laser-tracke
   origin o_k of each later frame (and at the target), computed once from the nominal geometry.
   The unknowns k_ik (compliance times lumped mass times g, rad/m) are linear; no mass model.
 
-What the data can identify is chosen by column-pivoted QR (scipy.linalg.qr, pivoting=True) of
-the finite-difference Jacobian at the start point with unit-norm columns: a parameter whose
-pivot |R_kk| falls below `tol` times the first is held at its nominal value and named. The
+What the data can identify is chosen by column-pivoted QR (Businger-Golub, ties within 1e-6 taken
+in column order: see pivoted_qr) of the finite-difference Jacobian at the start point with
+unit-norm columns: a parameter whose pivot |R_kk| falls below `tol` times the first is held at
+its nominal value and named. The
 remaining parameters are fitted by scipy.optimize.least_squares with its finite-difference
 Jacobian ('2-point'). Residuals: position in m, orientation (rotation vector of
 R_model^T R_measured) in rad times `orientation_weight_m` (default 1 m: 1 mrad weighs 1 mm).
@@ -43,7 +44,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import scipy.linalg
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
@@ -366,6 +366,29 @@ def initialise(model, data):
     return x
 
 
+def pivoted_qr(A, ties=1e-6):
+    """Column-pivoted QR (Businger & Golub 1965) by modified Gram-Schmidt: the pivot order and
+    |diag R|. Columns whose remaining norms agree within `ties` (relative) are taken in column
+    order: exactly dependent columns (translations along parallel axes) then tie up to the
+    finite-difference Jacobian's noise, which LAPACK's pivoting resolves by round-off, so that
+    another BLAS kernel would hold another member of the same combination."""
+    R = np.array(A, dtype=float)
+    n = R.shape[1]
+    order, diag = [], []
+    rest = list(range(n))
+    for _ in range(n):
+        norms = np.linalg.norm(R[:, rest], axis=0)
+        top = norms.max()
+        k = rest[int(np.flatnonzero(norms >= top * (1 - ties))[0])]
+        order.append(k)
+        diag.append(top)
+        rest.remove(k)
+        if top > 0 and rest:
+            q = R[:, k] / top
+            R[:, rest] -= np.outer(q, q @ R[:, rest])
+    return np.array(order), np.array(diag)
+
+
 def calibrate(dh, data, *, gravity=False, tol=1e-3, w_o=1.0, harmonics=False):
     six_d = data["R"] is not None
     model = Model(dh, np.unique(data["session"]), six_d, gravity, harmonics=harmonics)
@@ -377,8 +400,7 @@ def calibrate(dh, data, *, gravity=False, tol=1e-3, w_o=1.0, harmonics=False):
     norms = np.linalg.norm(J, axis=0)
     nz = norms > 0
     Js = J[:, nz] / norms[nz]
-    _, Rq, piv = scipy.linalg.qr(Js, mode="economic", pivoting=True)
-    diag = np.abs(np.diag(Rq))
+    piv, diag = pivoted_qr(Js)
     rank = int(np.sum(diag > tol * diag[0]))
     cols = np.flatnonzero(nz)
     free = np.sort(cols[piv[:rank]])
