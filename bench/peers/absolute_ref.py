@@ -22,9 +22,8 @@ It is what stiff's geometric calibration is checked against on real laser-tracke
 What the data can identify is chosen by column-pivoted QR (Businger-Golub, ties within 1e-6 taken
 in column order: see pivoted_qr) of the finite-difference Jacobian at the start point with
 unit-norm columns: a parameter whose pivot |R_kk| falls below `tol` times the first is held at
-its nominal value and named. The
-remaining parameters are fitted by scipy.optimize.least_squares with its finite-difference
-Jacobian ('2-point'). Residuals: position in m, orientation (rotation vector of
+its nominal value and named. The remaining parameters are fitted by
+scipy.optimize.least_squares with its finite-difference Jacobian ('2-point'). Residuals: position in m, orientation (rotation vector of
 R_model^T R_measured) in rad times `orientation_weight_m` (default 1 m: 1 mrad weighs 1 mm).
 
 Reads the absolute measurement format (docs/formats.md): id, session, q*_rad|_deg,
