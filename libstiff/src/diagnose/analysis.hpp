@@ -168,6 +168,10 @@ struct Level {
   bool separable = true;  ///< the top is separable from every group member
   std::string experiment;
   bool cross_validated = false;  ///< a.quality.cross_validation_error_m has been computed
+  bool validated = false;        ///< adding the pick lowered the validation error (explained_by)
+  /// decide() found the pick's step confirmed by the validation poses and only marginal
+  /// structure after it (verdict `ambiguous`): the loop still takes the step.
+  bool tentative = false;
 };
 
 /// The experiments that would separate the effects of an ambiguous group: each effect's own
@@ -206,7 +210,8 @@ struct Chain {
   /// (partial F-tests, Holm across them: no sigma needed). A chain of candidates that mimics
   /// an effect outside the library fits and predicts alike, but leaves the part it cannot
   /// mimic as a trend in the load torques or directions.
-  bool at_floor(const Level& L, std::string* why) const;
+  /// `weak`: every piece of evidence against the floor is marginal (alpha / 10 <= p < alpha).
+  bool at_floor(const Level& L, std::string* why, bool* weak) const;
 
   /// Does adding one of level i's significant candidates (the top and the next ones by rank,
   /// kAlternatives in all) and, while the evidence holds, the following ones bring the
@@ -214,11 +219,14 @@ struct Chain {
   /// calibration data ranks the candidates; when several chains explain it, the one that
   /// predicts the validation poses best is kept (out-of-sample choice; the first that explains
   /// without validation data). On success levels[i].pick is its candidate; on failure `why` is
-  /// the top's reason.
-  bool explained_by_chain(size_t i, int depth, std::string* why, std::string* top_why = nullptr);
+  /// the top's reason, and `weak` says whether the evidence against the top's chain is only
+  /// marginal (the validation error not significantly worse, or structure left at
+  /// alpha / 10 <= p < alpha): not refuted, only not confirmed.
+  bool explained_by_chain(
+      size_t i, int depth, std::string* why, std::string* top_why = nullptr, bool* weak = nullptr);
 
-  /// explained_by_chain for level i's pick.
-  bool explained_by(size_t i, int depth, std::string* why);
+  /// explained_by_chain for level i's pick (sets levels[i].validated).
+  bool explained_by(size_t i, int depth, std::string* why, bool* weak);
 
   /// Verdict of level i.
   std::string decide(size_t i, std::string* why);

@@ -30,9 +30,13 @@ const Level* Chain::next(size_t i) {
   return &levels[i + 1];
 }
 
-bool Chain::at_floor(const Level& L, std::string* why) const {
+bool Chain::at_floor(const Level& L, std::string* why, bool* weak) const {
   const ModelQuality& q = L.a.quality;
   const double alpha = cx->opt->alpha;
+  // Evidence at alpha / 10 <= p < alpha is marginal (the rule of decide() for candidates): a
+  // model that fails only on such evidence is not refuted, only not confirmed.
+  auto marginal = [&](double p) { return p >= alpha / 10; };
+  *weak = true;
   if (cx->noise->known) {
     if (q.floor_p >= alpha) return true;
     const std::string held_out =
@@ -42,25 +46,30 @@ bool Chain::at_floor(const Level& L, std::string* why) const {
     *why = "the residual is " + num(q.residual_to_floor, 3) + " times the stated noise floor" +
            held_out + " (improbable even for a noise " + num(100 * cx->opt->noise_uncertainty, 2) +
            " % above the stated one, p = " + num(q.floor_p, 2) + ")";
+    *weak = marginal(q.floor_p);
     return false;
   }
+  bool at = true;
   if (q.has_validation && q.validation_to_fit_p < alpha) {
     *why = "it predicts the validation poses " + num(q.validation_to_fit, 3) +
            " times worse than its fit residual allows (p = " + num(q.validation_to_fit_p, 2) +
            " allowing " + num(100 * cx->opt->noise_uncertainty, 2) +
            " % between sessions): structure remains";
-    return false;
+    *weak = marginal(q.validation_to_fit_p);
+    at = false;
   }
   Diagnosis d;
   where(*cx, L, d);
   for (const auto& c : d.covariates)
     if (c.significant) {
-      *why = "its residual still follows " + c.description +
-             " (partial F = " + num(c.statistic, 3) + ", p_adj = " + num(c.p_adjusted, 2) +
-             "): structure remains that no candidate explains";
-      return false;
+      if (at)
+        *why = "its residual still follows " + c.description +
+               " (partial F = " + num(c.statistic, 3) + ", p_adj = " + num(c.p_adjusted, 2) +
+               "): structure remains that no candidate explains";
+      *weak = *weak && marginal(c.p_adjusted);
+      at = false;
     }
-  return true;
+  return at;
 }
 
 namespace {
@@ -76,9 +85,11 @@ double comparable_validation(const ModelQuality& q) {
 }
 }  // namespace
 
-bool Chain::explained_by_chain(size_t i, int depth, std::string* why, std::string* top_why) {
+bool Chain::explained_by_chain(
+    size_t i, int depth, std::string* why, std::string* top_why, bool* weak) {
   static constexpr size_t kAlternatives = 3;
   std::string first;
+  bool first_weak = false, top_validated = false;
   size_t best = SIZE_MAX;
   // A copy: levels grows (and may move) while the chains are built.
   const std::string top_effect = levels[i].scores.empty() ? "" : levels[i].scores[0].effect;
@@ -95,7 +106,9 @@ bool Chain::explained_by_chain(size_t i, int depth, std::string* why, std::strin
     levels.resize(i + 1);
     levels[i].pick = k;
     std::string w;
-    const bool explains = explained_by(i, depth, &w);
+    bool wk = false;
+    const bool explains = explained_by(i, depth, &w, &wk);
+    if (k == 0) top_validated = levels[i].validated;
     // A rival whose chain explains the data only once the top is added later is no evidence
     // for the rival: the top's own chain asked whether the rival is needed after the top, and
     // the data did not say so; the rival's first step only took up part of the top's signal.
@@ -114,13 +127,16 @@ bool Chain::explained_by_chain(size_t i, int depth, std::string* why, std::strin
       if (!end.has_validation) break;
     } else if (k == 0) {
       first = w;
+      first_weak = wk;
     }
   }
   levels.resize(i + 1);
   levels[i].rival.clear();
   if (best == SIZE_MAX) {
     levels[i].pick = 0;
+    levels[i].validated = top_validated;
     *why = first;
+    if (weak) *weak = first_weak;
     return false;
   }
   // The top keeps its place unless a rival chain predicts the validation poses significantly
@@ -136,7 +152,8 @@ bool Chain::explained_by_chain(size_t i, int depth, std::string* why, std::strin
   }
   levels[i].pick = best;
   std::string w;
-  explained_by(i, depth, &w);  // rebuild the chosen chain's levels
+  bool wk = false;
+  explained_by(i, depth, &w, &wk);  // rebuild the chosen chain's levels
   if (top_why)
     *top_why = best == 0
                    ? ""
@@ -144,8 +161,10 @@ bool Chain::explained_by_chain(size_t i, int depth, std::string* why, std::strin
   return true;
 }
 
-bool Chain::explained_by(size_t i, int depth, std::string* why) {
+bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
   const std::string added = levels[i].scores[levels[i].pick].effect;
+  levels[i].validated = false;
+  *weak = false;
   const Level* n = next(i);
   if (!n) {
     *why = "the re-fit with " + added + " failed";
@@ -156,22 +175,30 @@ bool Chain::explained_by(size_t i, int depth, std::string* why) {
   if (q.has_validation && comparable_validation(nq) >= comparable_validation(q)) {
     *why = "adding " + added + " does not improve the validation error (" + um(q.validation_rms_m) +
            " -> " + um(nq.validation_rms_m) + ")";
+    // Refuted only when the validation poses are predicted significantly worse (paired test
+    // of the squared errors); otherwise the effect may be real but too small for this data to
+    // pay for its parameters on new poses.
+    *weak = !(paired_fall_p(nq.validation_error_m, q.validation_error_m) < cx->opt->alpha);
     return false;
   }
+  levels[i].validated = q.has_validation;
   // Explained: the residual is at the floor and no candidate finds structure in it (the
   // partial F-tests do not depend on the stated noise, so they also catch a residual that
   // the noise allowance would let pass).
   std::string floor_why;
-  const bool floor = at_floor(*n, &floor_why);
+  bool floor_weak = false;
+  const bool floor = at_floor(*n, &floor_why, &floor_weak);
   if (floor && !claims(*n)) return true;
   // At the floor with a marginal candidate left (p_adj > alpha/10, the rule of decide()) that
   // does not validate: not structure.
   const bool marginal = n->scores[0].p_adjusted > cx->opt->alpha / 10;
   if (claims(*n) && n->separable && depth > 1) {
     std::string deeper;
-    if (explained_by_chain(i + 1, depth - 1, &deeper)) return true;
+    bool deeper_weak = false;
+    if (explained_by_chain(i + 1, depth - 1, &deeper, nullptr, &deeper_weak)) return true;
     if (floor && levels[i + 1].scores[0].p_adjusted > cx->opt->alpha / 10) return true;
     *why = "after adding " + added + ": " + deeper;
+    *weak = deeper_weak && (floor || floor_weak);
     return false;
   }
   if (floor && marginal) return true;
@@ -180,12 +207,14 @@ bool Chain::explained_by(size_t i, int depth, std::string* why) {
     floor_why = "structure remains (" + n->scores[0].effect +
                 " is significant, p_adj = " + num(n->scores[0].p_adjusted, 2) +
                 (n->separable ? "" : ", not separable from " + join(n->group, ", ")) + ")";
+  *weak = !floor && floor_weak && (!claims(*n) || marginal);
   *why = "after adding " + added + " " + floor_why +
          (depth > 1 ? " and no further candidate explains the rest" : "");
   return false;
 }
 
 std::string Chain::decide(size_t i, std::string* why) {
+  levels[i].tentative = false;
   const Level& L = levels[i];
   const double alpha = cx->opt->alpha;
   const ModelQuality& q = L.a.quality;
@@ -230,11 +259,30 @@ std::string Chain::decide(size_t i, std::string* why) {
     return "ambiguous";
   }
   std::string reason, top_reason;
-  if (!explained_by_chain(i, cx->opt->max_steps, &reason, &top_reason)) {
+  bool weak = false;
+  if (!explained_by_chain(i, cx->opt->max_steps, &reason, &top_reason, &weak)) {
     // A marginal candidate that does not validate on a model at the noise floor: no claim.
     if (!omnibus && top.p_adjusted > alpha / 10)
       return nothing(" (" + top.effect + " reached p_adj = " + num(top.p_adjusted, 2) + " but " +
                      reason + ")");
+    // Strong evidence for the top in the calibration, and only marginal evidence against its
+    // chain: neither confirmed nor refuted, so no claim either way.
+    if (weak) {
+      levels[i].tentative = levels[i].validated;
+      levels[i].group = {top.effect};
+      levels[i].experiment = experiment_for(*cx, levels[i].group);
+      *why = top.effect + " explains part of the misfit (partial F = " + num(top.statistic, 4) +
+             ", p_adj = " + num(top.p_adjusted, 2) + ") but " + reason +
+             (levels[i].validated
+                  ? "; that evidence is marginal (p >= alpha/10): this data cannot tell whether " +
+                        top.effect +
+                        " is what is missing and the rest chance, or an effect outside the "
+                        "candidate list is at work"
+                  : ", though not significantly worse: " + top.effect +
+                        " may be real but too small for this data to pay for its parameters on "
+                        "new poses, or stand in for an effect outside the candidate list");
+      return "ambiguous";
+    }
     *why = top.effect + " explains part of the misfit (partial F = " + num(top.statistic, 4) +
            ", p_adj = " + num(top.p_adjusted, 2) + ") but " + reason +
            ": the missing effect is probably not in the candidate list";

@@ -140,6 +140,25 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
     VectorXd typical;
     const MatrixXd z = candidate_regressors(a, *mg, &typical);
     GroupScore g = score_group(a, z, typical, opt.rank_tolerance);
+    // The whole effect decides what is identifiable; the test takes the best of it and its
+    // common sub-forms (Effect::sub_forms), Bonferroni-corrected for the forms tried.
+    GroupScore best = g;
+    const std::vector<std::vector<int>> forms = eg.sub_forms();
+    size_t form = 0;
+    for (size_t f = 0; f < forms.size(); ++f) {
+      MatrixXd zf(z.rows(), forms[f].size());
+      VectorXd tf(forms[f].size());
+      for (size_t k = 0; k < forms[f].size(); ++k) {
+        zf.col(k) = z.col(forms[f][k]);
+        tf(k) = typical(forms[f][k]);
+      }
+      GroupScore gf = score_group(a, zf, tf, opt.rank_tolerance);
+      if (gf.df > 0 && (best.df == 0 || gf.log_p < best.log_p)) {
+        best = std::move(gf);
+        form = f + 1;
+      }
+    }
+    best.log_p = std::min(0.0, best.log_p + std::log(static_cast<double>(forms.size() + 1)));
     for (int k : g.null_columns) c.unidentifiable.push_back(eg.parameters()[k].name);
     std::sort(c.unidentifiable.begin(), c.unidentifiable.end());
     c.df = g.df;
@@ -161,22 +180,31 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
     if ((eg.requirements() & kNeedsTime) && !cx.had_time)
       c.reason += std::string(c.reason.empty() ? "" : "; ") +
                   "the data has no time column: the row order is taken as time";
-    c.statistic = g.f;
-    c.delta_rss = g.drss;
-    c.lm = cx.noise->known ? g.drss : NAN;
-    c.log_p = g.log_p;
-    c.p_value = std::exp(g.log_p);
+    if (form > 0) {
+      std::vector<std::string> names;
+      for (int k : forms[form - 1]) names.push_back(eg.parameters()[k].name);
+      c.reason += std::string(c.reason.empty() ? "" : "; ") + "scored as its sub-form " +
+                  join(names, ", ") + " (the best of " + std::to_string(forms.size() + 1) +
+                  " forms, Bonferroni-corrected)";
+      c.df = best.df;
+    }
+    c.statistic = best.f;
+    c.delta_rss = best.drss;
+    c.lm = cx.noise->known ? best.drss : NAN;
+    c.log_p = best.log_p;
+    c.p_value = std::exp(best.log_p);
     const double s2 =
-        cx.noise->known ? 1.0 : std::max(a.rss - g.drss, 0.0) / std::max(1, a.n - a.p - g.df);
+        cx.noise->known ? 1.0 : std::max(a.rss - best.drss, 0.0) / std::max(1, a.n - a.p - best.df);
     const double metres2 = cx.noise->known ? cx.noise->floor_m * cx.noise->floor_m : 1.0;
-    c.expected_rms_drop_m = std::sqrt(std::max(0.0, g.drss - g.df * s2) * metres2 / a.n);
+    c.expected_rms_drop_m = std::sqrt(std::max(0.0, best.drss - best.df * s2) * metres2 / a.n);
     const double rms2 = a.quality.fit_rms_m * a.quality.fit_rms_m;
-    c.fit_rms_after_m = std::sqrt(std::max(0.0, rms2 * (1.0 - g.drss / std::max(a.rss, 1e-300))));
+    c.fit_rms_after_m =
+        std::sqrt(std::max(0.0, rms2 * (1.0 - best.drss / std::max(a.rss, 1e-300))));
     const double excess = a.rss - (a.n - a.p);
-    c.excess_explained = cx.noise->known && excess > 0 ? std::min(1.0, g.drss / excess) : NAN;
+    c.excess_explained = cx.noise->known && excess > 0 ? std::min(1.0, best.drss / excess) : NAN;
     testable.push_back(c);
-    bases.push_back(g.u);
-    fitted.push_back(g.fitted);
+    bases.push_back(best.u);
+    fitted.push_back(best.fitted);
   }
   // Holm across the testable groups; rank by log p, then statistic.
   std::vector<double> lp;

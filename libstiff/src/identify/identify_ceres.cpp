@@ -390,8 +390,9 @@ FitResult identify(const RobotModel& robot,
   // Optional terms (ParameterSpec::optional_term: members of a family of forms that overlap
   // each other) stay only when the data support them: backward elimination by the Bayesian
   // information criterion (Schwarz 1978), BIC = m ln(RSS) + k ln(m) over the m weighted
-  // residual components (no stated noise needed). Each round drops the optional term whose
-  // removal raises the RSS least, while m ln(RSS_without / RSS) < ln(m); the RSS and the other
+  // residual components (no stated noise needed). Each round drops the optional term that pays
+  // least beyond its price (ln m, more for a rare term: below), while m ln(RSS_without / RSS) is
+  // below that price; the RSS and the other
   // parameters follow the removal on the linearisation at the solution (exact for a model
   // linear in its parameters). Terms that overlap are judged one at a time, so that one of
   // two collinear terms stays when together they matter. The dropped terms are held at their
@@ -414,6 +415,23 @@ FitResult identify(const RobotModel& robot,
       js.middleRows(dim * r, dim) *= w;
     }
     const double m = static_cast<double>(components);
+    // The price of a term: ln m (BIC); a term outside its family's common sub-forms
+    // (Effect::sub_forms, e.g. a coupling of joints that are not neighbours) also pays for the
+    // size of the space it is chosen from, 2 ln(number of such terms) (the extended BIC of
+    // Chen & Chen 2008, gamma = 1), so that the rare terms are not picked up by chance.
+    Eigen::VectorXd price = Eigen::VectorXd::Constant(p, std::log(m));
+    for (size_t ei = 0; ei < model.effects().size(); ++ei) {
+      const Effect& eff = *model.effects()[ei];
+      const std::vector<std::vector<int>> forms = eff.sub_forms();
+      if (forms.empty()) continue;
+      std::vector<bool> common(eff.size(), false);
+      for (const auto& f : forms)
+        for (int k : f) common[k] = true;
+      const auto rare = std::count(common.begin(), common.end(), false);
+      if (rare < 2) continue;
+      for (int k = 0; k < eff.size(); ++k)
+        if (!common[k]) price(model.offset(static_cast<int>(ei)) + k) += 2.0 * std::log(rare);
+    }
     double rss = e.squaredNorm();
     Eigen::VectorXd z(p);  // distance from the null value in typical magnitudes
     for (int k = 0; k < p; ++k) z(k) = (theta(k) - model.spec(k).null_value) / s.typical(k);
@@ -428,17 +446,20 @@ FitResult identify(const RobotModel& robot,
           d.asDiagonal() *
           (d.asDiagonal() * g * d.asDiagonal()).ldlt().solve(Eigen::MatrixXd::Identity(nc, nc)) *
           d.asDiagonal();
+      if (!(rss > 0)) break;
       int worst = -1;
-      double rise = INFINITY;
+      double rise = INFINITY, margin = INFINITY;  // margin: what the term pays beyond its price
       for (int a = 0; a < nc; ++a) {
         if (!optional(cur[a]) || !(cov(a, a) > 0)) continue;
         const double r = z(cur[a]) * z(cur[a]) / cov(a, a);  // RSS rise when it is dropped
-        if (r < rise) {
+        const double over = m * std::log1p(r / rss) - price(cur[a]);
+        if (over < margin) {
+          margin = over;
           rise = r;
           worst = a;
         }
       }
-      if (worst < 0 || !(rss > 0) || m * std::log1p(rise / rss) >= std::log(m)) break;
+      if (worst < 0 || margin >= 0) break;
       const int k = cur[worst];
       for (int a = 0; a < nc; ++a)
         if (a != worst) z(cur[a]) -= cov(a, worst) / cov(worst, worst) * z(k);
@@ -451,7 +472,7 @@ FitResult identify(const RobotModel& robot,
           num(100.0 * rise / (rss + rise)) +
           " %, less than the Bayesian information criterion asks of one more "
           "parameter (" +
-          num(100.0 * (1.0 - std::exp(-std::log(m) / m))) + " %)";
+          num(100.0 * (1.0 - std::exp(-price(k) / m))) + " %)";
       left_out[k] = true;
       rss += rise;
       cur.erase(cur.begin() + worst);

@@ -106,6 +106,32 @@ Scenario make_scenario(const std::string& hidden, uint64_t seed, double outlier_
   return s;
 }
 
+/// The paper's joint compliances and one effect with the named parameters set (the others at
+/// their null values).
+Truth joint_and(const std::string& effect,
+                const std::vector<std::pair<std::string, double>>& values) {
+  const DeflectionModel m(test::rokae(), {"joint", effect});
+  Truth truth;
+  truth.effects = {"joint", effect};
+  truth.theta = m.null_parameters();
+  truth.theta.head(6) = test::paper_stiffness().cwiseInverse();
+  for (const auto& [name, value] : values)
+    m.effects()[1]->set_parameter(truth.theta.data() + m.offset(1), name, value);
+  return truth;
+}
+
+/// 60 calibration and 40 validation poses of `truth` with the realistic noise; `stream`
+/// separates the designs and noises of one test from another's.
+Scenario scenario_of(const Truth& truth, uint64_t seed, uint64_t stream) {
+  const RobotModel robot = test::rokae();
+  Scenario s;
+  s.calib =
+      simulate(robot, truth, test::design60(seed, 60), realistic_noise(7000 + 100 * stream + seed));
+  s.valid = simulate(robot, truth, test::design60(50000 + 1000 * stream + seed, 40),
+                     realistic_noise(9000 + 100 * stream + seed));
+  return s;
+}
+
 Diagnosis run(const Scenario& s,
               const DiagnosisOptions& o = {},
               const std::vector<std::string>& model = {"joint"}) {
@@ -592,7 +618,6 @@ TEST(DiagnoseHonesty, LeftOutEffectIsUnexplainedNotMisattributed) {
 // `nonlinear_joint` (or in its group), the fit keeps the terms that carry the truth, and the
 // validation error after it sits within 1.25x the floor (as the hidden-effect sweep asks).
 TEST(DiagnoseNonlinearJoint, LoadCentredHardeningAndSofteningAreFound) {
-  const RobotModel robot = test::rokae();
   const Eigen::VectorXd c = test::paper_stiffness().cwiseInverse();
   struct Form {
     const char* what;
@@ -603,18 +628,7 @@ TEST(DiagnoseNonlinearJoint, LoadCentredHardeningAndSofteningAreFound) {
       {"softening about the preload", {{"e2", -0.4 * c(1)}, {"e3", -0.4 * c(2)}}}};
   for (const auto& form : forms)
     for (uint64_t seed = 1; seed <= 2; ++seed) {
-      const DeflectionModel m(robot, {"joint", "nonlinear_joint"});
-      Truth truth;
-      truth.effects = {"joint", "nonlinear_joint"};
-      truth.theta = m.null_parameters();
-      truth.theta.head(6) = c;
-      for (const auto& [name, value] : form.values)
-        m.effects()[1]->set_parameter(truth.theta.data() + m.offset(1), name, value);
-      Scenario s;
-      s.calib = simulate(robot, truth, test::design60(seed, 60), realistic_noise(7100 + seed));
-      s.valid =
-          simulate(robot, truth, test::design60(51000 + seed, 40), realistic_noise(9100 + seed));
-      const Diagnosis d = run(s);
+      const Diagnosis d = run(scenario_of(joint_and("nonlinear_joint", form.values), seed, 1));
       print(form.what, seed, d);
       ASSERT_TRUE(found(d, "nonlinear_joint")) << form.what << ": " << d.summary;
       ASSERT_TRUE(d.after_valid);
@@ -636,6 +650,59 @@ TEST(DiagnoseNonlinearJoint, LoadCentredHardeningAndSofteningAreFound) {
       }
       EXPECT_GE(kept, 1) << form.what;
     }
+}
+
+// Coupling between joints that are not neighbours (a tendon or belt running past joint 3
+// couples 2 with 4; a coupled wrist couples 3 with 5 through its transmission): found as
+// `coupling` (or in its group), the fit keeps the true pair among its fifteen optional pairs,
+// with the truth's sign, and the validation error after it sits within 1.25x the floor.
+TEST(DiagnoseCoupling, PairsThatAreNotNeighboursAreFound) {
+  const Eigen::VectorXd c = test::paper_stiffness().cwiseInverse();
+  const std::vector<std::pair<std::string, double>> forms = {
+      {"c24", 0.5 * std::sqrt(c(1) * c(3))}, {"c35", -0.5 * std::sqrt(c(2) * c(4))}};
+  for (const auto& [pair, value] : forms)
+    for (uint64_t seed = 1; seed <= 2; ++seed) {
+      const Diagnosis d = run(scenario_of(joint_and("coupling", {{pair, value}}), seed, 2));
+      print("coupling " + pair, seed, d);
+      ASSERT_TRUE(found(d, "coupling")) << pair << ": " << d.summary;
+      ASSERT_TRUE(d.after_valid);
+      EXPECT_LE(validation_ratio(d), 1.25) << pair;
+      const auto& names = d.after.parameter_names;
+      const auto it = std::find(names.begin(), names.end(), "coupling." + pair);
+      ASSERT_NE(it, names.end());
+      EXPECT_GT(d.after.parameter_values[it - names.begin()] * value, 0.0) << pair;
+      // A pair whose truth is 0 stays with probability ~2 % each (docs/identifiability.md).
+      int others = 0;
+      for (size_t k = 0; k < names.size(); ++k)
+        others += names[k].rfind("coupling.", 0) == 0 && names[k] != "coupling." + pair &&
+                  d.after.parameter_values[k] != 0.0;
+      EXPECT_LE(others, 1) << pair;
+    }
+}
+
+// An effect at half the example's size, often strongly significant in the calibration but
+// small against the prediction variance of its parameters on 40 new poses. When the validation
+// poses neither confirm nor refute it, the verdict names it (`ambiguous` with it) instead of
+// `unexplained` ("not in the candidate list"), which would send the user looking outside the
+// library for an effect the library has. `unexplained` stays for validation errors that rise
+// significantly (paired test at alpha = 5 %): at most one seed in twelve per effect; a claim
+// names the truth.
+TEST(DiagnoseHonesty, SmallEffectIsNotCalledUnexplained) {
+  const RobotModel robot = test::rokae();
+  for (const std::string hidden : {"nonlinear_joint", "coupling", "point_offset", "link"}) {
+    int unexplained = 0;
+    for (uint64_t seed = 1; seed <= 12; ++seed) {
+      Truth truth = test::effect_truth(hidden, robot);
+      const DeflectionModel m(robot, truth.effects);
+      const int at = m.offset(static_cast<int>(truth.effects.size()) - 1);
+      truth.theta.tail(truth.theta.size() - at) *= 0.5;
+      const Diagnosis d = run(scenario_of(truth, seed, 3));
+      print("half " + hidden, seed, d);
+      unexplained += d.verdict == "unexplained";
+      if (claimed(d)) EXPECT_TRUE(found(d, hidden)) << hidden << ": " << d.summary;
+    }
+    EXPECT_LE(unexplained, 1) << hidden;
+  }
 }
 
 // Two hidden effects: the loop finds both (in either order) and ends adequate, the validation

@@ -253,6 +253,12 @@ class Effect {
                                   double* /*p*/) const {
     return false;
   }
+  /// The physically common sub-forms of a family of forms, each a set of parameter indices
+  /// (e.g. the adjacent pairs of a coupling): the diagnosis's score test takes the best of the
+  /// whole effect and these, with the Bonferroni correction for the number tried, so that a
+  /// common sub-form is not tested diluted among every term the family has. Empty: the whole
+  /// effect only.
+  virtual std::vector<std::vector<int>> sub_forms() const { return {}; }
   /// Experiments that tell this effect from its look-alikes, one sentence each (the
   /// diagnosis's advice when the data cannot decide).
   virtual std::vector<std::string> experiment_hints() const { return {}; }
