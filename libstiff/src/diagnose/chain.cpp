@@ -270,7 +270,9 @@ std::string Chain::decide(size_t i, std::string* why) {
     if (weak) {
       levels[i].tentative = levels[i].validated;
       levels[i].group = {top.effect};
-      levels[i].experiment = experiment_for(*cx, levels[i].group);
+      levels[i].experiment = "more validation poses, to confirm or refute " + top.effect +
+                             " on new data (the model with and without it as the candidates); " +
+                             experiment_for(*cx, levels[i].group);
       *why = top.effect + " explains part of the misfit (partial F = " + num(top.statistic, 4) +
              ", p_adj = " + num(top.p_adjusted, 2) + ") but " + reason +
              (levels[i].validated

@@ -296,7 +296,7 @@ Diagnosis diagnose(const RobotModel& robot,
     std::string verdict = d.verdict;
     for (size_t i = 0; static_cast<int>(i) < options.max_steps; ++i) {
       const bool go = verdict == "missing_effect" ||
-                      (verdict == "ambiguous" && chain.levels[i].tentative) ||
+                      (!absolute && verdict == "ambiguous" && chain.levels[i].tentative) ||
                       (absolute && (verdict == "unexplained" || verdict == "ambiguous") &&
                        choose_by_held_out(i));
       if (!go || !chain.next(i)) break;
