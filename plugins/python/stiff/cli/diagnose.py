@@ -24,7 +24,8 @@ EXAMPLE = """worked example (a hidden force-sensor clocking error on the virtual
 
 Verdicts: missing_effect (the top candidate, with the command that adds it), adequate
 (residuals at the noise floor, nothing claimed), ambiguous (candidates this data cannot tell
-apart, with an experiment that would), unexplained (misfit that no candidate explains).
+apart, or one that the validation poses neither confirm nor refute, with an experiment that
+would decide), unexplained (misfit that no candidate explains).
 Statistics: group score / partial-F tests on the candidate regressors projected off the
 current model, Holm-corrected (docs/diagnosis.md). The noise floor comes from sigma_d,
 `# tracker_sigma_m` (plus the stated force-sensor error) or replicated measurements."""
