@@ -56,6 +56,7 @@ bool Chain::at_floor(const Level& L, std::string* why, bool* weak) const {
            " allowing " + num(100 * cx->opt->noise_uncertainty, 2) +
            " % between sessions): structure remains";
     *weak = marginal(q.validation_to_fit_p);
+    if (!*weak) return false;  // strong already: the trend tests cannot make it marginal
     at = false;
   }
   Diagnosis d;
@@ -267,14 +268,16 @@ std::string Chain::decide(size_t i, std::string* why) {
                      reason + ")");
     // Strong evidence for the top in the calibration, and only marginal evidence against its
     // chain: neither confirmed nor refuted, so no claim either way.
+    const std::string evidence =
+        top.effect + " explains part of the misfit (partial F = " + num(top.statistic, 4) +
+        ", p_adj = " + num(top.p_adjusted, 2) + ") but " + reason;
     if (weak) {
       levels[i].tentative = levels[i].validated;
       levels[i].group = {top.effect};
       levels[i].experiment = "more validation poses, to confirm or refute " + top.effect +
                              " on new data (the model with and without it as the candidates); " +
                              experiment_for(*cx, levels[i].group);
-      *why = top.effect + " explains part of the misfit (partial F = " + num(top.statistic, 4) +
-             ", p_adj = " + num(top.p_adjusted, 2) + ") but " + reason +
+      *why = evidence +
              (levels[i].validated
                   ? "; that evidence is marginal (p >= alpha/10): this data cannot tell whether " +
                         top.effect +
@@ -285,9 +288,7 @@ std::string Chain::decide(size_t i, std::string* why) {
                         "new poses, or stand in for an effect outside the candidate list");
       return "ambiguous";
     }
-    *why = top.effect + " explains part of the misfit (partial F = " + num(top.statistic, 4) +
-           ", p_adj = " + num(top.p_adjusted, 2) + ") but " + reason +
-           ": the missing effect is probably not in the candidate list";
+    *why = evidence + ": the missing effect is probably not in the candidate list";
     return "unexplained";
   }
   if (!L.rival.empty()) {

@@ -392,11 +392,10 @@ FitResult identify(const RobotModel& robot,
   // information criterion (Schwarz 1978), BIC = m ln(RSS) + k ln(m) over the m weighted
   // residual components (no stated noise needed). Each round drops the optional term that pays
   // least beyond its price (ln m, more for a rare term: below), while m ln(RSS_without / RSS) is
-  // below that price; the RSS and the other
-  // parameters follow the removal on the linearisation at the solution (exact for a model
-  // linear in its parameters). Terms that overlap are judged one at a time, so that one of
-  // two collinear terms stays when together they matter. The dropped terms are held at their
-  // null value and the rest solved again.
+  // below that price; the RSS and the other parameters follow the removal on the linearisation
+  // at the solution (exact for a model linear in its parameters). Terms that overlap are judged one
+  // at a time, so that one of two collinear terms stays when together they matter. The dropped
+  // terms are held at their null value and the rest solved again.
   left_out.assign(p, false);
   auto select_terms = [&]() {
     std::fill(left_out.begin(), left_out.end(), false);
@@ -432,7 +431,8 @@ FitResult identify(const RobotModel& robot,
       for (int k = 0; k < eff.size(); ++k)
         if (!common[k]) price(model.offset(static_cast<int>(ei)) + k) += 2.0 * std::log(rare);
     }
-    double rss = e.squaredNorm();
+    double rss = e.squaredNorm();  // only grows as terms are dropped
+    if (!(rss > 0)) return;
     Eigen::VectorXd z(p);  // distance from the null value in typical magnitudes
     for (int k = 0; k < p; ++k) z(k) = (theta(k) - model.spec(k).null_value) / s.typical(k);
     bool dropped = false;
@@ -446,7 +446,6 @@ FitResult identify(const RobotModel& robot,
           d.asDiagonal() *
           (d.asDiagonal() * g * d.asDiagonal()).ldlt().solve(Eigen::MatrixXd::Identity(nc, nc)) *
           d.asDiagonal();
-      if (!(rss > 0)) break;
       int worst = -1;
       double rise = INFINITY, margin = INFINITY;  // margin: what the term pays beyond its price
       for (int a = 0; a < nc; ++a) {
