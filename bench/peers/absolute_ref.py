@@ -529,7 +529,26 @@ UR10_SERIES = {"A": "ur10_A_grid.csv", "B": "ur10_B_joint_configurations.csv",
                "C": "ur10_C_random_poses.csv", "D": "ur10_D_iso_cubes.csv"}
 
 
-def study_ur10(data_dir, tol=1e-3, seed=0, w_o=1.0, models=UR10_MODELS):
+def fifteen_pose_draws(n, draws, seed):
+    """The registration subsets of the 15-pose protocol: draw 0 is the split of the main
+    table, the others are further random draws of 15 poses (the rest evaluated)."""
+    for k in range(draws):
+        r = np.random.default_rng(seed + 1 + k).permutation(n)
+        yield np.sort(r[:15]), np.sort(r[15:])
+
+
+def draw_means(S, draws, seed, register):
+    """Mean position [mm] and orientation [deg] errors of each draw of 15 registration poses."""
+    mm, deg = [], []
+    for reg, ev in fifteen_pose_draws(len(S["q"]), draws, seed):
+        e = errors(register(reg)(subset(S, ev)), subset(S, ev))
+        mm.append(e["mean_mm"])
+        deg.append(e.get("mean_deg"))
+    return {"mean_mm": mm, "mean_deg": deg}
+
+
+def study_ur10(data_dir, tol=1e-3, seed=0, w_o=1.0, models=UR10_MODELS, draws=10,
+               draws_of=("B", "D")):
     dh = robot_dh("ur10")
     d = {k: read_absolute(Path(data_dir) / "ur10" / v) for k, v in UR10_SERIES.items()
          if (Path(data_dir) / "ur10" / v).exists()}
@@ -560,6 +579,9 @@ def study_ur10(data_dir, tol=1e-3, seed=0, w_o=1.0, models=UR10_MODELS):
                 reg, ev = np.sort(r[:nreg]), np.sort(r[nreg:])
                 pred = register_session(cal, subset(S, reg), w_o)
                 out[f"{k} ({label})"] = errors(pred(subset(S, ev)), subset(S, ev))
+            if k in draws_of:
+                out[f"{k} (15 poses, draws)"] = draw_means(
+                    S, draws, seed, lambda reg: register_session(cal, subset(S, reg), w_o))
         res[name] = out
     return res
 

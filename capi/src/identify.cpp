@@ -329,6 +329,8 @@ stiff_status stiff_result_statistics(stiff_fit_statistics* statistics, const sti
     s.orientation_mean_rad = f.orientation_mean_rad;
     s.orientation_max_rad = f.orientation_max_rad;
     s.orientation_length_m = f.orientation_length_m;
+    s.model_error_m = f.model_error_m;
+    s.model_error_rad = f.model_error_rad;
     // Write back only the caller's part of the struct.
     const size_t n = std::min<size_t>(statistics->struct_size, sizeof s);
     s.struct_size = statistics->struct_size;

@@ -86,7 +86,9 @@ STIFF_FIELDS(stiff_fit_statistics,
              STIFF_FIELD(stiff_fit_statistics, orientation_rms_rad),
              STIFF_FIELD(stiff_fit_statistics, orientation_mean_rad),
              STIFF_FIELD(stiff_fit_statistics, orientation_max_rad),
-             STIFF_FIELD(stiff_fit_statistics, orientation_length_m));
+             STIFF_FIELD(stiff_fit_statistics, orientation_length_m),
+             STIFF_FIELD(stiff_fit_statistics, model_error_m),
+             STIFF_FIELD(stiff_fit_statistics, model_error_rad));
 STIFF_FIELDS(stiff_path_options,
              STIFF_FIELD(stiff_path_options, struct_size),
              STIFF_FIELD(stiff_path_options, frame),

@@ -515,6 +515,11 @@ typedef struct stiff_fit_statistics {
   /** The orientation residuals' weight as a length: 1 rad weighed as this many metres of
    *  position error [m] @since 0.2 */
   double orientation_length_m;
+  /** Standard deviation of the model's error added to each absolute row's stated sigma_p,
+   *  estimated from the residuals; 0 where the stated noise explains them [m] @since 0.2 */
+  double model_error_m;
+  /** The same for the orientations of rows with a stated sigma_o [rad] @since 0.2 */
+  double model_error_rad;
 } stiff_fit_statistics;
 /** Fill *statistics (set its struct_size first). @since 0.1 */
 STIFF_API stiff_status stiff_result_statistics(stiff_fit_statistics* statistics,

@@ -92,6 +92,8 @@ std::string fit_to_json(const FitResult& f) {
     j["fit"]["orientation_max_rad"] = f.orientation_max_rad;
     j["fit"]["orientation_length_m"] = f.orientation_length_m;
   }
+  if (f.model_error_m > 0) j["fit"]["model_error_m"] = f.model_error_m;
+  if (f.model_error_rad > 0) j["fit"]["model_error_rad"] = f.model_error_rad;
   json cov = json::array();
   for (int r = 0; r < f.covariance.rows(); ++r) {
     json row = json::array();
@@ -170,6 +172,8 @@ FitResult fit_from_json(const std::string& text, const std::string& file) {
       f.orientation_mean_rad = s.value("orientation_mean_rad", 0.0);
       f.orientation_max_rad = s.value("orientation_max_rad", 0.0);
       f.orientation_length_m = s.value("orientation_length_m", 0.0);
+      f.model_error_m = s.value("model_error_m", 0.0);
+      f.model_error_rad = s.value("model_error_rad", 0.0);
     }
     const int p = static_cast<int>(f.parameters.size());
     f.covariance = Eigen::MatrixXd::Constant(p, p, NAN);

@@ -424,8 +424,8 @@ FitResult identify(const RobotModel& robot,
       const std::vector<std::vector<int>> forms = eff.sub_forms();
       if (forms.empty()) continue;
       std::vector<bool> common(eff.size(), false);
-      for (const auto& f : forms)
-        for (int k : f) common[k] = true;
+      for (const auto& form : forms)
+        for (int k : form) common[k] = true;
       const auto rare = std::count(common.begin(), common.end(), false);
       if (rare < 2) continue;
       for (int k = 0; k < eff.size(); ++k)
@@ -588,6 +588,82 @@ FitResult identify(const RobotModel& robot,
       for (int r = 0; r < n; ++r)
         loss_scale(r) = scale_used_m * s.row_weight(r) * std::sqrt(s.components(r) / 3.0);
       fit_passes();
+    }
+  }
+  // The model's error as a variance component of its own (Paule & Mandel 1982; Rukhin, Biggerstaff
+  // & Vangel 2000): a tracker states each row's noise, but on a real arm the model's errors are
+  // tens of times larger and do not shrink where the instrument happened to be more precise.
+  // Weighting by the stated sigma alone lets the few rows with the smallest stated sigma decide
+  // the fit (the registration of a new placement from 15 poses then followed 2-3 of them). Each
+  // absolute row's variance is therefore sigma_r^2 + s^2, one s^2 per group (positions,
+  // orientations with a stated sigma_o), the smallest s^2 >= 0 at which the group's weighted
+  // squares match its redundancy, and the fit is made again from its start. Where the stated
+  // noise explains the residuals, s = 0 and the weights are the stated ones.
+  double excess_p2 = 0, excess_o2 = 0;
+  if (weighted && absolute) {
+    const double share = 1.0 - static_cast<double>(free.size()) / std::max(1, components);
+    // Smallest s2 >= 0 with sum_r w_r u_r^2 / (v_r + s2) <= red (the left side falls with s2).
+    auto excess = [](const std::vector<double>& u2, const std::vector<double>& v,
+                     const std::vector<double>& w, double red) {
+      auto lhs = [&](double s2) {
+        double t = 0;
+        for (size_t i = 0; i < u2.size(); ++i) t += w[i] * u2[i] / (v[i] + s2);
+        return t;
+      };
+      if (!(red > 0) || lhs(0.0) <= red) return 0.0;
+      double lo = 0, hi = 0;
+      for (size_t i = 0; i < u2.size(); ++i) hi += w[i] * u2[i];
+      hi /= red;  // every term <= w u2 / hi, so the sum <= red
+      for (int it = 0; it < 100 && hi - lo > 1e-9 * hi; ++it) {
+        const double mid = 0.5 * (lo + hi);
+        (lhs(mid) > red ? lo : hi) = mid;
+      }
+      return hi;
+    };
+    for (int round = 0; round < 4; ++round) {
+      const Eigen::VectorXd e = weighted_residuals(s, theta);
+      std::vector<double> up, vp, wp, uo, vo, wo;
+      for (int r = 0; r < n; ++r) {
+        if (!data.rows[r].absolute) continue;
+        const double w = robust_weight(e, r);
+        const double sp = data.rows[r].sigma();
+        up.push_back((e.segment<3>(dim * r) / s.row_weight(r)).squaredNorm() / 3.0);
+        vp.push_back(sp * sp);
+        wp.push_back(3.0 * w);
+        if (weighted_o && s.orient_weight(r) > 0) {
+          const double so = data.rows[r].sigma_o;
+          uo.push_back((e.segment<3>(dim * r + 3) / s.orient_weight(r)).squaredNorm() / 3.0);
+          vo.push_back(so * so);
+          wo.push_back(3.0 * w);
+        }
+      }
+      auto total = [](const std::vector<double>& w) {
+        double t = 0;
+        for (double x : w) t += x;
+        return t;
+      };
+      const double sp2 = excess(up, vp, wp, share * total(wp));
+      const double so2 = uo.empty() ? 0.0 : excess(uo, vo, wo, share * total(wo));
+      // Refit only when a weight moves by more than 5 % (then from the start, as below).
+      double change = 0;
+      Eigen::VectorXd rw = s.row_weight, ow = s.orient_weight;
+      for (int r = 0; r < n; ++r) {
+        if (!data.rows[r].absolute) continue;
+        const double sp = data.rows[r].sigma();
+        rw(r) = 1.0 / std::sqrt(sp * sp + sp2);
+        if (ow(r) > 0)
+          ow(r) = weighted_o ? 1.0 / std::sqrt(std::pow(data.rows[r].sigma_o, 2) + so2)
+                             : s.orient_weight(r) / s.row_weight(r) * rw(r);
+        change = std::max(change, std::abs(rw(r) / s.row_weight(r) - 1.0));
+        if (ow(r) > 0) change = std::max(change, std::abs(ow(r) / s.orient_weight(r) - 1.0));
+      }
+      excess_p2 = sp2;
+      excess_o2 = so2;
+      if (change < 0.05) break;
+      s.row_weight = rw;
+      s.orient_weight = ow;
+      theta = theta_start;
+      fit_from_start();
     }
   }
   // The orientation weight as a variance component (Helmert; Koch, Parameter Estimation and
@@ -813,11 +889,24 @@ FitResult identify(const RobotModel& robot,
     f.orientation_length_m = robust::median(length);
   }
   f.noise_floor_m = stated;
-  const double resid_scale = weighted ? stated : noise;  // metres per residual unit (typical)
+  f.model_error_m = std::sqrt(excess_p2);
+  f.model_error_rad = std::sqrt(excess_o2);
+  // Metres per residual unit (typical): the stated noise, with the model's error when estimated.
+  const double resid_scale = weighted ? std::sqrt(stated * stated + excess_p2) : noise;
   f.sigma_hat_m = std::sqrt(std::max(0.0, s2)) * resid_scale;
-  if (weighted)
-    f.chi2 = e.squaredNorm();
-  else if (stated > 0)
+  if (weighted) {
+    // Against the stated noise alone (the model's error is what chi2 measures).
+    f.chi2 = 0;
+    for (int r = 0; r < n; ++r) {
+      const double ws = 1.0 / data.rows[r].sigma();  // the stated position weight
+      f.chi2 += e.segment<3>(dim * r).squaredNorm() * std::pow(ws / s.row_weight(r), 2);
+      if (dim == 6 && s.orient_weight(r) > 0) {
+        const double wo =
+            weighted_o ? 1.0 / data.rows[r].sigma_o : s.orient_weight(r) / s.row_weight(r) * ws;
+        f.chi2 += e.segment<3>(dim * r + 3).squaredNorm() * std::pow(wo / s.orient_weight(r), 2);
+      }
+    }
+  } else if (stated > 0)
     f.chi2 = f.residuals.squaredNorm() / (stated * stated);
 
   // ---- outliers: rows inconsistent with the rest. Least squares judges them against the

@@ -106,6 +106,8 @@ class FitStatistics(C.Structure):
         ("orientation_mean_rad", C.c_double),
         ("orientation_max_rad", C.c_double),
         ("orientation_length_m", C.c_double),
+        ("model_error_m", C.c_double),
+        ("model_error_rad", C.c_double),
     ]
 
 

@@ -386,6 +386,8 @@ class FitStatistics:
     orientation_mean_rad: float = 0.0
     orientation_max_rad: float = 0.0
     orientation_length_m: float = 0.0  # 1 rad of orientation error weighed as this many m
+    model_error_m: float = 0.0  # the model's error added to each absolute row's sigma_p
+    model_error_rad: float = 0.0  # the same for the orientations (rows with sigma_o)
 
 
 class Fit(_Handle):

@@ -699,7 +699,9 @@ TEST(DiagnoseHonesty, SmallEffectIsNotCalledUnexplained) {
       const Diagnosis d = run(scenario_of(truth, seed, 3));
       print("half " + hidden, seed, d);
       unexplained += d.verdict == "unexplained";
-      if (claimed(d)) EXPECT_TRUE(found(d, hidden)) << hidden << ": " << d.summary;
+      if (claimed(d)) {
+        EXPECT_TRUE(found(d, hidden)) << hidden << ": " << d.summary;
+      }
     }
     EXPECT_LE(unexplained, 1) << hidden;
   }

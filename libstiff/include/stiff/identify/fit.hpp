@@ -67,6 +67,12 @@ struct FitResult {
   /// The weight the orientation residuals had, as a length: 1 rad of orientation error weighed
   /// as this many metres of position error (median over the oriented rows) [m].
   double orientation_length_m = 0.0;
+  /// Standard deviation of the model's error added to each absolute row's stated sigma_p (a
+  /// variance component estimated from the residuals, Paule & Mandel 1982) [m]; 0 where the
+  /// stated noise explains the residuals or no noise is stated.
+  double model_error_m = 0.0;
+  /// The same for the orientation residuals of rows with a stated sigma_o [rad].
+  double model_error_rad = 0.0;
   std::vector<std::string> warnings;
 
   /// Parameter vector theta in model order.

@@ -113,6 +113,10 @@ def print_fit(fit: api.Fit, truth_stiffness=None) -> None:
         verdict = "at the noise floor" if ratio < 1.0 + 3.0 / math.sqrt(2 * s.dof) else \
             "ABOVE the noise floor: the model misses something (run `stiff diagnose`)"
         print(f"      residual / noise floor = {ratio:.2f}: {verdict}")
+    if s.model_error_m > 0:
+        o = (f" and {math.degrees(s.model_error_rad):.4f} deg" if s.model_error_rad > 0 else "")
+        print(f"      the model's error, {s.model_error_m * 1e6:.2f} um{o} per axis, is added to each "
+              "row's stated sigma in the weights")
     bad = [j + 1 for j in range(len(k)) if not ident[j]]
     if bad:
         print(f"not identifiable from this data: joint{'s' if len(bad) > 1 else ''} "
