@@ -771,6 +771,17 @@ Dataset session_rows(const Dataset& data, const std::string& label, int first, i
   return out;
 }
 
+/// Held-out RMS of the 3-D position error of fit f on rows.
+double held_out_rms(const RobotModel& robot, const FitResult& f, const Dataset& rows) {
+  const DeflectionModel m(robot, f.model, &rows);
+  const auto ctx = m.contexts(rows);
+  double ss = 0;
+  for (size_t r = 0; r < rows.size(); ++r)
+    ss += (m.predict(f.theta(), rows.rows[r], ctx[r]).head<3>() - rows.rows[r].position)
+              .squaredNorm();
+  return std::sqrt(ss / static_cast<double>(rows.size()));
+}
+
 TEST(AbsoluteEffects, NewPlacementIsRegisteredToACalibratedRobotFromFifteenPoses) {
   // Calibrate on placement S0; register placement S1 alone (--start --refit registration)
   // from 15 poses; predict 200 other poses of S1. With sigma = 20 um per axis, the calibrated
@@ -805,26 +816,8 @@ TEST(AbsoluteEffects, NewPlacementIsRegisteredToACalibratedRobotFromFifteenPoses
   }
   EXPECT_EQ(fitted, 6);
   EXPECT_EQ(reg.rank, 6);
-  const Dataset rest = session_rows(all, "S1", 15, 200);
-  const DeflectionModel m(robot, reg.model, &rest);
-  const auto ctx = m.contexts(rest);
-  double ss = 0;
-  for (size_t r = 0; r < rest.size(); ++r)
-    ss += (m.predict(reg.theta(), rest.rows[r], ctx[r]).head<3>() - rest.rows[r].position)
-              .squaredNorm();
-  const double rms = std::sqrt(ss / static_cast<double>(rest.size()));
+  const double rms = held_out_rms(robot, reg, session_rows(all, "S1", 15, 200));
   EXPECT_LT(rms, 1.3 * std::sqrt(3.0) * sigma) << rms;
-}
-
-/// Held-out RMS of the 3-D position error of fit f on rows.
-double held_out_rms(const RobotModel& robot, const FitResult& f, const Dataset& rows) {
-  const DeflectionModel m(robot, f.model, &rows);
-  const auto ctx = m.contexts(rows);
-  double ss = 0;
-  for (size_t r = 0; r < rows.size(); ++r)
-    ss += (m.predict(f.theta(), rows.rows[r], ctx[r]).head<3>() - rows.rows[r].position)
-              .squaredNorm();
-  return std::sqrt(ss / static_cast<double>(rows.size()));
 }
 
 TEST(AbsoluteEffects, ModelErrorAboveTheStatedNoiseIsAVarianceComponent) {
