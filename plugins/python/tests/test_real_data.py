@@ -124,18 +124,21 @@ def test_ur5_nominal_geometry_is_several_times_worse(root, tmp_path, geometry):
     assert e_nominal.mean() > 4 * geometry[0].mean()
 
 
-def test_ur10_new_tracker_placement_registered_from_15_poses(root, tmp_path):
-    """UR10 (Landgraf et al. 2021): calibrated on series C, then series B (another tracker
-    placement) registered to it with `--start C.json --refit registration` from 15 of its poses
-    (the reference's random pick), evaluated on the rest of B. Gravity compliance is what
-    carries over between set-ups: the reference reaches 0.587 mm here, and the accepted figure
-    is 0.615 mm."""
+@pytest.mark.parametrize("series,accepted", [("B", 0.615), ("D", 0.70)])
+def test_ur10_new_tracker_placement_registered_from_15_poses(root, tmp_path, series, accepted):
+    """UR10 (Landgraf et al. 2021): calibrated on series C with the probe's orientations, then
+    series B and D (other tracker placements) registered to it with `--start C.json --refit
+    registration` from 15 of their poses (the reference's random pick), evaluated on the rest.
+    Gravity compliance is what carries over between set-ups: the reference reaches 0.587 mm
+    (B) and 0.675 mm (D) here, and the accepted figures are 0.615 and 0.70 mm. The readings
+    state their noise (2-60 um), far below the model's error: weighted by it alone, a few
+    readings decided D's registration (0.705 mm)."""
     pytest.importorskip("scipy")
     sys.path.insert(0, str(root / "bench" / "peers"))
     import absolute_ref as ref
-    series = root / "examples/real/ur10"
-    C, B = series / ref.UR10_SERIES["C"], series / ref.UR10_SERIES["B"]
-    lines = B.read_text().splitlines()
+    folder = root / "examples/real/ur10"
+    C, S = folder / ref.UR10_SERIES["C"], folder / ref.UR10_SERIES[series]
+    lines = S.read_text().splitlines()
     head = [i for i, ln in enumerate(lines) if ln and not ln.startswith("#")][0]
     body = lines[head + 1:]
     r = np.random.default_rng(1).permutation(len(body))
@@ -143,9 +146,11 @@ def test_ur10_new_tracker_placement_registered_from_15_poses(root, tmp_path):
     reg.write_text("\n".join(lines[:head + 1] + [body[i] for i in sorted(r[:15])]) + "\n")
     ev.write_text("\n".join(lines[:head + 1] + [body[i] for i in sorted(r[15:])]) + "\n")
     cli = [sys.executable, "-m", "stiff.cli"]
-    cfit, bfit, pred = tmp_path / "C.json", tmp_path / "B.json", tmp_path / "pred.csv"
-    for cmd in (["identify", "--robot", "ur10", "--data", C, "--model",
-                 "+".join(GEOMETRY + ["gravity_lumped"]), "-o", cfit],
+    cfit, bfit, pred = tmp_path / "C.json", tmp_path / "reg.json", tmp_path / "pred.csv"
+    model = ["registration", "tool", "tool_orientation", "joint_offset", "kinematic",
+             "gravity_lumped"]
+    for cmd in (["identify", "--robot", "ur10", "--data", C, "--model", "+".join(model),
+                 "-o", cfit],
                 ["identify", "--robot", "ur10", "--data", reg, "--start", cfit,
                  "--refit", "registration", "-o", bfit],
                 ["predict", "--robot", "ur10", "--fit", bfit, "--data", ev, "-o", pred]):
@@ -156,12 +161,12 @@ def test_ur10_new_tracker_placement_registered_from_15_poses(root, tmp_path):
             if q["effect"] != "registration"}
     assert all(kept[(q["effect"], q["name"])] == q["value"]
                for q in b["parameters"] if q["effect"] != "registration")
-    assert b["fit"]["rank"] == 6 and b["sessions"] == ["B"]
+    assert b["fit"]["rank"] == 6 and b["sessions"] == [series]
     d = ref.read_absolute(ev)
     with open(pred) as f:
         P = {x["id"]: [float(x[k]) for k in ("x_m", "y_m", "z_m")] for x in csv.DictReader(f)}
     e = np.linalg.norm(np.array([P[i] for i in d["ids"]]) - d["p"], axis=1) * 1e3
-    assert e.mean() <= 0.615, e.mean()
+    assert e.mean() <= accepted, e.mean()
 
 
 def test_ur5_calibrated_robot_description(root, tmp_path):
