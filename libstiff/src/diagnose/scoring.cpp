@@ -161,7 +161,7 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
     best.log_p = std::min(0.0, best.log_p + std::log(static_cast<double>(forms.size() + 1)));
     for (int k : g.null_columns) c.unidentifiable.push_back(eg.parameters()[k].name);
     std::sort(c.unidentifiable.begin(), c.unidentifiable.end());
-    c.df = g.df;
+    c.df = best.df;  // the form tested; identifiability is the whole effect's (g)
     c.identifiable = g.df == c.parameters;
     c.surviving_fraction = g.surviving;
     if (g.df == 0) {
@@ -186,7 +186,6 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
       c.reason += std::string(c.reason.empty() ? "" : "; ") + "scored as its sub-form " +
                   join(names, ", ") + " (the best of " + std::to_string(forms.size() + 1) +
                   " forms, Bonferroni-corrected)";
-      c.df = best.df;
     }
     c.statistic = best.f;
     c.delta_rss = best.drss;

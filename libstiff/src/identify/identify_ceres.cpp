@@ -13,6 +13,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <numeric>
 #include <sstream>
 
 #include "identify/ceres_quiet.hpp"
@@ -637,13 +638,9 @@ FitResult identify(const RobotModel& robot,
           wo.push_back(3.0 * w);
         }
       }
-      auto total = [](const std::vector<double>& w) {
-        double t = 0;
-        for (double x : w) t += x;
-        return t;
-      };
-      const double sp2 = excess(up, vp, wp, share * total(wp));
-      const double so2 = uo.empty() ? 0.0 : excess(uo, vo, wo, share * total(wo));
+      const double sp2 = excess(up, vp, wp, share * std::accumulate(wp.begin(), wp.end(), 0.0));
+      const double so2 =
+          uo.empty() ? 0.0 : excess(uo, vo, wo, share * std::accumulate(wo.begin(), wo.end(), 0.0));
       // Refit only when a weight moves by more than 5 % (then from the start, as below).
       double change = 0;
       Eigen::VectorXd rw = s.row_weight, ow = s.orient_weight;
