@@ -321,6 +321,23 @@ def product_transfer(C, model, seed, tmp):
     cfit = os.path.join(tmp, "C.json")
     _run([exe, "identify", "--robot", "ur10", "--data", str(C), "--model", model, "-o", cfit])
     out = {"C": {"calibration": {"parameters": json.loads(Path(cfit).read_text())["fit"]["rank"]}}}
+    # The registration alone (the issue's protocol), and with the probe's frame on the flange
+    # refitted too (a probe re-mounted for the new set-up).
+    refits = [("", "registration")] + ([(" probe", "registration+tool_orientation")]
+                                       if "tool_orientation" in model else [])
+
+    def registered(S, reg, ev, refit):
+        """Summary of the errors on rows ev of S after refitting `refit` on rows reg."""
+        rp, ep = os.path.join(tmp, "reg.csv"), os.path.join(tmp, "ev.csv")
+        write_rows(S, reg, rp)
+        write_rows(S, ev, ep)
+        fit, pred = os.path.join(tmp, "reg.json"), os.path.join(tmp, "ev_pred.csv")
+        _run([exe, "identify", "--robot", "ur10", "--data", rp, "--start", cfit,
+              "--refit", refit, "-o", fit])
+        s = summary(predicted_errors("ur10", fit, ep, pred, True))
+        s.pop("per_pose_mm")  # thousands of poses: the summary only
+        return s
+
     for k in ("B", "D", "A"):
         S = REAL / "ur10" / ref.UR10_SERIES[k]
         if not S.exists():
@@ -330,36 +347,17 @@ def product_transfer(C, model, seed, tmp):
             r = np.random.default_rng(seed + 1).permutation(n)  # the reference's split
             nreg = int(round(0.2 * n)) if count is None else count
             reg, ev = np.sort(r[:nreg]), np.sort(r[nreg:])
-            rp, ep = os.path.join(tmp, "reg.csv"), os.path.join(tmp, "ev.csv")
-            write_rows(S, reg, rp)
-            write_rows(S, ev, ep)
-            fit, pred = os.path.join(tmp, "reg.json"), os.path.join(tmp, "ev_pred.csv")
-            # The registration alone (the issue's protocol), and with the probe's frame on the
-            # flange refitted too (a probe re-mounted for the new set-up).
-            for key, refit in (("", "registration"), (" probe", "registration+tool_orientation")):
-                if key and "tool_orientation" not in model:
-                    continue
-                _run([exe, "identify", "--robot", "ur10", "--data", rp, "--start", cfit,
-                      "--refit", refit, "-o", fit])
-                s = summary(predicted_errors("ur10", fit, ep, pred, True))
-                s.pop("per_pose_mm")  # thousands of poses: the summary only
-                out[f"{k} ({label}){key}"] = s
+            for key, refit in refits:
+                out[f"{k} ({label}){key}"] = registered(S, reg, ev, refit)
         if k not in DRAWS_OF:
             continue
         # Which 15 poses register a set-up matters more than the evaluation's own spread:
-        # further draws, the same as the reference's.
-        for key, refit in (("", "registration"), (" probe", "registration+tool_orientation")):
-            if key and "tool_orientation" not in model:
-                continue
-            mm, deg = [], []
-            for reg, ev in ref.fifteen_pose_draws(n, DRAWS, seed):
-                rp, ep = os.path.join(tmp, "reg.csv"), os.path.join(tmp, "ev.csv")
-                write_rows(S, reg, rp)
-                write_rows(S, ev, ep)
-                fit, pred = os.path.join(tmp, "reg.json"), os.path.join(tmp, "ev_pred.csv")
-                _run([exe, "identify", "--robot", "ur10", "--data", rp, "--start", cfit,
-                      "--refit", refit, "-o", fit])
-                s = summary(predicted_errors("ur10", fit, ep, pred, True))
+        # further draws, the same as the reference's (draw 0 is the split above).
+        for key, refit in refits:
+            main = out[f"{k} (15 poses){key}"]
+            mm, deg = [main["mean_mm"]], [main.get("mean_deg")]
+            for reg, ev in ref.fifteen_pose_draws(n, DRAWS, seed, first=1):
+                s = registered(S, reg, ev, refit)
                 mm.append(s["mean_mm"])
                 deg.append(s.get("mean_deg"))
             out[f"{k} (15 poses, draws){key}"] = {"mean_mm": mm, "mean_deg": deg}

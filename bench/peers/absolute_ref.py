@@ -529,18 +529,20 @@ UR10_SERIES = {"A": "ur10_A_grid.csv", "B": "ur10_B_joint_configurations.csv",
                "C": "ur10_C_random_poses.csv", "D": "ur10_D_iso_cubes.csv"}
 
 
-def fifteen_pose_draws(n, draws, seed):
-    """The registration subsets of the 15-pose protocol: draw 0 is the split of the main
-    table, the others are further random draws of 15 poses (the rest evaluated)."""
-    for k in range(draws):
+def fifteen_pose_draws(n, draws, seed, first=0):
+    """The registration subsets of the 15-pose protocol, draws first .. draws - 1: draw 0 is
+    the split of the main table, the others are further random draws of 15 poses (the rest
+    evaluated)."""
+    for k in range(first, draws):
         r = np.random.default_rng(seed + 1 + k).permutation(n)
         yield np.sort(r[:15]), np.sort(r[15:])
 
 
-def draw_means(S, draws, seed, register):
-    """Mean position [mm] and orientation [deg] errors of each draw of 15 registration poses."""
-    mm, deg = [], []
-    for reg, ev in fifteen_pose_draws(len(S["q"]), draws, seed):
+def draw_means(S, draws, seed, register, main):
+    """Mean position [mm] and orientation [deg] errors of each draw of 15 registration poses;
+    draw 0 is `main`, the main table's errors on the same split."""
+    mm, deg = [main["mean_mm"]], [main.get("mean_deg")]
+    for reg, ev in fifteen_pose_draws(len(S["q"]), draws, seed, first=1):
         e = errors(register(reg)(subset(S, ev)), subset(S, ev))
         mm.append(e["mean_mm"])
         deg.append(e.get("mean_deg"))
@@ -581,7 +583,8 @@ def study_ur10(data_dir, tol=1e-3, seed=0, w_o=1.0, models=UR10_MODELS, draws=10
                 out[f"{k} ({label})"] = errors(pred(subset(S, ev)), subset(S, ev))
             if k in draws_of:
                 out[f"{k} (15 poses, draws)"] = draw_means(
-                    S, draws, seed, lambda reg: register_session(cal, subset(S, reg), w_o))
+                    S, draws, seed, lambda reg: register_session(cal, subset(S, reg), w_o),
+                    out[f"{k} (15 poses)"])
         res[name] = out
     return res
 
