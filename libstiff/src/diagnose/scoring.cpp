@@ -158,6 +158,17 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
         form = f + 1;
       }
     }
+    // Parameters the effect decided from these data by a search (backlash's link masses) were
+    // fitted too: the F test counts them, or the search's freedom reads as evidence.
+    int decided = 0;
+    for (const auto& ps : eg.parameters()) decided += ps.from_data && ps.null_value != 0.0;
+    if (decided > 0 && best.df > 0) {
+      const int df = best.df + decided, dof2 = a.n - a.p - df;
+      if (dof2 > 0) {
+        best.f = (best.drss / df) / (std::max(a.rss - best.drss, 1e-300) / dof2);
+        best.log_p = stats::log_f_sf(best.f, df, dof2);
+      }
+    }
     best.log_p = std::min(0.0, best.log_p + std::log(static_cast<double>(forms.size() + 1)));
     for (int k : g.null_columns) c.unidentifiable.push_back(eg.parameters()[k].name);
     std::sort(c.unidentifiable.begin(), c.unidentifiable.end());

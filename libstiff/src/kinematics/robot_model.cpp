@@ -45,12 +45,12 @@ Joint standard_dh_joint(double alpha, double a, double d, double theta_offset) {
   return j;
 }
 
-Eigen::VectorXd gravity_torques(const RobotModel& robot,
-                                const ChainState& s,
-                                Eigen::VectorXd* quadrature) {
+Eigen::MatrixXd gravity_torques_by_link(const RobotModel& robot,
+                                        const ChainState& s,
+                                        Eigen::MatrixXd* quadrature) {
   const int n = robot.dof();
-  Eigen::VectorXd tau = Eigen::VectorXd::Zero(n);
-  if (quadrature) quadrature->setZero(n);
+  Eigen::MatrixXd tau = Eigen::MatrixXd::Zero(n, n);
+  if (quadrature) quadrature->setZero(n, n);
   auto add_weight = [&](int link, double mass, const Eigen::Vector3d& com_local) {
     if (mass <= 0.0) return;
     const Eigen::Matrix4d& t = s.link[link];
@@ -60,12 +60,22 @@ Eigen::VectorXd gravity_torques(const RobotModel& robot,
     for (int j = 0; j <= link; ++j) {
       Eigen::Vector3d lever;
       lever_arm(s.axis.col(j), s.origin.col(j), c, lever);
-      tau(j) += force_torque(lever, w);
-      if (quadrature) (*quadrature)(j) += s.axis.col(j).dot(lever.cross(w));
+      tau(j, link) += force_torque(lever, w);
+      if (quadrature) (*quadrature)(j, link) += s.axis.col(j).dot(lever.cross(w));
     }
   };
   for (int i = 0; i < n; ++i) add_weight(i, robot.joints[i].mass, robot.joints[i].com);
   if (n > 0) add_weight(n - 1, robot.tool_mass, robot.tool_com);
+  return tau;
+}
+
+Eigen::VectorXd gravity_torques(const RobotModel& robot,
+                                const ChainState& s,
+                                Eigen::VectorXd* quadrature) {
+  Eigen::MatrixXd q;
+  const Eigen::VectorXd tau =
+      gravity_torques_by_link(robot, s, quadrature ? &q : nullptr).rowwise().sum();
+  if (quadrature) *quadrature = q.rowwise().sum();
   return tau;
 }
 

@@ -205,7 +205,8 @@ MeasurementContext DeflectionModel::context(const Measurement& m, int row) const
   check_joint_vector(robot_, m.q, "measurement '" + m.id + "'");
   MeasurementContext c;
   c.chain = robot_.chain(m.q);
-  c.tau_gravity = gravity_torques(robot_, c.chain);
+  c.tau_gravity_links = gravity_torques_by_link(robot_, c.chain);
+  c.tau_gravity = c.tau_gravity_links.rowwise().sum();
   c.session = session_index(m.session);
   c.time = m.time != 0.0 ? m.time : static_cast<double>(row);
   return c;
@@ -244,7 +245,8 @@ std::vector<MeasurementContext> DeflectionModel::contexts(const Dataset& data) c
     c.chain.flange.setIdentity();
     c.chain.flange.topLeftCorner<3, 3>() = rf;
     c.chain.flange.topRightCorner<3, 1>() = pf;
-    c.tau_gravity = gravity_torques(robot_, c.chain);
+    c.tau_gravity_links = gravity_torques_by_link(robot_, c.chain);
+    c.tau_gravity = c.tau_gravity_links.rowwise().sum();
     c.session = session_index(m.session);
     c.time = (data.has_time ? m.time : static_cast<double>(r)) - first[m.session];
   }

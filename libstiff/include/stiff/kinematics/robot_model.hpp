@@ -166,6 +166,14 @@ Eigen::VectorXd gravity_torques(const RobotModel& robot,
                                 const ChainState& s,
                                 Eigen::VectorXd* quadrature = nullptr);
 
+/// The same torques link by link: entry (j, k) is the torque on joint j of the weight of link k
+/// (the tool's weight counts with the last link), so that tau_g = row sums. A link's mass
+/// scales its column: what an error in one link's mass does to every joint's preload.
+/// `quadrature` (optional) likewise, per link.
+Eigen::MatrixXd gravity_torques_by_link(const RobotModel& robot,
+                                        const ChainState& s,
+                                        Eigen::MatrixXd* quadrature = nullptr);
+
 /// Smallest singular value and condition number of the translational 3 x n Jacobian at q.
 struct JacobianConditioning {
   double sigma_min;

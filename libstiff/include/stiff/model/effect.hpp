@@ -78,8 +78,10 @@ struct ParameterSpec {
 struct MeasurementContext {
   ChainState chain;
   Eigen::VectorXd tau_gravity;  ///< gravity torques [N*m] (zeros without a mass model)
-  int session = 0;              ///< index of the measurement's session (0..sessions-1)
-  double time = 0.0;            ///< time of the reading [s] (row index when the file has no t)
+  /// The same by link (gravity_torques_by_link): tau_gravity holds its row sums.
+  Eigen::MatrixXd tau_gravity_links;
+  int session = 0;    ///< index of the measurement's session (0..sessions-1)
+  double time = 0.0;  ///< time of the reading [s] (row index when the file has no t)
 };
 
 /// Evolving state of one evaluation (see the stages above). Sizes are the robot's dof.

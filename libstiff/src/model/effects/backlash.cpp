@@ -1,8 +1,12 @@
 // backlash: lost motion of the reducers with a gravity preload (docs/effects.md).
+#include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <deque>
 #include <limits>
+#include <mutex>
 
 #include "stiff/kinematics/joint_torque.hpp"
 #include "stiff/model/effects/common.hpp"
@@ -12,14 +16,14 @@ namespace {
 
 /// A dead zone of width b_j: the gravity preload holds the gear against one flank; the load
 /// traverses the gap only when it reverses the joint torque:
-///   dtheta_j += b_j/2 [sgn((1 + s_j) tau_g + tau_F) - sgn(tau_g)].
-/// The preload tau_g comes from the robot file's masses and centres of mass, which users know
-/// to about 30 %; s_j is the relative error of joint j's preload. The data tell s_j only
-/// through which rows jumped, a sharp threshold that a derivative cannot find: the effect
-/// estimates it from the data it is built on by threshold regression (Hansen 2000), the
-/// least-squares threshold of the joint-compliance + backlash model within the band the mass
-/// uncertainty allows, and holds it there (its start and null value: b_j = 0 switches the
-/// effect off whatever s_j is; a fit keeps it).
+///   dtheta_j += b_j/2 [sgn(tau_p,j + tau_F) - sgn(tau_p,j)],  tau_p,j = sum_k (1 + m_k) tau_g,jk,
+/// tau_g,jk the torque of link k's weight on joint j from the robot file (the tool with the last
+/// link). The masses are what users do not know: m_k is the relative error of link k's mass,
+/// one value that moves the preload of every joint carrying link k. The data tell the m_k only
+/// through which rows jumped, sharp thresholds that a derivative cannot find: the effect
+/// estimates them from the data it is built on by threshold regression (Hansen 2000) over every
+/// link's mass at once, from none to twice the file's, and holds them there (their start and
+/// null value: b_j = 0 switches the effect off whatever m_k is; a fit keeps them).
 /// The sign is smoothed, sgn(x) ~ tanh(x / eps) with eps = 0.05 N*m (well below the load
 /// torques of a test), so that the model has a derivative with respect to everything that
 /// changes the torques (force frame, offsets). A joint without preload (tau_g = 0, e.g. a
@@ -34,15 +38,16 @@ class Backlash : public EffectT<Backlash> {
           "b" + std::to_string(j + 1), "rad",
           "backlash (lost motion) of joint " + std::to_string(j + 1) + ", full gap width", 0.0,
           0.05, 1.5e-4, 0.0, 0.0));
-    for (int j = 0; j < n; ++j) {
-      params_.push_back(effects::parameter(
-          "s" + std::to_string(j + 1), "1",
-          "relative error of the gravity preload of joint " + std::to_string(j + 1) +
-              " (where its backlash jumps), from the data",
-          kScaleLow, kScaleHigh, kMassUncertainty, s0.s(j), s0.s(j)));
+    for (int k = 0; k < n; ++k) {
+      params_.push_back(
+          effects::parameter("m" + std::to_string(k + 1), "1",
+                             "relative error of the mass of link " + std::to_string(k + 1) +
+                                 (k + 1 == n ? " and the tool" : "") +
+                                 " in the robot file (where the backlash jumps), from the data",
+                             kMassLow, kMassHigh, kMassUncertainty, s0.m(k), s0.m(k)));
       params_.back().from_data = true;
-      params_.back().confidence_lower = s0.lower(j);
-      params_.back().confidence_upper = s0.upper(j);
+      params_.back().confidence_lower = s0.lower(k);
+      params_.back().confidence_upper = s0.upper(k);
     }
     for (int j = 0; j < n; ++j) {
       params_.push_back(effects::parameter(
@@ -66,9 +71,9 @@ class Backlash : public EffectT<Backlash> {
     return {effects::kHintLoadReversal, effects::kHintLoadLevel, effects::kHintGravityVariety};
   }
   std::string description() const override {
-    return "backlash with gravity preload: dtheta_j += b_j/2 [sgn((1+s_j) tau_g+tau_F) - "
-           "sgn(tau_g)], s_j the preload error found from the data (smooth sign, eps 0.05 N*m); "
-           "independent of the load level";
+    return "backlash with gravity preload: dtheta_j += b_j/2 [sgn(tau_p,j + tau_F) - "
+           "sgn(tau_p,j)], tau_p,j = sum_k (1+m_k) tau_g,jk, the link masses' errors m_k found "
+           "from the data (smooth sign, eps 0.05 N*m); independent of the load level";
   }
   std::string reference() const override {
     return "Harmonic Drive / Nabtesco RV catalogues (lost motion <= 1 arcmin); FIGAROH "
@@ -79,26 +84,28 @@ class Backlash : public EffectT<Backlash> {
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
 
   static constexpr double kEps = 0.05;  ///< N*m
-  /// Relative uncertainty of the link masses and of the centres of mass. The preload is
-  /// their product: off by a factor in [(1-u)^2, (1+u)^2].
+  /// A link's mass is searched from none to twice the robot file's; the turn of a centre of
+  /// mass (what the data leave open) over 30 % of its distance.
+  static constexpr double kMassLow = -1.0;
+  static constexpr double kMassHigh = 1.0;
   static constexpr double kMassUncertainty = 0.3;
-  static constexpr double kScaleLow = (1 - kMassUncertainty) * (1 - kMassUncertainty) - 1;
-  static constexpr double kScaleHigh = (1 + kMassUncertainty) * (1 + kMassUncertainty) - 1;
 
   template <typename T>
   void joint_t(const T* p, EvalState<T>& s) const {
     using std::tanh;
-    const auto& tg = s.context->tau_gravity;
+    const Eigen::MatrixXd& tl = s.context->tau_gravity_links;
     const int n = static_cast<int>(s.dtheta.size());
+    Eigen::VectorXd mass(n);
+    for (int k = 0; k < n; ++k) mass(k) = 1 + scalar(p[n + k]);
     // The turns g_j are 0 but where the diagnosis tries the ends of their confidence sets.
     Eigen::VectorXd tq;
     for (int j = 0; j < n && tq.size() == 0; ++j)
       if (scalar(p[2 * n + j]) != 0.0) gravity_torques(*s.robot, s.context->chain, &tq);
     for (int j = 0; j < n; ++j) {
-      // s_j, g_j by their value only: the threshold regression decides them, not a derivative.
-      double pre = tg(j);
+      // m_k, g_j by their value only: the threshold regression decides them, not a derivative.
+      double pre = tl.rows() == n ? tl.row(j).dot(mass) : 0.0;
       if (scalar(p[2 * n + j]) != 0.0) pre += scalar(p[2 * n + j]) * tq(j);
-      const T loaded = tanh((T((1 + scalar(p[n + j])) * pre) + s.tau(j)) / T(kEps));
+      const T loaded = tanh((T(pre) + s.tau(j)) / T(kEps));
       const T preload = T(std::tanh(pre / kEps));
       s.dtheta(j) += T(0.5) * p[j] * (loaded - preload);
     }
@@ -122,36 +129,97 @@ class Backlash : public EffectT<Backlash> {
   static double threshold_lr_critical(double alpha) {
     return -2.0 * std::log(1.0 - std::sqrt(1.0 - alpha));
   }
-  /// tanh(x / eps), exactly +-1 in double precision beyond 20 eps (tanh 20 = 1 - 8.5e-18)
-  /// without evaluating it: the searches below take it for every row and threshold.
-  static double smooth_sign(double x) {
-    return std::abs(x) > 20 * kEps ? std::copysign(1.0, x) : std::tanh(x / kEps);
-  }
+  /// The search decides jumps by the exact sign (0 at 0, a joint without preload): the
+  /// model's smooth sign would let it place a threshold within eps of a row and fit that row's
+  /// residual by a fraction of the jump.
+  static double sign(double x) { return x > 0 ? 1.0 : x < 0 ? -1.0 : 0.0; }
   static double scalar(double x) { return x; }
   static double scalar(const Jet& x) { return x.a; }
+  /// Radical inverse of i in base b (Halton 1960): low-discrepancy points in [0, 1).
+  static double radical_inverse(int i, int b) {
+    double f = 1.0, r = 0.0;
+    for (; i > 0; i /= b) {
+      f /= b;
+      r += f * (i % b);
+    }
+    return r;
+  }
 
-  /// The preload errors s_j that the data support: coordinate-wise threshold regression of
-  /// d = sum_j c_j J_j(P) tau_F,j + b_j/2 [sgn((1+s_j) tau_g + tau_F) - sgn(tau_g)] J_j(P)
-  /// (weighted least squares in c, b) over s_j in the band of the mass uncertainty. Between two
-  /// rows' thresholds the decisions, hence the fit, do not change: the candidates are the
-  /// midpoints. Zero where the data (displacement rows) cannot tell, and without data.
-  /// The estimate s and the confidence interval [lower, upper] of each joint's preload error
-  /// (NaN without data).
+  /// The link masses' errors m that the data support, by threshold regression of
+  /// d = (the model's other effects) + sum_j b_j/2 [sgn(tau_p,j + tau_F) - sgn(tau_p,j)] J_j(P)
+  /// (weighted least squares in their coefficients and b) over m in the box [-1, 1]^L of the L
+  /// links with mass: the decisions, hence the fit, change only where a row's threshold is
+  /// crossed, so no derivative finds them. A low-discrepancy design of the box, then coordinate
+  /// sweeps from its best points. The file's masses (m = 0) stand unless the data reject
+  /// them. The estimate m and its confidence box [lower, upper], and the range of each joint's
+  /// turn (NaN without data).
   struct Preload {
-    Eigen::VectorXd s, lower, upper, turn_lower, turn_upper;
+    Eigen::VectorXd m, lower, upper, turn_lower, turn_upper;
   };
+  /// preload_correction() of the same inputs again (a diagnosis builds one model several
+  /// times: to score it, to fit it, to cross-fit a session) is looked up, not searched again:
+  /// the last few results, keyed by every input the search reads, compared exactly.
   static Preload preload_correction(const EffectSetup& setup) {
+    if (!setup.data || !setup.robot->has_masses()) return search_preload(setup);
+    std::vector<double> key;
+    const RobotModel& robot = *setup.robot;
+    for (const auto& j : robot.joints) {
+      key.push_back(j.mass);
+      key.insert(key.end(), j.com.data(), j.com.data() + 3);
+      key.insert(key.end(), j.pre.data(), j.pre.data() + 16);
+      key.insert(key.end(), j.post.data(), j.post.data() + 16);
+      key.insert(key.end(), j.axis.data(), j.axis.data() + 3);
+    }
+    key.push_back(robot.tool_mass);
+    key.insert(key.end(), robot.tool_com.data(), robot.tool_com.data() + 3);
+    key.insert(key.end(), robot.gravity.data(), robot.gravity.data() + 3);
+    key.insert(key.end(), robot.measured_point.data(), robot.measured_point.data() + 3);
+    key.insert(key.end(), robot.load_point.data(), robot.load_point.data() + 3);
+    for (const Measurement& m : setup.data->rows) {
+      key.push_back(m.absolute ? 1.0 : 0.0);
+      key.push_back(m.sigma_d);
+      key.insert(key.end(), m.q.data(), m.q.data() + m.q.size());
+      key.insert(key.end(), m.force.data(), m.force.data() + 3);
+      key.insert(key.end(), m.moment.data(), m.moment.data() + 3);
+      key.insert(key.end(), m.displacement.data(), m.displacement.data() + 3);
+    }
+    const Eigen::MatrixXd& cols = setup.companion_columns;
+    key.push_back(static_cast<double>(cols.rows()));
+    key.insert(key.end(), cols.data(), cols.data() + cols.size());
+    struct Entry {
+      std::vector<double> key;
+      Preload value;
+    };
+    static std::mutex mutex;
+    static std::deque<Entry> cache;
+    constexpr size_t kEntries = 16;
+    auto same = [&](const Entry& e) {
+      return e.key.size() == key.size() &&
+             std::memcmp(e.key.data(), key.data(), key.size() * sizeof(double)) == 0;
+    };
+    {
+      const std::lock_guard<std::mutex> lock(mutex);
+      for (const Entry& e : cache)
+        if (same(e)) return e.value;
+    }
+    Preload found = search_preload(setup);
+    const std::lock_guard<std::mutex> lock(mutex);
+    cache.push_front({std::move(key), found});
+    if (cache.size() > kEntries) cache.pop_back();
+    return found;
+  }
+  static Preload search_preload(const EffectSetup& setup) {
     const RobotModel& robot = *setup.robot;
     const int n = robot.dof();
     Preload out;
-    out.s = Eigen::VectorXd::Zero(n);
+    out.m = Eigen::VectorXd::Zero(n);
     out.lower = out.upper = out.turn_lower = out.turn_upper =
         Eigen::VectorXd::Constant(n, std::numeric_limits<double>::quiet_NaN());
-    Eigen::VectorXd& s = out.s;
     if (!setup.data || !robot.has_masses()) return out;
     struct Row {
       Eigen::Matrix3Xd jp;  // J_j(P), translational columns
-      Eigen::VectorXd tau, tg, tq;
+      Eigen::VectorXd tau, tq;
+      Eigen::MatrixXd tl;  // tau_g,jk
     };
     std::vector<Row> rows;
     std::vector<Eigen::Vector3d> obs;
@@ -176,7 +244,8 @@ class Backlash : public EffectT<Backlash> {
         r.jp.col(j) = wp;
         r.tau(j) = joint_torque(wl, z, m.force, m.moment);
       }
-      r.tg = gravity_torques(robot, c, &r.tq);
+      r.tl = gravity_torques_by_link(robot, c);
+      gravity_torques(robot, c, &r.tq);
       rows.push_back(std::move(r));
       obs.push_back(m.displacement);
       wt.push_back(sigma ? 1.0 / m.sigma_d : 1.0);
@@ -184,13 +253,20 @@ class Backlash : public EffectT<Backlash> {
     }
     const int N = static_cast<int>(rows.size());
     if (N < 2 * n) return out;
+    // The links whose mass loads a joint on these rows.
+    std::vector<int> links;
+    for (int k = 0; k < n; ++k) {
+      double most = 0;
+      for (const Row& r : rows) most = std::max(most, r.tl.col(k).cwiseAbs().maxCoeff());
+      if (most > kEps) links.push_back(k);
+    }
+    if (links.empty()) return out;
     // Weighted design: what the model's other effects do (EffectSetup::companion_columns: a
     // point offset, a force frame, the joint compliance, ...), so that the thresholds are decided
-    // on what they leave; alone in its model, the joint compliance it acts with. Then one
-    // backlash column per joint.
+    // on what they leave; alone in its model, the joint compliance it acts with.
     const Eigen::MatrixXd& cols = setup.companion_columns;
     const bool companions = cols.rows() == 3 * static_cast<int>(setup.data->rows.size());
-    Eigen::MatrixXd lin(3 * N, companions ? cols.cols() : n), x(3 * N, n);
+    Eigen::MatrixXd lin(3 * N, companions ? cols.cols() : n);
     Eigen::VectorXd y(3 * N);
     for (int i = 0; i < N; ++i) {
       y.segment<3>(3 * i) = wt[i] * obs[i];
@@ -200,141 +276,171 @@ class Backlash : public EffectT<Backlash> {
         for (int j = 0; j < n; ++j)
           lin.block<3, 1>(3 * i, j) = wt[i] * rows[i].tau(j) * rows[i].jp.col(j);
     }
-    auto column = [&](int j, double sj, Eigen::Ref<Eigen::VectorXd> dst, double gj = 0.0) {
-      for (int i = 0; i < N; ++i) {
-        const Row& r = rows[i];
-        const double pre = r.tg(j) + gj * r.tq(j);
-        const double jump = 0.5 * (smooth_sign((1 + sj) * pre + r.tau(j)) - smooth_sign(pre));
-        dst.segment<3>(3 * i) = wt[i] * jump * r.jp.col(j);
-      }
+    // Orthonormal basis Q of the other effects' columns (unit columns: the rank threshold
+    // compares like with like); r0 what they leave.
+    for (int c = 0; c < lin.cols(); ++c) {
+      const double norm = lin.col(c).norm();
+      if (norm > 0) lin.col(c) /= norm;
+    }
+    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(lin);
+    qr.setThreshold(1e-10);
+    const int rank = static_cast<int>(qr.rank());
+    const Eigen::MatrixXd q = qr.householderQ() * Eigen::MatrixXd::Identity(3 * N, rank);
+    const Eigen::VectorXd r0 = y - q * (q.transpose() * y);
+    const int dof = 3 * N - rank - n;
+    // Per row and joint, the gap's block u_ij = w_i J_j(P_i): u.r0, the Gram entries u_ij.u_il
+    // (column j n + l) and Q_i^T u, so that a candidate costs O(N n (rank + n)) without
+    // allocating.
+    Eigen::MatrixXd along(N, n), gram(N, n * n);
+    std::vector<Eigen::MatrixXd> proj(n, Eigen::MatrixXd(rank, N));
+    for (int i = 0; i < N; ++i) {
+      const Eigen::Matrix3Xd u = wt[i] * rows[i].jp;
+      along.row(i) = (u.transpose() * r0.segment<3>(3 * i)).transpose();
+      const Eigen::MatrixXd uu = u.transpose() * u;
+      for (int j = 0; j < n; ++j)
+        for (int l = 0; l < n; ++l) gram(i, j * n + l) = uu(j, l);
+      const Eigen::MatrixXd qu = q.middleRows(3 * i, 3).transpose() * u;
+      for (int j = 0; j < n; ++j) proj[j].col(i) = qu.col(j);
+    }
+    // Joints whose gap has a lever arm with the measured point on some row.
+    std::vector<int> levered;
+    for (int j = 0; j < n; ++j)
+      if (gram.col(j * n + j).maxCoeff() > 0) levered.push_back(j);
+    const int nl = static_cast<int>(levered.size());
+    if (nl == 0) return out;
+    Eigen::MatrixXd jump(N, n);
+    auto decide = [&](const Eigen::VectorXd& m, const Eigen::VectorXd& g) {
+      const Eigen::VectorXd mass = Eigen::VectorXd::Ones(n) + m;
+      for (int i = 0; i < N; ++i)
+        for (const int j : levered) {
+          const double pre = rows[i].tl.row(j).dot(mass) + g(j) * rows[i].tq(j);
+          jump(i, j) = 0.5 * (sign(pre + rows[i].tau(j)) - sign(pre));
+        }
     };
-    for (int j = 0; j < n; ++j) column(j, 0.0, x.col(j));
-    // Two coordinate sweeps decide s; a third, with every s decided, gives the confidence sets.
-    for (int sweep = 0; sweep < 3; ++sweep) {
-      const bool last = sweep == 2;
-      for (int j = 0; j < n; ++j) {
-        // Orthonormal basis of every other column (rank-revealing: joint 6 and its gap have no
-        // lever arm with P and L on the flange axis); RSS(x) = |r0|^2 - (x~.r0)^2 / |x~|^2.
-        Eigen::MatrixXd other(3 * N, lin.cols() + n - 1);
-        other << lin, x.leftCols(j), x.rightCols(n - j - 1);
-        // Unit columns: the span is the same, and the rank threshold compares like with like.
-        for (int c = 0; c < other.cols(); ++c) {
-          const double norm = other.col(c).norm();
-          if (norm > 0) other.col(c) /= norm;
-        }
-        Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(other);
-        qr.setThreshold(1e-10);
-        const int rank = static_cast<int>(qr.rank());
-        const Eigen::MatrixXd q = qr.householderQ() * Eigen::MatrixXd::Identity(3 * N, rank);
-        const Eigen::VectorXd r0 = y - q * (q.transpose() * y);
-        const int dof = 3 * N - rank - 1;
-        // Per row, the column's block u_i = w_i J_j(P_i) times the row's jump: u_i.r0,
-        // |u_i|^2 and Q_i^T u_i, so that a candidate costs O(N rank) (the confidence set tries
-        // many).
-        Eigen::VectorXd along(N), sq(N);
-        Eigen::MatrixXd proj(rank, N);
-        for (int i = 0; i < N; ++i) {
-          const Eigen::Vector3d u = wt[i] * rows[i].jp.col(j);
-          along(i) = u.dot(r0.segment<3>(3 * i));
-          sq(i) = u.squaredNorm();
-          proj.col(i) = q.middleRows(3 * i, 3).transpose() * u;
-        }
-        Eigen::VectorXd jump(N);
-        const double tiny = 1e-20 * y.squaredNorm();
-        auto gain = [&](double sj, double gj) {
-          for (int i = 0; i < N; ++i) {
-            const Row& r = rows[i];
-            const double pre = r.tg(j) + gj * r.tq(j);
-            jump(i) = 0.5 * (smooth_sign((1 + sj) * pre + r.tau(j)) - smooth_sign(pre));
-          }
-          // |(I - Q Q^T) c|^2 = |c|^2 - |Q^T c|^2, and (I - Q Q^T) c . r0 = c . r0.
-          const double cc = jump.cwiseAbs2().dot(sq);
-          const double nn = cc - (proj * jump).squaredNorm();
-          // A column (nearly) inside the others' span: no gain (and no cancellation noise).
-          if (!(nn > tiny) || !(nn > 1e-9 * cc)) return 0.0;
-          const double u = jump.dot(along);
-          return u * u / nn;
-        };
-        // Edges of the intervals of s between the rows' thresholds, with the preload's lumped
-        // centre of mass turned by gj: (1 + s)(tau_g + gj tau_q) + tau_F = 0 there.
-        auto edges = [&](double gj) {
-          std::vector<double> e = {kScaleLow};
-          for (const auto& r : rows) {
-            const double pre = r.tg(j) + gj * r.tq(j);
-            if (std::abs(pre) > kEps) {
-              const double v = -r.tau(j) / pre - 1;
-              if (v > kScaleLow && v < kScaleHigh) e.push_back(v);
-            }
-          }
-          std::sort(e.begin() + 1, e.end());
-          e.push_back(kScaleHigh);
-          return e;
-        };
-        if (last) {
-          // What the data do not exclude: the likelihood-ratio confidence set of the threshold
-          // (Hansen 2000) over the preload's scale s and the turn g of its lumped centre of
-          // mass (a centre of mass off the file's line, which no scale reproduces), both in
-          // the band of the mass uncertainty: every (s, g) whose residual sum of squares exceeds
-          // the best by less than c times the residual variance, with the decided value; as
-          // the box spanning them. g only widens what is uncertain: the model holds it at 0
-          // (estimating it over-fits: docs/effects.md).
-          constexpr int kTurns = 12;  // g on a grid of steps 2u/12 = 0.05
-          struct Cell {
-            double s_lo, s_hi, g, gain;
-          };
-          std::vector<Cell> cells;
-          double top = gain(s(j), 0.0);
-          for (int t = 0; t <= kTurns; ++t) {
-            const double gj = -kMassUncertainty + 2.0 * kMassUncertainty * t / kTurns;
-            const std::vector<double> e = edges(gj);
-            for (size_t k = 0; k + 1 < e.size(); ++k) {
-              const double g = gain(0.5 * (e[k] + e[k + 1]), gj);
-              cells.push_back({e[k], e[k + 1], gj, g});
-              top = std::max(top, g);
-            }
-          }
-          const double var = (r0.squaredNorm() - top) / std::max(dof, 1);
-          const double c = threshold_lr_critical(0.05) * var;
-          double lo = s(j), hi = s(j), glo = 0.0, ghi = 0.0;
-          for (const Cell& cl : cells) {
-            const bool decided = cl.g == 0.0 && cl.s_lo <= s(j) && s(j) <= cl.s_hi;
-            if (decided || top - cl.gain <= c) {
-              lo = std::min(lo, cl.s_lo);
-              hi = std::max(hi, cl.s_hi);
-              glo = std::min(glo, cl.g);
-              ghi = std::max(ghi, cl.g);
-            }
-          }
-          out.lower(j) = lo;
-          out.upper(j) = hi;
-          out.turn_lower(j) = glo;
-          out.turn_upper(j) = ghi;
-          continue;
-        }
-        const std::vector<double> edge = edges(0.0);
-        if (edge.size() == 2) continue;  // no calibration row tells where joint j reverses
-        // A candidate per interval (its midpoint) and the file's preload, s = 0.
-        std::vector<double> cand = {0.0};
-        for (size_t k = 0; k + 1 < edge.size(); ++k) cand.push_back(0.5 * (edge[k] + edge[k + 1]));
-        const double at_file = gain(0.0, 0.0);
-        double best = at_file, best_s = 0.0;
-        for (const double sj : cand) {
-          const double g = gain(sj, 0.0);
-          // A larger gain wins; on a tie (the same decisions) the smaller correction.
-          if (g > best * (1 + 1e-12) ||
-              (g >= best * (1 - 1e-12) && std::abs(sj) < std::abs(best_s))) {
-            best = g;
-            best_s = sj;
-          }
-        }
-        // The robot file's preload stands unless the data reject it: the drop of the residual
-        // sum of squares from s = 0 to the best threshold, in units of the residual variance,
-        // against the chi2(1) quantile at alpha / (number of thresholds tried) (Bonferroni:
-        // the search picks the best of them; alpha = 5 %).
-        const double var = (r0.squaredNorm() - best) / std::max(dof, 1);
-        s(j) = dof > 0 && best - at_file > chi2_1_quantile(0.05 / cand.size()) * var ? best_s : 0.0;
-        column(j, s(j), x.col(j));
+    // The drop of the residual sum of squares when the gaps' columns join the others':
+    // b^T A^+ b, A the Gram matrix of the columns with Q's span removed.
+    const double tiny = 1e-20 * y.squaredNorm();
+    Eigen::VectorXd b(nl), t(nl);
+    Eigen::MatrixXd a(nl, nl), pj(rank, nl);
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(nl);
+    auto gain = [&]() {
+      for (int x = 0; x < nl; ++x) {
+        const int j = levered[x];
+        b(x) = jump.col(j).dot(along.col(j));
+        pj.col(x).noalias() = proj[j] * jump.col(j);
       }
+      a.noalias() = -pj.transpose() * pj;
+      for (int x = 0; x < nl; ++x)
+        for (int z = x; z < nl; ++z) {
+          const int j = levered[x], l = levered[z];
+          a(x, z) += jump.col(j).cwiseProduct(jump.col(l)).dot(gram.col(j * n + l));
+          a(z, x) = a(x, z);
+        }
+      es.compute(a);
+      const Eigen::VectorXd& ev = es.eigenvalues();
+      // A column (nearly) inside the others' span adds nothing (and no cancellation noise).
+      const double floor = std::max(tiny, 1e-9 * a.diagonal().maxCoeff());
+      t.noalias() = es.eigenvectors().transpose() * b;
+      double out_gain = 0;
+      for (int k = 0; k < nl; ++k)
+        if (ev(k) > floor) out_gain += t(k) * t(k) / ev(k);
+      return out_gain;
+    };
+    const Eigen::VectorXd none = Eigen::VectorXd::Zero(n);
+    struct Tried {
+      Eigen::VectorXd m;
+      double gain;
+    };
+    std::vector<Tried> tried;
+    auto evaluate = [&](const Eigen::VectorXd& m) {
+      decide(m, none);
+      tried.push_back({m, gain()});
+      return tried.back().gain;
+    };
+    const double at_file = evaluate(none);
+    // The file's masses stand unless the data reject them: the drop of the residual sum of
+    // squares, in units of the residual variance, against the chi2(1) quantile at alpha /
+    // (number of points tried) (Bonferroni: the search picks the best of them; alpha = 5 %).
+    const double rss0 = r0.squaredNorm();
+    auto rejects = [&](double simpler, double richer, size_t points) {
+      const double var = (rss0 - richer) / std::max(dof, 1);
+      return dof > 0 && richer - simpler > chi2_1_quantile(0.05 / points) * var;
+    };
+    constexpr int kGrid = 41;  // a link's mass in steps of 5 % of the file's
+    // A Halton design of the box, then coordinate sweeps over a grid of each link's mass from
+    // the design's best points (the decisions change in steps: a local search stalls, a design
+    // alone is coarse).
+    const size_t first = tried.size();
+    constexpr int kDesign = 512, kStarts = 6, kSweeps = 3;
+    constexpr int kPrimes[] = {2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53};
+    const int dims = std::min(static_cast<int>(links.size()), 16);
+    for (int i = 1; i <= kDesign; ++i) {
+      Eigen::VectorXd m = none;
+      for (int d = 0; d < dims; ++d)
+        m(links[d]) = kMassLow + (kMassHigh - kMassLow) * radical_inverse(i, kPrimes[d]);
+      evaluate(m);
+    }
+    std::vector<int> order(tried.size() - first);
+    for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(first + i);
+    std::partial_sort(order.begin(), order.begin() + kStarts, order.end(),
+                      [&](int a, int b) { return tried[a].gain > tried[b].gain; });
+    std::vector<std::pair<Eigen::VectorXd, double>> starts;
+    for (int st = 0; st < kStarts; ++st)
+      starts.emplace_back(tried[order[st]].m, tried[order[st]].gain);
+    Eigen::VectorXd best_m = none;
+    double best = at_file;
+    for (auto& [m, here] : starts) {
+      for (int sweep = 0; sweep < kSweeps; ++sweep)
+        for (int d = 0; d < dims; ++d) {
+          const int k = links[d];
+          double keep = m(k);
+          for (int t = 0; t < kGrid; ++t) {
+            m(k) = kMassLow + (kMassHigh - kMassLow) * t / (kGrid - 1);
+            const double g = evaluate(m);
+            if (g > here * (1 + 1e-12)) {
+              here = g;
+              keep = m(k);
+            }
+          }
+          m(k) = keep;
+        }
+      if (here > best * (1 + 1e-12)) {
+        best = here;
+        best_m = m;
+      }
+    }
+    out.m = rejects(at_file, best, tried.size()) ? best_m : none;
+    const double top = best;
+    const double var = (rss0 - top) / std::max(dof, 1);
+    // What the data do not exclude: the likelihood-ratio confidence set of the thresholds
+    // (Hansen 2000), every point tried whose residual sum of squares exceeds the best by less
+    // than c times the residual variance, with the decided value; as the box spanning them.
+    const double c = threshold_lr_critical(0.05) * var;
+    for (const int k : links) out.lower(k) = out.upper(k) = out.m(k);
+    for (const Tried& t : tried)
+      if (top - t.gain <= c)
+        for (const int k : links) {
+          out.lower(k) = std::min(out.lower(k), t.m(k));
+          out.upper(k) = std::max(out.upper(k), t.m(k));
+        }
+    // The turn of each joint's lumped centre of mass (a centre of mass off the file's line,
+    // which no mass reproduces): the range over which the decided masses' fit stays in the set.
+    // It only widens what is uncertain: the model holds it at 0 (estimating it over-fits:
+    // docs/effects.md).
+    constexpr int kTurns = 12;  // g on a grid of steps 2u/12 = 0.05
+    for (int j = 0; j < n; ++j) {
+      double glo = 0.0, ghi = 0.0;
+      for (int t = 0; t <= kTurns; ++t) {
+        Eigen::VectorXd g = none;
+        g(j) = -kMassUncertainty + 2.0 * kMassUncertainty * t / kTurns;
+        decide(out.m, g);
+        if (top - gain() <= c) {
+          glo = std::min(glo, g(j));
+          ghi = std::max(ghi, g(j));
+        }
+      }
+      out.turn_lower(j) = glo;
+      out.turn_upper(j) = ghi;
     }
     return out;
   }
