@@ -34,6 +34,16 @@ MatrixXd candidate_regressors(const Analysis& a, const DeflectionModel& mg, Vect
   return z;
 }
 
+/// The partial F of g's drop in the residual sum of squares taken as df fitted parameters,
+/// and its log p; false when no degree of freedom is left.
+bool partial_f(const Analysis& a, int df, GroupScore* g) {
+  const int dof2 = a.n - a.p - df;
+  if (dof2 <= 0) return false;
+  g->f = (g->drss / df) / (std::max(a.rss - g->drss, 1e-300) / dof2);
+  g->log_p = stats::log_f_sf(g->f, df, dof2);
+  return true;
+}
+
 }  // namespace
 
 GroupScore score_group(const Analysis& a, const MatrixXd& z, const VectorXd& typical, double tol) {
@@ -66,14 +76,7 @@ GroupScore score_group(const Analysis& a, const MatrixXd& z, const VectorXd& typ
   const VectorXd proj = g.u.transpose() * a.r;
   g.drss = proj.squaredNorm();
   g.fitted = g.u * proj;
-  const int dof2 = a.n - a.p - g.df;
-  if (dof2 <= 0) {
-    g.df = 0;
-    return g;
-  }
-  const double rss1 = std::max(a.rss - g.drss, 1e-300);
-  g.f = (g.drss / g.df) / (rss1 / dof2);
-  g.log_p = stats::log_f_sf(g.f, g.df, dof2);
+  if (!partial_f(a, g.df, &g)) g.df = 0;
   return g;
 }
 
@@ -162,13 +165,7 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
     // fitted too: the F test counts them, or the search's freedom reads as evidence.
     int decided = 0;
     for (const auto& ps : eg.parameters()) decided += ps.from_data && ps.null_value != 0.0;
-    if (decided > 0 && best.df > 0) {
-      const int df = best.df + decided, dof2 = a.n - a.p - df;
-      if (dof2 > 0) {
-        best.f = (best.drss / df) / (std::max(a.rss - best.drss, 1e-300) / dof2);
-        best.log_p = stats::log_f_sf(best.f, df, dof2);
-      }
-    }
+    if (decided > 0 && best.df > 0) partial_f(a, best.df + decided, &best);
     best.log_p = std::min(0.0, best.log_p + std::log(static_cast<double>(forms.size() + 1)));
     for (int k : g.null_columns) c.unidentifiable.push_back(eg.parameters()[k].name);
     std::sort(c.unidentifiable.begin(), c.unidentifiable.end());

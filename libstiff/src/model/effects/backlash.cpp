@@ -2,6 +2,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <cstring>
 #include <deque>
@@ -95,15 +96,15 @@ class Backlash : public EffectT<Backlash> {
     using std::tanh;
     const Eigen::MatrixXd& tl = s.context->tau_gravity_links;
     const int n = static_cast<int>(s.dtheta.size());
-    Eigen::VectorXd mass(n);
-    for (int k = 0; k < n; ++k) mass(k) = 1 + scalar(p[n + k]);
+    assert(tl.rows() == n && tl.cols() == n);  // every context comes from DeflectionModel
     // The turns g_j are 0 but where the diagnosis tries the ends of their confidence sets.
     Eigen::VectorXd tq;
     for (int j = 0; j < n && tq.size() == 0; ++j)
       if (scalar(p[2 * n + j]) != 0.0) gravity_torques(*s.robot, s.context->chain, &tq);
     for (int j = 0; j < n; ++j) {
       // m_k, g_j by their value only: the threshold regression decides them, not a derivative.
-      double pre = tl.rows() == n ? tl.row(j).dot(mass) : 0.0;
+      double pre = 0;
+      for (int k = 0; k < n; ++k) pre += tl(j, k) * (1 + scalar(p[n + k]));
       if (scalar(p[2 * n + j]) != 0.0) pre += scalar(p[2 * n + j]) * tq(j);
       const T loaded = tanh((T(pre) + s.tau(j)) / T(kEps));
       const T preload = T(std::tanh(pre / kEps));
@@ -244,8 +245,9 @@ class Backlash : public EffectT<Backlash> {
         r.jp.col(j) = wp;
         r.tau(j) = joint_torque(wl, z, m.force, m.moment);
       }
-      r.tl = gravity_torques_by_link(robot, c);
-      gravity_torques(robot, c, &r.tq);
+      Eigen::MatrixXd tq;
+      r.tl = gravity_torques_by_link(robot, c, &tq);
+      r.tq = tq.rowwise().sum();
       rows.push_back(std::move(r));
       obs.push_back(m.displacement);
       wt.push_back(sigma ? 1.0 / m.sigma_d : 1.0);
@@ -358,19 +360,11 @@ class Backlash : public EffectT<Backlash> {
       return tried.back().gain;
     };
     const double at_file = evaluate(none);
-    // The file's masses stand unless the data reject them: the drop of the residual sum of
-    // squares, in units of the residual variance, against the chi2(1) quantile at alpha /
-    // (number of points tried) (Bonferroni: the search picks the best of them; alpha = 5 %).
     const double rss0 = r0.squaredNorm();
-    auto rejects = [&](double simpler, double richer, size_t points) {
-      const double var = (rss0 - richer) / std::max(dof, 1);
-      return dof > 0 && richer - simpler > chi2_1_quantile(0.05 / points) * var;
-    };
     constexpr int kGrid = 41;  // a link's mass in steps of 5 % of the file's
     // A Halton design of the box, then coordinate sweeps over a grid of each link's mass from
     // the design's best points (the decisions change in steps: a local search stalls, a design
     // alone is coarse).
-    const size_t first = tried.size();
     constexpr int kDesign = 512, kStarts = 6, kSweeps = 3;
     constexpr int kPrimes[] = {2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53};
     const int dims = std::min(static_cast<int>(links.size()), 16);
@@ -380,8 +374,8 @@ class Backlash : public EffectT<Backlash> {
         m(links[d]) = kMassLow + (kMassHigh - kMassLow) * radical_inverse(i, kPrimes[d]);
       evaluate(m);
     }
-    std::vector<int> order(tried.size() - first);
-    for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(first + i);
+    std::vector<int> order(kDesign);  // the design's points, after the file's (tried[0])
+    for (int i = 0; i < kDesign; ++i) order[i] = i + 1;
     std::partial_sort(order.begin(), order.begin() + kStarts, order.end(),
                       [&](int a, int b) { return tried[a].gain > tried[b].gain; });
     std::vector<std::pair<Eigen::VectorXd, double>> starts;
@@ -409,16 +403,19 @@ class Backlash : public EffectT<Backlash> {
         best_m = m;
       }
     }
-    out.m = rejects(at_file, best, tried.size()) ? best_m : none;
-    const double top = best;
-    const double var = (rss0 - top) / std::max(dof, 1);
+    // The file's masses stand unless the data reject them: the drop of the residual sum of
+    // squares, in units of the residual variance, against the chi2(1) quantile at alpha /
+    // (number of points tried) (Bonferroni: the search picks the best of them; alpha = 5 %).
+    const double var = (rss0 - best) / std::max(dof, 1);
+    const bool rejected = dof > 0 && best - at_file > chi2_1_quantile(0.05 / tried.size()) * var;
+    out.m = rejected ? best_m : none;
     // What the data do not exclude: the likelihood-ratio confidence set of the thresholds
     // (Hansen 2000), every point tried whose residual sum of squares exceeds the best by less
     // than c times the residual variance, with the decided value; as the box spanning them.
     const double c = threshold_lr_critical(0.05) * var;
     for (const int k : links) out.lower(k) = out.upper(k) = out.m(k);
     for (const Tried& t : tried)
-      if (top - t.gain <= c)
+      if (best - t.gain <= c)
         for (const int k : links) {
           out.lower(k) = std::min(out.lower(k), t.m(k));
           out.upper(k) = std::max(out.upper(k), t.m(k));
@@ -434,7 +431,7 @@ class Backlash : public EffectT<Backlash> {
         Eigen::VectorXd g = none;
         g(j) = -kMassUncertainty + 2.0 * kMassUncertainty * t / kTurns;
         decide(out.m, g);
-        if (top - gain() <= c) {
+        if (best - gain() <= c) {
           glo = std::min(glo, g(j));
           ghi = std::max(ghi, g(j));
         }
