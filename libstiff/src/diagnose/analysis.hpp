@@ -169,6 +169,7 @@ struct Level {
   std::string experiment;
   bool cross_validated = false;  ///< a.quality.cross_validation_error_m has been computed
   bool validated = false;        ///< adding the pick lowered the validation error (explained_by)
+  bool refuted = false;          ///< adding the pick raised the validation error significantly
   /// decide() found the pick's step confirmed by the validation poses and only marginal
   /// structure after it (verdict `ambiguous`): the loop still takes the step.
   bool tentative = false;

@@ -90,7 +90,7 @@ bool Chain::explained_by_chain(
     size_t i, int depth, std::string* why, std::string* top_why, bool* weak) {
   static constexpr size_t kAlternatives = 3;
   std::string first;
-  bool first_weak = false, top_validated = false;
+  bool first_weak = false, top_validated = false, top_refuted = false;
   size_t best = SIZE_MAX;
   // A copy: levels grows (and may move) while the chains are built.
   const std::string top_effect = levels[i].scores.empty() ? "" : levels[i].scores[0].effect;
@@ -109,7 +109,10 @@ bool Chain::explained_by_chain(
     std::string w;
     bool wk = false;
     const bool explains = explained_by(i, depth, &w, &wk);
-    if (k == 0) top_validated = levels[i].validated;
+    if (k == 0) {
+      top_validated = levels[i].validated;
+      top_refuted = levels[i].refuted;
+    }
     // A rival whose chain explains the data only once the top is added later is no evidence
     // for the rival: the top's own chain asked whether the rival is needed after the top, and
     // the data did not say so; the rival's first step only took up part of the top's signal.
@@ -136,6 +139,7 @@ bool Chain::explained_by_chain(
   if (best == SIZE_MAX) {
     levels[i].pick = 0;
     levels[i].validated = top_validated;
+    levels[i].refuted = top_refuted;
     *why = first;
     if (weak) *weak = first_weak;
     return false;
@@ -164,7 +168,7 @@ bool Chain::explained_by_chain(
 
 bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
   const std::string added = levels[i].scores[levels[i].pick].effect;
-  levels[i].validated = false;
+  levels[i].validated = levels[i].refuted = false;
   *weak = false;
   const Level* n = next(i);
   if (!n) {
@@ -180,6 +184,7 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
     // of the squared errors); otherwise the effect may be real but too small for this data to
     // pay for its parameters on new poses.
     *weak = !(paired_fall_p(nq.validation_error_m, q.validation_error_m) < cx->opt->alpha);
+    levels[i].refuted = !*weak;
     return false;
   }
   levels[i].validated = q.has_validation;
@@ -198,6 +203,17 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
     bool deeper_weak = false;
     if (explained_by_chain(i + 1, depth - 1, &deeper, nullptr, &deeper_weak)) return true;
     if (floor && levels[i + 1].scores[0].p_adjusted > cx->opt->alpha / 10) return true;
+    // The candidate left predicts the new poses significantly worse: what it takes up on the
+    // calibration poses does not carry over. That may be a few rows a jump decided on the
+    // wrong side, or an effect outside the list that no candidate reproduces: neither a
+    // confirmation nor a refutation of the chain so far, unless the floor test refutes it.
+    if (levels[i + 1].refuted && (floor || floor_weak)) {
+      *why = "after adding " + added + ", " + levels[i + 1].scores[0].effect +
+             " takes up structure on the calibration poses that the validation poses refute (" +
+             deeper + ")" + (floor ? "" : " and " + floor_why);
+      *weak = true;
+      return false;
+    }
     *why = "after adding " + added + ": " + deeper;
     *weak = deeper_weak && (floor || floor_weak);
     return false;
@@ -279,7 +295,8 @@ std::string Chain::decide(size_t i, std::string* why) {
                              experiment_for(*cx, levels[i].group);
       *why = evidence +
              (levels[i].validated
-                  ? "; that evidence is marginal (p >= alpha/10): this data cannot tell whether " +
+                  ? "; that evidence is marginal (p >= alpha/10, or a fit the validation poses "
+                    "refute): this data cannot tell whether " +
                         top.effect +
                         " is what is missing and the rest chance, or an effect outside the "
                         "candidate list is at work"
