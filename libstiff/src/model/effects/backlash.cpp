@@ -310,12 +310,18 @@ class Backlash : public EffectT<Backlash> {
       if (gram.col(j * n + j).maxCoeff() > 0) levered.push_back(j);
     const int nl = static_cast<int>(levered.size());
     if (nl == 0) return out;
+    // Every row's by-link torques stacked (row n i + j: joint j of row i), so that the
+    // preloads of a candidate are one product.
+    Eigen::MatrixXd tl_all(N * n, n);
+    for (int i = 0; i < N; ++i) tl_all.middleRows(n * i, n) = rows[i].tl;
     Eigen::MatrixXd jump(N, n);
+    Eigen::VectorXd mass(n), pre_all(N * n);
     auto decide = [&](const Eigen::VectorXd& m, const Eigen::VectorXd& g) {
-      const Eigen::VectorXd mass = Eigen::VectorXd::Ones(n) + m;
+      mass = m.array() + 1.0;
+      pre_all.noalias() = tl_all * mass;
       for (int i = 0; i < N; ++i)
         for (const int j : levered) {
-          const double pre = rows[i].tl.row(j).dot(mass) + g(j) * rows[i].tq(j);
+          const double pre = pre_all(n * i + j) + g(j) * rows[i].tq(j);
           jump(i, j) = 0.5 * (sign(pre + rows[i].tau(j)) - sign(pre));
         }
     };
