@@ -409,16 +409,22 @@ class Backlash : public EffectT<Backlash> {
         best_m = m;
       }
     }
+    // The file's masses stand unless the data reject them: the drop of the residual sum of
+    // squares, in units of the residual variance, against the chi2(1) quantile at alpha /
+    // (number of points tried) (Bonferroni: the search picks the best of them; alpha = 5 %).
+    const double var = (rss0 - best) / std::max(dof, 1);
+    const bool rejected = dof > 0 && best - at_file > chi2_1_quantile(0.05 / tried.size()) * var;
     // Every mass vector that decides the calibration rows' jumps alike fits them alike: the
     // best is a cell, convex (each decision is a half-space in the masses), and the sweeps end
     // on its wall, next to some row's reversal, where a new pose's jump is most often decided
-    // wrongly. Its middle instead, axis by axis (bisection to the walls, rounds until it stays).
+    // wrongly. Its middle instead (when it replaces the file's masses), axis by axis (bisection
+    // to the walls, rounds until it stays).
     auto in_best_cell = [&](const Eigen::VectorXd& m) {
       decide(m, none);
       return std::abs(gain() - best) <= 1e-9 * std::abs(best);
     };
     double moved = 1;
-    for (int round = 0; round < 8 && moved > 2e-3; ++round) {
+    for (int round = 0; rejected && round < 8 && moved > 2e-3; ++round) {
       moved = 0;
       for (int d = 0; d < dims; ++d) {
         const int k = links[d];
@@ -441,11 +447,6 @@ class Backlash : public EffectT<Backlash> {
         best_m(k) = 0.5 * (wall[0] + wall[1]);
       }
     }
-    // The file's masses stand unless the data reject them: the drop of the residual sum of
-    // squares, in units of the residual variance, against the chi2(1) quantile at alpha /
-    // (number of points tried) (Bonferroni: the search picks the best of them; alpha = 5 %).
-    const double var = (rss0 - best) / std::max(dof, 1);
-    const bool rejected = dof > 0 && best - at_file > chi2_1_quantile(0.05 / tried.size()) * var;
     out.m = rejected ? best_m : none;
     // What the data do not exclude: the likelihood-ratio confidence set of the thresholds
     // (Hansen 2000), every point tried whose residual sum of squares exceeds the best by less
