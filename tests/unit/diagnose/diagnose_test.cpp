@@ -375,6 +375,37 @@ TEST(DiagnoseMassModel, BacklashWithMorePosesJudgesBothSidesAlike) {
   EXPECT_GT(trimmed, 0);
 }
 
+/// Each joint's jump decision on every row of `data` (sign of preload + load torque against
+/// the preload's, exactly as the threshold regression decides it) as a function of the scales
+/// of the file's link masses.
+struct JumpDecisions {
+  std::vector<Eigen::MatrixXd> by_link;  // tau_g,jk per row
+  std::vector<Eigen::VectorXd> tau;      // the load's joint torques per row
+  JumpDecisions(const RobotModel& file, const Dataset& data) {
+    for (const Measurement& row : data.rows) {
+      const ChainState c = file.chain(row.q);
+      const Eigen::Vector3d l = file.point_position(c, file.load_point);
+      by_link.push_back(gravity_torques_by_link(file, c));
+      Eigen::VectorXd t(file.dof());
+      for (int j = 0; j < file.dof(); ++j) {
+        Eigen::Vector3d w;
+        lever_arm(c.axis.col(j), c.origin.col(j), l, w);
+        t(j) = force_torque(w, row.force);
+      }
+      tau.push_back(t);
+    }
+  }
+  std::vector<int> operator()(const Eigen::VectorXd& mass) const {
+    auto sgn = [](double x) { return (x > 0) - (x < 0); };
+    std::vector<int> out;
+    for (size_t r = 0; r < tau.size(); ++r) {
+      const Eigen::VectorXd pre = by_link[r] * mass;
+      for (int j = 0; j < pre.size(); ++j) out.push_back(sgn(pre(j) + tau[r](j)) - sgn(pre(j)));
+    }
+    return out;
+  }
+};
+
 /// Rows x joints 2-5 (those with a gravity preload) whose backlash jump the model `m`, built on
 /// `data` with the robot file `file`, decides otherwise than the true masses (`truth`) do:
 /// `*by_file` with the file's masses, `*by_found` with the link masses' errors m_k that m's
@@ -393,20 +424,15 @@ void jump_decisions(const RobotModel& truth,
     mass(k) = 1 + m.spec(off + n + k).null_value;
     *moved += mass(k) != 1;
   }
-  for (size_t r = 0; r < data.rows.size(); ++r) {
-    const ChainState c = file.chain(data.rows[r].q);
-    const Eigen::Vector3d l = file.point_position(c, file.load_point);
-    const Eigen::VectorXd tg_true = gravity_torques(truth, truth.chain(data.rows[r].q));
-    const Eigen::MatrixXd by_link = gravity_torques_by_link(file, c);
-    for (int j = 1; j < 5; ++j) {
-      Eigen::Vector3d w;
-      lever_arm(c.axis.col(j), c.origin.col(j), l, w);
-      const double tau = force_torque(w, data.rows[r].force);
-      const double tg_file = by_link.row(j).sum(), tg_found = by_link.row(j).dot(mass);
-      const bool jump = (tg_true(j) + tau) * tg_true(j) < 0;
-      *by_file += jump != ((tg_file + tau) * tg_file < 0);
-      *by_found += jump != ((tg_found + tau) * tg_found < 0);
-    }
+  const Eigen::VectorXd ones = Eigen::VectorXd::Ones(n);
+  const JumpDecisions decisions(file, data);
+  const std::vector<int> truly = JumpDecisions(truth, data)(ones);
+  const std::vector<int> with_file = decisions(ones), with_found = decisions(mass);
+  for (size_t i = 0; i < truly.size(); ++i) {
+    const int j = static_cast<int>(i % n);
+    if (j < 1 || j >= 5) continue;
+    *by_file += truly[i] != with_file[i];
+    *by_found += truly[i] != with_found[i];
   }
 }
 
@@ -504,37 +530,6 @@ TEST(DiagnoseMassModel, BacklashFindsEachLinksMass) {
   EXPECT_LE(tool.confidence_lower, -0.5);
   EXPECT_GE(tool.confidence_upper, -0.5);
 }
-
-/// Each joint's jump decision on every row of `data` (sign of preload + load torque against
-/// the preload's, exactly as the threshold regression decides it) as a function of the scales
-/// of the file's link masses.
-struct JumpDecisions {
-  std::vector<Eigen::MatrixXd> by_link;  // tau_g,jk per row
-  std::vector<Eigen::VectorXd> tau;      // the load's joint torques per row
-  JumpDecisions(const RobotModel& file, const Dataset& data) {
-    for (const Measurement& row : data.rows) {
-      const ChainState c = file.chain(row.q);
-      const Eigen::Vector3d l = file.point_position(c, file.load_point);
-      by_link.push_back(gravity_torques_by_link(file, c));
-      Eigen::VectorXd t(file.dof());
-      for (int j = 0; j < file.dof(); ++j) {
-        Eigen::Vector3d w;
-        lever_arm(c.axis.col(j), c.origin.col(j), l, w);
-        t(j) = force_torque(w, row.force);
-      }
-      tau.push_back(t);
-    }
-  }
-  std::vector<int> operator()(const Eigen::VectorXd& mass) const {
-    auto sgn = [](double x) { return (x > 0) - (x < 0); };
-    std::vector<int> out;
-    for (size_t r = 0; r < tau.size(); ++r) {
-      const Eigen::VectorXd pre = by_link[r] * mass;
-      for (int j = 0; j < pre.size(); ++j) out.push_back(sgn(pre(j) + tau[r](j)) - sgn(pre(j)));
-    }
-    return out;
-  }
-};
 
 // Every mass vector that decides the calibration rows' jumps alike fits them alike; the one the
 // search returns must sit in the middle of that set along each link's mass (the room to the

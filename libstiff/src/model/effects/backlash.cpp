@@ -220,12 +220,14 @@ class Backlash : public EffectT<Backlash> {
     struct Row {
       Eigen::Matrix3Xd jp;  // J_j(P), translational columns
       Eigen::VectorXd tau, tq;
-      Eigen::MatrixXd tl;  // tau_g,jk
     };
     std::vector<Row> rows;
     std::vector<Eigen::Vector3d> obs;
     std::vector<double> wt;
     std::vector<int> at;  // the row's index in the data
+    // Every row's by-link torques tau_g,jk stacked (row n i + j: joint j of row i), so that the
+    // preloads of a candidate are one product.
+    Eigen::MatrixXd tl_all(n * setup.data->rows.size(), n);
     bool sigma = true;
     for (const auto& m : setup.data->rows) sigma = sigma && (m.absolute || m.sigma_d > 0);
     for (size_t k = 0; k < setup.data->rows.size(); ++k) {
@@ -246,7 +248,7 @@ class Backlash : public EffectT<Backlash> {
         r.tau(j) = joint_torque(wl, z, m.force, m.moment);
       }
       Eigen::MatrixXd tq;
-      r.tl = gravity_torques_by_link(robot, c, &tq);
+      tl_all.middleRows(n * rows.size(), n) = gravity_torques_by_link(robot, c, &tq);
       r.tq = tq.rowwise().sum();
       rows.push_back(std::move(r));
       obs.push_back(m.displacement);
@@ -255,12 +257,11 @@ class Backlash : public EffectT<Backlash> {
     }
     const int N = static_cast<int>(rows.size());
     if (N < 2 * n) return out;
+    tl_all.conservativeResize(N * n, n);
     // The links whose mass loads a joint on these rows.
     std::vector<int> links;
     for (int k = 0; k < n; ++k) {
-      double most = 0;
-      for (const Row& r : rows) most = std::max(most, r.tl.col(k).cwiseAbs().maxCoeff());
-      if (most > kEps) links.push_back(k);
+      if (tl_all.col(k).cwiseAbs().maxCoeff() > kEps) links.push_back(k);
     }
     if (links.empty()) return out;
     // Weighted design: what the model's other effects do (EffectSetup::companion_columns: a
@@ -310,10 +311,6 @@ class Backlash : public EffectT<Backlash> {
       if (gram.col(j * n + j).maxCoeff() > 0) levered.push_back(j);
     const int nl = static_cast<int>(levered.size());
     if (nl == 0) return out;
-    // Every row's by-link torques stacked (row n i + j: joint j of row i), so that the
-    // preloads of a candidate are one product.
-    Eigen::MatrixXd tl_all(N * n, n);
-    for (int i = 0; i < N; ++i) tl_all.middleRows(n * i, n) = rows[i].tl;
     Eigen::MatrixXd jump(N, n);
     Eigen::VectorXd mass(n), pre_all(N * n);
     auto decide = [&](const Eigen::VectorXd& m, const Eigen::VectorXd& g) {
@@ -383,7 +380,7 @@ class Backlash : public EffectT<Backlash> {
     std::vector<int> order(kDesign);  // the design's points, after the file's (tried[0])
     for (int i = 0; i < kDesign; ++i) order[i] = i + 1;
     std::partial_sort(order.begin(), order.begin() + kStarts, order.end(),
-                      [&](int a, int b) { return tried[a].gain > tried[b].gain; });
+                      [&](int u, int v) { return tried[u].gain > tried[v].gain; });
     std::vector<std::pair<Eigen::VectorXd, double>> starts;
     for (int st = 0; st < kStarts; ++st)
       starts.emplace_back(tried[order[st]].m, tried[order[st]].gain);
@@ -394,8 +391,8 @@ class Backlash : public EffectT<Backlash> {
         for (int d = 0; d < dims; ++d) {
           const int k = links[d];
           double keep = m(k);
-          for (int t = 0; t < kGrid; ++t) {
-            m(k) = kMassLow + (kMassHigh - kMassLow) * t / (kGrid - 1);
+          for (int step = 0; step < kGrid; ++step) {
+            m(k) = kMassLow + (kMassHigh - kMassLow) * step / (kGrid - 1);
             const double g = evaluate(m);
             if (g > here * (1 + 1e-12)) {
               here = g;
@@ -431,15 +428,15 @@ class Backlash : public EffectT<Backlash> {
         double wall[2];
         for (int side = 0; side < 2; ++side) {
           Eigen::VectorXd m = best_m;
-          double in = best_m(k), out = side ? kMassHigh : kMassLow;
-          m(k) = out;
+          double in = best_m(k), beyond = side ? kMassHigh : kMassLow;
+          m(k) = beyond;
           if (in_best_cell(m)) {
-            wall[side] = out;
+            wall[side] = beyond;
             continue;
           }
           for (int it = 0; it < 12; ++it) {
-            m(k) = 0.5 * (in + out);
-            (in_best_cell(m) ? in : out) = m(k);
+            m(k) = 0.5 * (in + beyond);
+            (in_best_cell(m) ? in : beyond) = m(k);
           }
           wall[side] = in;
         }
@@ -453,11 +450,11 @@ class Backlash : public EffectT<Backlash> {
     // than c times the residual variance, with the decided value; as the box spanning them.
     const double c = threshold_lr_critical(0.05) * var;
     for (const int k : links) out.lower(k) = out.upper(k) = out.m(k);
-    for (const Tried& t : tried)
-      if (best - t.gain <= c)
+    for (const Tried& point : tried)
+      if (best - point.gain <= c)
         for (const int k : links) {
-          out.lower(k) = std::min(out.lower(k), t.m(k));
-          out.upper(k) = std::max(out.upper(k), t.m(k));
+          out.lower(k) = std::min(out.lower(k), point.m(k));
+          out.upper(k) = std::max(out.upper(k), point.m(k));
         }
     // The turn of each joint's lumped centre of mass (a centre of mass off the file's line,
     // which no mass reproduces): the range over which the decided masses' fit stays in the set.
@@ -466,9 +463,9 @@ class Backlash : public EffectT<Backlash> {
     constexpr int kTurns = 12;  // g on a grid of steps 2u/12 = 0.05
     for (int j = 0; j < n; ++j) {
       double glo = 0.0, ghi = 0.0;
-      for (int t = 0; t <= kTurns; ++t) {
+      for (int step = 0; step <= kTurns; ++step) {
         Eigen::VectorXd g = none;
-        g(j) = -kMassUncertainty + 2.0 * kMassUncertainty * t / kTurns;
+        g(j) = -kMassUncertainty + 2.0 * kMassUncertainty * step / kTurns;
         decide(out.m, g);
         if (best - gain() <= c) {
           glo = std::min(glo, g(j));
