@@ -90,6 +90,8 @@ class Backlash : public EffectT<Backlash> {
   static constexpr double kMassLow = -1.0;
   static constexpr double kMassHigh = 1.0;
   static constexpr double kMassUncertainty = 0.3;
+  /// What a robot file tells of a link's mass: within half of it (one standard deviation).
+  static constexpr double kMassPrior = 0.5;
 
   template <typename T>
   void joint_t(const T* p, EvalState<T>& s) const {
@@ -151,9 +153,9 @@ class Backlash : public EffectT<Backlash> {
   /// (weighted least squares in their coefficients and b) over m in the box [-1, 1]^L of the L
   /// links with mass: the decisions, hence the fit, change only where a row's threshold is
   /// crossed, so no derivative finds them. A low-discrepancy design of the box, then coordinate
-  /// sweeps from its best points. The file's masses (m = 0) stand unless the data reject
-  /// them. The estimate m and its confidence box [lower, upper], and the range of each joint's
-  /// turn (NaN without data).
+  /// sweeps from its best points, maximising the posterior with the file's masses as the
+  /// prior. The file's masses (m = 0) stand unless the data reject them. The estimate m and its
+  /// confidence box [lower, upper], and the range of each joint's turn (NaN without data).
   struct Preload {
     Eigen::VectorXd m, lower, upper, turn_lower, turn_upper;
   };
@@ -377,15 +379,26 @@ class Backlash : public EffectT<Backlash> {
         m(links[d]) = kMassLow + (kMassHigh - kMassLow) * radical_inverse(i, kPrimes[d]);
       evaluate(m);
     }
+    // Many cells fit the rows about alike, and the one with the smallest residual is often far
+    // from the file's masses and decides new poses worse: the search maximises the posterior
+    // instead, the file's masses as a Gaussian prior of each m_k with standard deviation
+    // kMassPrior, the fit's likelihood with the residual variance of the design's best point.
+    double best_design = at_file;
+    for (const Tried& point : tried) best_design = std::max(best_design, point.gain);
+    const double prior_weight = (rss0 - best_design) / std::max(dof, 1) / (kMassPrior * kMassPrior);
+    auto score = [&](const Eigen::VectorXd& m, double g) {
+      return g - prior_weight * m.squaredNorm();
+    };
     std::vector<int> order(kDesign);  // the design's points, after the file's (tried[0])
     for (int i = 0; i < kDesign; ++i) order[i] = i + 1;
-    std::partial_sort(order.begin(), order.begin() + kStarts, order.end(),
-                      [&](int u, int v) { return tried[u].gain > tried[v].gain; });
+    std::partial_sort(order.begin(), order.begin() + kStarts, order.end(), [&](int u, int v) {
+      return score(tried[u].m, tried[u].gain) > score(tried[v].m, tried[v].gain);
+    });
     std::vector<std::pair<Eigen::VectorXd, double>> starts;
     for (int st = 0; st < kStarts; ++st)
-      starts.emplace_back(tried[order[st]].m, tried[order[st]].gain);
+      starts.emplace_back(tried[order[st]].m, score(tried[order[st]].m, tried[order[st]].gain));
     Eigen::VectorXd best_m = none;
-    double best = at_file;
+    double best_score = at_file;
     for (auto& [m, here] : starts) {
       for (int sweep = 0; sweep < kSweeps; ++sweep)
         for (int d = 0; d < dims; ++d) {
@@ -393,19 +406,21 @@ class Backlash : public EffectT<Backlash> {
           double keep = m(k);
           for (int step = 0; step < kGrid; ++step) {
             m(k) = kMassLow + (kMassHigh - kMassLow) * step / (kGrid - 1);
-            const double g = evaluate(m);
-            if (g > here * (1 + 1e-12)) {
+            const double g = score(m, evaluate(m));
+            if (g > here + 1e-12 * std::abs(here)) {
               here = g;
               keep = m(k);
             }
           }
           m(k) = keep;
         }
-      if (here > best * (1 + 1e-12)) {
-        best = here;
+      if (here > best_score + 1e-12 * std::abs(best_score)) {
+        best_score = here;
         best_m = m;
       }
     }
+    decide(best_m, none);
+    const double best = gain();
     // The file's masses stand unless the data reject them: the drop of the residual sum of
     // squares, in units of the residual variance, against the chi2(1) quantile at alpha /
     // (number of points tried) (Bonferroni: the search picks the best of them; alpha = 5 %).
