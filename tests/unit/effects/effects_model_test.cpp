@@ -47,12 +47,20 @@ TEST(Effects, RegistryHasEveryEffectWithTexts) {
 }
 
 TEST(Effects, LinkKeepsOnlyDirectionsTheJointsCannotAbsorb) {
-  // Upper arm: bending out of plane and torsion; forearm: torsion is joint 4's axis, dropped.
+  // Per link the two axes perpendicular to its joint, less one parallel to the next joint:
+  // column, one (the other is joint 2's); upper arm, bending out of plane and torsion;
+  // forearm, one (torsion is joint 4's axis); wrist links, one each. Only the upper arm's and
+  // forearm's are always fitted; the others are optional terms.
   const RobotModel robot = test::rokae();
   DeflectionModel m(robot, {"link"});
-  std::vector<std::string> names;
-  for (const auto& p : m.effects()[0]->parameters()) names.push_back(p.name);
-  EXPECT_EQ(names, (std::vector<std::string>{"c_link2_x", "c_link2_y", "c_link3_x"}));
+  std::vector<std::string> names, always;
+  for (const auto& p : m.effects()[0]->parameters()) {
+    names.push_back(p.name);
+    if (!p.optional_term) always.push_back(p.name);
+  }
+  EXPECT_EQ(names, (std::vector<std::string>{"c_link1_x", "c_link2_x", "c_link2_y", "c_link3_x",
+                                             "c_link4_x", "c_link5_x"}));
+  EXPECT_EQ(always, (std::vector<std::string>{"c_link2_x", "c_link2_y", "c_link3_x"}));
 }
 
 TEST(Effects, NullParametersSwitchEveryEffectOff) {

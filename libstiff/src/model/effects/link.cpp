@@ -11,15 +11,17 @@ namespace {
 /// joint between joints i and i+1: d += c (u x (P - o)) (u x (L - o) . F + u . M).
 /// Candidates per link are the two axes perpendicular to joint axis i (bending out of the
 /// link's plane and torsion); a candidate parallel to joint axis i+1 is dropped because that
-/// joint's compliance absorbs it (Klimchik's model reduction). Links 2 and 3 (upper arm and
-/// forearm) carry springs.
+/// joint's compliance absorbs it (Klimchik's model reduction). Every link between two joints
+/// carries springs; those of the upper arm and forearm (links 2 and 3, the long castings) are
+/// the common case and are always fitted, the others (the column, the wrist) are optional
+/// terms (ParameterSpec::optional_term) that a fit keeps only when the data support them.
 class LinkCompliance : public EffectT<LinkCompliance> {
  public:
   explicit LinkCompliance(const EffectSetup& s) {
     const RobotModel& robot = *s.robot;
     const int n = robot.dof();
     const ChainState c0 = robot.chain(Eigen::VectorXd::Zero(n));
-    for (int link = 2; link <= std::min(3, n - 1); ++link) {
+    for (int link = 1; link <= n - 1; ++link) {
       const Eigen::Matrix3d r = c0.link[link - 1].block<3, 3>(0, 0);
       const Eigen::Vector3d a = r.transpose() * c0.axis.col(link - 1);  // axis i, link frame
       const Eigen::Vector3d next = r.transpose() * c0.axis.col(link);   // axis i+1
@@ -31,24 +33,35 @@ class LinkCompliance : public EffectT<LinkCompliance> {
       const char* label[2] = {"x", "y"};
       for (int k = 0; k < 2; ++k) {
         if (std::abs(cand[k].dot(next)) > 0.95) continue;  // collinear with joint i+1
+        const bool arm = link == 2 || link == 3;
+        if (arm) common_.push_back(static_cast<int>(springs_.size()));
         springs_.push_back({link - 1, cand[k]});
-        params_.push_back(
+        ParameterSpec p =
             effects::parameter("c_link" + std::to_string(link) + "_" + label[k], "rad/(N*m)",
                                "compliance of a virtual rotational spring at the root of link " +
                                    std::to_string(link) + " about its frame's " + label[k] +
                                    " axis (bending or torsion of the link)",
-                               0.0, 1e-2, 3e-6, 0.0, 1e-6));
+                               0.0, 1e-2, 3e-6, 0.0, 1e-6);
+        p.optional_term = !arm;
+        params_.push_back(p);
       }
     }
   }
   const std::string& name() const override { return name_; }
+  /// The upper arm and forearm alone, the common case, are scored on their own too.
+  std::vector<std::vector<int>> sub_forms() const override {
+    if (common_.empty() || common_.size() == springs_.size()) return {};
+    return {common_};
+  }
   bool example_parameters(const Eigen::VectorXd& /*c*/, double* p) const override {
-    for (int k = 0; k < size(); ++k) p[k] = 1.0 / 3e5;  // k = 3e5 N*m/rad, a stiff casting
+    for (int k = 0; k < size(); ++k) p[k] = 0.0;
+    for (int k : common_) p[k] = 1.0 / 3e5;  // k = 3e5 N*m/rad, a stiff casting
     return true;
   }
   std::string description() const override {
-    return "link compliance (virtual joint method): rotational springs in links 2 and 3 about "
-           "the axes the joints cannot absorb, d += c_v (u x (P-o)) (u x (L-o) . F)";
+    return "link compliance (virtual joint method): rotational springs in the links about the "
+           "axes the joints cannot absorb, d += c_v (u x (P-o)) (u x (L-o) . F); the column's "
+           "and the wrist's kept only when the data support them";
   }
   std::string reference() const override {
     return "Pashkevich, Chablat & Wenger, Mech. Mach. Theory 44(5), 2009; Klimchik et al., "
@@ -138,6 +151,7 @@ class LinkCompliance : public EffectT<LinkCompliance> {
   };
   std::string name_ = "link";
   std::vector<Spring> springs_;
+  std::vector<int> common_;  ///< the springs of links 2 and 3
   std::vector<ParameterSpec> params_;
 };
 
