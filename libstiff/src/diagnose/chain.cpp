@@ -215,7 +215,10 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
       return false;
     }
     *why = "after adding " + added + ": " + deeper;
-    *weak = deeper_weak && (floor || floor_weak);
+    // What is left here is marginal evidence against the chain when it is at the floor, or
+    // when the validation poses confirmed the next step: then this level's misfit is that
+    // step's, and only the evidence beyond it, marginal, remains.
+    *weak = deeper_weak && (floor || floor_weak || levels[i + 1].validated);
     return false;
   }
   if (floor && marginal) return true;
