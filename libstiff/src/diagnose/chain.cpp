@@ -89,9 +89,9 @@ double comparable_validation(const ModelQuality& q) {
 bool Chain::explained_by_chain(
     size_t i, int depth, std::string* why, std::string* top_why, bool* weak) {
   static constexpr size_t kAlternatives = 3;
-  std::string first;
+  std::string first, alt_why;
   bool first_weak = false, top_validated = false, top_refuted = false;
-  size_t best = SIZE_MAX;
+  size_t best = SIZE_MAX, alt = SIZE_MAX;
   // A copy: levels grows (and may move) while the chains are built.
   const std::string top_effect = levels[i].scores.empty() ? "" : levels[i].scores[0].effect;
   double best_rms = INFINITY, top_rms = INFINITY;
@@ -117,9 +117,15 @@ bool Chain::explained_by_chain(
     // for the rival: the top's own chain asked whether the rival is needed after the top, and
     // the data did not say so; the rival's first step only took up part of the top's signal.
     const auto& chain_effects = levels.back().a.effects;
-    if (explains && k > 0 &&
-        std::find(chain_effects.begin(), chain_effects.end(), top_effect) != chain_effects.end())
-      continue;
+    const bool needs_top =
+        std::find(chain_effects.begin(), chain_effects.end(), top_effect) != chain_effects.end();
+    if (explains && k > 0 && needs_top) continue;
+    // A rival whose step the validation poses confirm, with only marginal evidence beyond it:
+    // the lead when the top's chain is refuted outright.
+    if (!explains && k > 0 && wk && levels[i].validated && !needs_top && alt == SIZE_MAX) {
+      alt = k;
+      alt_why = w;
+    }
     if (explains) {
       const ModelQuality& end = levels.back().a.quality;
       const double rms = end.has_validation ? comparable_validation(end) : 0.0;
@@ -137,11 +143,13 @@ bool Chain::explained_by_chain(
   levels.resize(i + 1);
   levels[i].rival.clear();
   if (best == SIZE_MAX) {
-    levels[i].pick = 0;
-    levels[i].validated = top_validated;
-    levels[i].refuted = top_refuted;
-    *why = first;
-    if (weak) *weak = first_weak;
+    const bool lead_alt = !first_weak && alt != SIZE_MAX;
+    levels[i].pick = lead_alt ? alt : 0;
+    levels[i].validated = lead_alt || top_validated;
+    levels[i].refuted = !lead_alt && top_refuted;
+    *why = lead_alt ? alt_why : first;
+    if (top_why) *top_why = lead_alt ? first : "";
+    if (weak) *weak = lead_alt || first_weak;
     return false;
   }
   // The top keeps its place unless a rival chain predicts the validation poses significantly
@@ -287,23 +295,27 @@ std::string Chain::decide(size_t i, std::string* why) {
                      reason + ")");
     // Strong evidence for the top in the calibration, and only marginal evidence against its
     // chain: neither confirmed nor refuted, so no claim either way.
+    // The lead: the top, or a rival whose confirmed step replaced a top the validation poses
+    // refuted (explained_by_chain).
+    const CandidateScore& lead = L.scores[L.pick];
     const std::string evidence =
-        top.effect + " explains part of the misfit (partial F = " + num(top.statistic, 4) +
-        ", p_adj = " + num(top.p_adjusted, 2) + ") but " + reason;
+        (L.pick > 0 ? top.effect + " does not validate (" + top_reason + "); " : "") + lead.effect +
+        " explains part of the misfit (partial F = " + num(lead.statistic, 4) +
+        ", p_adj = " + num(lead.p_adjusted, 2) + ") but " + reason;
     if (weak) {
       levels[i].tentative = levels[i].validated;
-      levels[i].group = {top.effect};
-      levels[i].experiment = "more validation poses, to confirm or refute " + top.effect +
+      levels[i].group = {lead.effect};
+      levels[i].experiment = "more validation poses, to confirm or refute " + lead.effect +
                              " on new data (the model with and without it as the candidates); " +
                              experiment_for(*cx, levels[i].group);
       *why = evidence +
              (levels[i].validated
                   ? "; that evidence is marginal (p >= alpha/10, or a fit the validation poses "
                     "refute): this data cannot tell whether " +
-                        top.effect +
+                        lead.effect +
                         " is what is missing and the rest chance, or an effect outside the "
                         "candidate list is at work"
-                  : ", though not significantly worse: " + top.effect +
+                  : ", though not significantly worse: " + lead.effect +
                         " may be real but too small for this data to pay for its parameters on "
                         "new poses, or stand in for an effect outside the candidate list");
       return "ambiguous";
