@@ -772,6 +772,42 @@ TEST(DiagnoseHonesty, LeftOutEffectIsUnexplainedNotMisattributed) {
     }
 }
 
+// An effect outside the library, added to the virtual robot's data by hand: the pedestal tilts
+// about the base x and y axes under the load's moment about the base (6e4 and 9e4 N*m/rad, a
+// stand that is not grouted). With the noise stated, the chain that mimics it on the
+// calibration poses (link, then a force-frame rotation) fits them within the noise allowance
+// but predicts the validation poses 1.3 times the floor: the validation rows' own chi-square
+// refutes it where, pooled with that fit, they passed (claimed in 3 of these 4 seeds). Where the
+// chain predicts the new poses within 1.12 times the floor (one seed) this data cannot tell the
+// tilt from link compliance; a stiffer pedestal (2e5 and 3e5 N*m/rad) is named link compliance,
+// the model with it predicting the new poses at 0.97-1.23 times the floor.
+TEST(DiagnoseHonesty, PedestalTiltIsNotClaimed) {
+  const RobotModel robot = test::rokae();
+  const Eigen::Vector3d c(1.0 / 6.0e4, 1.0 / 9.0e4, 0.0);
+  auto tilt = [&](Dataset& data) {
+    for (auto& m : data.rows) {
+      const ChainState chain = robot.chain(m.q);
+      const Eigen::Vector3d load = robot.point_position(chain, robot.load_point);
+      const Eigen::Vector3d point = robot.point_position(chain, robot.measured_point);
+      const Eigen::Vector3d moment = load.cross(m.force) + m.moment;  // about the base origin
+      m.displacement += c.cwiseProduct(moment).cross(point);
+    }
+  };
+  int claims = 0;
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
+    Scenario s = make_scenario("joint", seed);
+    tilt(s.calib);
+    tilt(s.valid);
+    const Diagnosis d = run(s);
+    print("pedestal tilt", seed, d);
+    claims += d.verdict == "missing_effect" || d.verdict == "adequate";
+    if (d.verdict == "unexplained") {
+      EXPECT_FALSE(d.unexplained_signature.empty());
+    }
+  }
+  EXPECT_LE(claims, 1);
+}
+
 // The nonlinear reducer in the forms the library's example does not use: hardening about the
 // unloaded state (the compliance of joints 2 and 3 falls by half of c per 100 N*m of load
 // torque) and softening about the gravity preload (a stiff zone, e = -0.4 c). Found as
