@@ -360,10 +360,9 @@ stiff_status stiff_model_create(stiff_model** out,
     const FitResult& f = fit_of(fit);
     auto m = std::make_unique<stiff_model>();
     m->robot = robot->model;
-    m->fit = f;
     m->model = std::make_unique<DeflectionModel>(m->robot, f.model, nullptr, f.sessions);
-    check_fit_applies(f, m->robot, *m->model, "");
-    m->theta = f.theta();
+    m->fit = fit_for_model(f, m->robot, *m->model, "");
+    m->theta = m->fit.theta();
     *out = m.release();
     return STIFF_OK;
   });

@@ -461,7 +461,7 @@ void export_fmu(const RobotModel& robot,
                           "' is not a C identifier");
   if (path.empty()) throw InvalidArgument("fmu export: output path is empty");
   const DeflectionModel model(robot, fit.model, nullptr, fit.sessions);
-  check_fit_applies(fit, robot, model, "fmu export");
+  const FitResult conformed = fit_for_model(fit, robot, model, "fmu export");
   if (options.array_inputs && options.fmi_version != 3)
     throw InvalidArgument(
         "fmu export: array inputs need FMI 3 (fmi_version = 3); FMI 2 has "
@@ -471,7 +471,8 @@ void export_fmu(const RobotModel& robot,
   // arms (a wrist singularity) any load leaves the compensation unconverged from the first read.
   const Eigen::VectorXd home = home_pose(robot);
   for (auto& v : vars) {
-    if (v.role == Role::parameter) v.start = fit.parameters[static_cast<size_t>(v.index)].value;
+    if (v.role == Role::parameter)
+      v.start = conformed.parameters[static_cast<size_t>(v.index)].value;
     if (v.role == Role::q) v.start = home(v.index);
     if (v.role == Role::q_array) v.starts.assign(home.data(), home.data() + home.size());
   }

@@ -78,8 +78,7 @@ RobotModel calibrated_robot(const RobotModel& robot,
     }
     data.rows.push_back(m);
   }
-  check_fit_applies(fit, robot, model, "calibrated robot");
-  const Eigen::VectorXd theta = fit.theta();
+  const Eigen::VectorXd theta = fit_for_model(fit, robot, model, "calibrated robot").theta();
   const auto ctx = model.contexts(data);
 
   Eigen::VectorXd dq = Eigen::VectorXd::Zero(n);

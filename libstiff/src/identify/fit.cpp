@@ -298,13 +298,61 @@ double stated_noise_m(const Dataset& data) {
   return 0.0;
 }
 
+FitResult fit_for_model(const FitResult& fit,
+                        const RobotModel& robot,
+                        const DeflectionModel& model,
+                        const std::string& what) {
+  const int p = model.parameter_count();
+  if (static_cast<int>(fit.parameters.size()) < p) {
+    std::vector<FitParameter> params;
+    std::vector<int> from;  // the fit's index of each parameter, -1 for an inserted one
+    size_t j = 0;
+    for (int k = 0; k < p; ++k) {
+      const ParameterSpec& sp = model.spec(k);
+      const std::string& effect = model.owner(k).name();
+      if (j < fit.parameters.size() && fit.parameters[j].effect == effect &&
+          fit.parameters[j].name == sp.name) {
+        params.push_back(fit.parameters[j]);
+        from.push_back(static_cast<int>(j++));
+      } else if (sp.optional_term) {
+        FitParameter q;
+        q.effect = effect;
+        q.name = sp.name;
+        q.unit = sp.unit;
+        q.meaning = sp.meaning;
+        q.value = sp.null_value;
+        q.standard_error = NAN;
+        q.identified = false;
+        params.push_back(q);
+        from.push_back(-1);
+      } else {
+        break;  // not a missing optional term: check_fit_applies names the mismatch
+      }
+    }
+    if (static_cast<int>(params.size()) == p && j == fit.parameters.size()) {
+      FitResult out = fit;
+      out.parameters = std::move(params);
+      if (fit.covariance.size() > 0) {
+        out.covariance = Eigen::MatrixXd::Constant(p, p, NAN);
+        for (int a = 0; a < p; ++a)
+          for (int b = 0; b < p; ++b)
+            if (from[a] >= 0 && from[b] >= 0)
+              out.covariance(a, b) = fit.covariance(from[a], from[b]);
+      }
+      check_fit_applies(out, robot, model, what);
+      return out;
+    }
+  }
+  check_fit_applies(fit, robot, model, what);
+  return fit;
+}
+
 Eigen::MatrixXd predict_dataset(const RobotModel& robot,
                                 const FitResult& fit,
                                 const Dataset& data) {
   validate_dataset(data, robot.dof(), false);
   DeflectionModel model(robot, fit.model, &data);
-  check_fit_applies(fit, robot, model, "predict");
-  const Eigen::VectorXd theta = fit.theta();
+  const Eigen::VectorXd theta = fit_for_model(fit, robot, model, "predict").theta();
   Eigen::MatrixXd out(data.rows.size(), 6);
   const auto ctx = model.contexts(data);  // the one time axis (model.cpp)
   for (size_t r = 0; r < data.rows.size(); ++r)

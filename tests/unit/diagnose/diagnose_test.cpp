@@ -859,7 +859,9 @@ Diagnosis expect_found(const std::string& effect,
   print(effect + " " + parameter, seed, d);
   EXPECT_TRUE(found(d, effect)) << parameter << ": " << d.summary;
   EXPECT_TRUE(d.after_valid) << parameter;
-  if (d.after_valid) EXPECT_LE(validation_ratio(d), 1.25) << parameter;
+  if (d.after_valid) {
+    EXPECT_LE(validation_ratio(d), 1.25) << parameter;
+  }
   return d;
 }
 

@@ -7,6 +7,7 @@
 
 #include "../effects/effect_truths.hpp"
 #include "stiff/error.hpp"
+#include "stiff/identify/fit.hpp"
 #include "stiff/identify/identify.hpp"
 
 namespace stiff {
@@ -92,6 +93,50 @@ TEST(IdentifyCeres, CommonForceScaleIsNamedAndHeld) {
         w.find("force_frame.scale_x") != std::string::npos)
       named = true;
   EXPECT_TRUE(named) << "warning must name the combination";
+}
+
+// A fit written before its effect gained optional terms (link's column and wrist springs) still
+// applies: the terms it lacks enter at their null value, held, and it predicts as the same fit
+// with them written at 0 does. A fit that lacks a term that is not optional is refused.
+TEST(FitCompatibility, AFitWithoutLaterOptionalTermsStillApplies) {
+  const RobotModel robot = test::rokae();
+  const Truth truth = test::effect_truth("link", robot);
+  const Dataset data = simulated(truth, 3);
+  FitResult full = identify(robot, data, truth.effects);
+  FitResult old = full;
+  old.parameters.clear();
+  std::vector<int> kept;
+  for (size_t k = 0; k < full.parameters.size(); ++k) {
+    const auto& p = full.parameters[k];
+    const bool later = p.effect == "link" && p.name != "c_link2_x" && p.name != "c_link2_y" &&
+                       p.name != "c_link3_x";
+    if (later) {
+      full.parameters[k].value = 0.0;  // as the older fit holds them
+      continue;
+    }
+    old.parameters.push_back(p);
+    kept.push_back(static_cast<int>(k));
+  }
+  ASSERT_EQ(old.parameters.size() + 3, full.parameters.size());
+  old.covariance = Eigen::MatrixXd(kept.size(), kept.size());
+  for (size_t a = 0; a < kept.size(); ++a)
+    for (size_t b = 0; b < kept.size(); ++b)
+      old.covariance(a, b) = full.covariance(kept[a], kept[b]);
+  const FitResult back = fit_from_json(fit_to_json(old), "old_fit.json");
+  const Eigen::MatrixXd a = predict_dataset(robot, back, data);
+  const Eigen::MatrixXd b = predict_dataset(robot, full, data);
+  EXPECT_LT((a - b).cwiseAbs().maxCoeff(), 1e-15);
+  const DeflectionModel model(robot, full.model);
+  const FitResult conformed = fit_for_model(back, robot, model, "test");
+  ASSERT_EQ(conformed.parameters.size(), full.parameters.size());
+  for (size_t k = 0; k < full.parameters.size(); ++k)
+    EXPECT_EQ(conformed.parameters[k].name, full.parameters[k].name);
+  EXPECT_FALSE(conformed.parameters[6].identified);  // link.c_link1_x, inserted
+  EXPECT_TRUE(std::isnan(conformed.covariance(6, 6)));
+  FitResult broken = old;
+  broken.parameters.erase(broken.parameters.begin() + 6);  // link.c_link2_x: not optional
+  broken.covariance = Eigen::MatrixXd();
+  EXPECT_THROW(predict_dataset(robot, broken, data), InvalidArgument);
 }
 
 // 5 % gross tracker errors of 0.5 mm (50 sigma): Huber keeps the validation error at the

@@ -107,6 +107,15 @@ void check_fit_applies(const FitResult& fit,
                        const DeflectionModel& model,
                        const std::string& what);
 
+/// The fit as this model takes it: every optional term of the model that the fit lacks (a term
+/// its effect gained after the fit was written, ParameterSpec::optional_term) inserted at its
+/// null value, held and without a variance, as a fit that left the term out holds it; then
+/// checked as check_fit_applies does, which throws what it throws.
+FitResult fit_for_model(const FitResult& fit,
+                        const RobotModel& robot,
+                        const DeflectionModel& model,
+                        const std::string& what);
+
 /// The robot with the fit's pose-independent geometry built into its description: the joint
 /// offsets and kinematic errors into each joint's fixed transform (pre_j <- pre_j E_j
 /// Rot(a_j, dq_j), the corrected chain of the model), the tool offset into the measured point;
