@@ -1,0 +1,109 @@
+"""bench/diagnosis_score.py, the scoring harness of the diagnosis: its rules, and a run on a
+small scenario directory of the same layout as the independent development suite (folders with
+calib.csv, valid.csv and truth.json; index.json), made here by the virtual robot."""
+import importlib.util
+import json
+import subprocess
+import sys
+
+import pytest
+
+from stiff.cli import main
+
+PAPER_K = [5.0914e4, 1.6382e4, 3.1311e4, 7.7911e3, 5.6136e3, 4.0e3]
+TRACKER_SIGMA_UM = 10.0
+
+
+@pytest.fixture(scope="module")
+def score(root):
+    spec = importlib.util.spec_from_file_location("diagnosis_score",
+                                                  root / "bench" / "diagnosis_score.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_classify_follows_the_documented_rules(score):
+    def run(expected, verdict, final="joint", group=(), suggested=None, valid_m=None):
+        truth = {"expected": expected, "true_class_refit_valid_um": {"axis_um": 20.0}}
+        d = {"verdict": verdict, "final_model": final, "ambiguous_group": list(group),
+             "suggested_model": suggested,
+             "steps": [{"validation_rms_m": valid_m}] if valid_m else []}
+        return score.classify(truth, d)
+
+    one = {"verdict": "missing_effect", "effects": ["point_offset"]}
+    assert run(one, "missing_effect", suggested="joint+point_offset")[0] == "right"
+    assert run(one, "missing_effect", suggested="joint+link")[0] == "wrong"
+    assert run(one, "ambiguous", group=["point_offset", "tool_compliance"])[0] == "right"
+    assert run(one, "ambiguous", group=["link"])[0] == "ambiguous"
+    assert run(one, "unexplained")[0] == "miss"
+    outside = {"verdict": "unexplained"}
+    assert run(outside, "unexplained")[0] == "right"
+    assert run(outside, "ambiguous", group=["link"])[0] == "right"
+    assert run(outside, "missing_effect", suggested="joint+link")[0] == "wrong"
+    control = {"verdict": "adequate"}
+    assert run(control, "adequate")[0] == "right"
+    assert run(control, "missing_effect", suggested="joint+drift")[0] == "wrong"
+    both = {"verdict": "missing_effect", "effects": ["point_offset", "backlash"]}
+    assert run(both, "missing_effect", "joint+point_offset+backlash")[0] == "right"
+    assert run(both, "ambiguous", "joint+point_offset+backlash", ["point_offset"])[0] == "partial"
+    assert run(both, "missing_effect", "joint+point_offset")[0] == "partial"
+    # The ratio: the final step's validation RMS over what a right model reaches.
+    assert run(one, "missing_effect", suggested="joint+point_offset",
+               valid_m=25e-6)[4] == pytest.approx(1.25)
+
+
+@pytest.fixture(scope="module")
+def suite(tmp_path_factory):
+    """Two scenarios of 60 calibration and 40 validation poses with the noise stated: an SMR
+    and load point 40 mm off the flange axis, and a control without a hidden effect."""
+    d = tmp_path_factory.mktemp("suite")
+    k = "stiffness_Nm_per_rad: [" + ", ".join(map(str, PAPER_K)) + "]\n"
+    cases = {
+        "g_00": ("g", k + "effects:\n  point_offset: {meas_x: 0.04, load_x: 0.04}\n",
+                 {"verdict": "missing_effect", "effects": ["point_offset"]}),
+        "none_00": ("none", k, {"verdict": "adequate"}),
+    }
+    index = []
+    for name, (kind, truth_yaml, expected) in cases.items():
+        folder = d / "base" / name
+        folder.mkdir(parents=True)
+        (folder / "truth.yaml").write_text(truth_yaml)
+        for csv, count, seed in (("calib.csv", 60, 11), ("valid.csv", 40, 12)):
+            assert main(["simulate", "--robot", "rokae", "--count", str(count), "--seed",
+                         str(seed), "--truth", str(folder / "truth.yaml"), "--tracker-sigma-um",
+                         str(TRACKER_SIGMA_UM), "-o", str(folder / csv)]) == 0
+        # What a right model reaches on new poses is the tracker noise (per axis).
+        (folder / "truth.json").write_text(json.dumps({
+            "type": kind, "expected": expected,
+            "true_class_refit_valid_um": {"axis_um": TRACKER_SIGMA_UM}}))
+        index.append({"path": f"base/{name}", "type": kind})
+    (d / "index.json").write_text(json.dumps(index))
+    return d
+
+
+def test_harness_scores_a_scenario_directory(root, suite, tmp_path):
+    out = tmp_path / "scores.json"
+    p = subprocess.run([sys.executable, str(root / "bench" / "diagnosis_score.py"), "--data",
+                        str(suite), "--sets", "base", "--seeds", "0", "--noise", "both",
+                        "--jobs", "1", "--json", str(out)],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    rows = {(r["path"], r["noise"]): r for r in json.loads(out.read_text())}
+    # Each file states its noise, so each scenario runs with and without the statement.
+    assert set(rows) == {("base/g_00", "given"), ("base/g_00", "unknown"),
+                         ("base/none_00", "given"), ("base/none_00", "unknown")}
+    for key, r in rows.items():
+        assert r["outcome"] == "right", (key, r)
+    for noise in ("given", "unknown"):
+        # The offset found, the model with it predicts new poses within the issue's 1.25 times
+        # what a right model reaches (the tracker noise plus its parameters' prediction error).
+        assert rows[("base/g_00", noise)]["final"] == ["point_offset"]
+        assert rows[("base/g_00", noise)]["ratio"] < 1.25
+    assert "base    g" in p.stdout and "runs in" in p.stdout
+
+
+def test_harness_skips_without_data(root, tmp_path):
+    p = subprocess.run([sys.executable, str(root / "bench" / "diagnosis_score.py"), "--data",
+                        str(tmp_path / "absent")], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0 and "skipped" in p.stdout
