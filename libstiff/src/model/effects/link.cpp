@@ -33,8 +33,6 @@ class LinkCompliance : public EffectT<LinkCompliance> {
       const char* label[2] = {"x", "y"};
       for (int k = 0; k < 2; ++k) {
         if (std::abs(cand[k].dot(next)) > 0.95) continue;  // collinear with joint i+1
-        const bool arm = link == 2 || link == 3;
-        if (arm) common_.push_back(static_cast<int>(springs_.size()));
         springs_.push_back({link - 1, cand[k]});
         ParameterSpec p =
             effects::parameter("c_link" + std::to_string(link) + "_" + label[k], "rad/(N*m)",
@@ -42,7 +40,7 @@ class LinkCompliance : public EffectT<LinkCompliance> {
                                    std::to_string(link) + " about its frame's " + label[k] +
                                    " axis (bending or torsion of the link)",
                                0.0, 1e-2, 3e-6, 0.0, 1e-6);
-        p.optional_term = !arm;
+        p.optional_term = link != 2 && link != 3;
         params_.push_back(p);
       }
     }
@@ -50,12 +48,13 @@ class LinkCompliance : public EffectT<LinkCompliance> {
   const std::string& name() const override { return name_; }
   /// The upper arm and forearm alone, the common case, are scored on their own too.
   std::vector<std::vector<int>> sub_forms() const override {
-    if (common_.empty() || common_.size() == springs_.size()) return {};
-    return {common_};
+    const std::vector<int> arm = arm_springs();
+    if (arm.empty() || arm.size() == springs_.size()) return {};
+    return {arm};
   }
   bool example_parameters(const Eigen::VectorXd& /*c*/, double* p) const override {
     for (int k = 0; k < size(); ++k) p[k] = 0.0;
-    for (int k : common_) p[k] = 1.0 / 3e5;  // k = 3e5 N*m/rad, a stiff casting
+    for (int k : arm_springs()) p[k] = 1.0 / 3e5;  // k = 3e5 N*m/rad, a stiff casting
     return true;
   }
   std::string description() const override {
@@ -123,6 +122,13 @@ class LinkCompliance : public EffectT<LinkCompliance> {
   }
 
  private:
+  // The springs of the upper arm and forearm: those that are not optional terms.
+  std::vector<int> arm_springs() const {
+    std::vector<int> out;
+    for (size_t k = 0; k < params_.size(); ++k)
+      if (!params_[k].optional_term) out.push_back(static_cast<int>(k));
+    return out;
+  }
   // The spring axis u and origin o do not depend on the parameters: kept in double so that
   // automatic differentiation only carries derivatives where they can be non-zero.
   void axis(const ChainState& chain, size_t k, Eigen::Vector3d& u, Eigen::Vector3d& o) const {
@@ -151,7 +157,6 @@ class LinkCompliance : public EffectT<LinkCompliance> {
   };
   std::string name_ = "link";
   std::vector<Spring> springs_;
-  std::vector<int> common_;  ///< the springs of links 2 and 3
   std::vector<ParameterSpec> params_;
 };
 
