@@ -238,6 +238,31 @@ std::string kinematics_digest(const RobotModel& robot) {
   return buf;
 }
 
+FitResult read_fit(const std::string& path) { return fit_from_json(read_text_file(path), path); }
+
+void write_fit(const std::string& path, const FitResult& fit) {
+  write_text_file_atomic(path, fit_to_json(fit));
+}
+
+double stated_noise_m(const Dataset& data) {
+  if (data.has_sigma || data.has_sigma_p) {
+    std::vector<double> s;
+    for (const auto& m : data.rows) s.push_back(m.sigma());
+    std::nth_element(s.begin(), s.begin() + s.size() / 2, s.end());
+    return s[s.size() / 2];
+  }
+  const std::string meta = data.meta("tracker_sigma_m");
+  if (!meta.empty()) {
+    char* end = nullptr;
+    const double v = std::strtod(meta.c_str(), &end);
+    if (end != meta.c_str() && std::isfinite(v) && v > 0) return v;
+  }
+  return 0.0;
+}
+
+namespace {
+/// Throws InvalidArgument (prefixed by `what`) unless the fit applies to this robot and model
+/// as it stands (fit_for_model).
 void check_fit_applies(const FitResult& fit,
                        const RobotModel& robot,
                        const DeflectionModel& model,
@@ -275,28 +300,7 @@ void check_fit_applies(const FitResult& fit,
     }
   }
 }
-
-FitResult read_fit(const std::string& path) { return fit_from_json(read_text_file(path), path); }
-
-void write_fit(const std::string& path, const FitResult& fit) {
-  write_text_file_atomic(path, fit_to_json(fit));
-}
-
-double stated_noise_m(const Dataset& data) {
-  if (data.has_sigma || data.has_sigma_p) {
-    std::vector<double> s;
-    for (const auto& m : data.rows) s.push_back(m.sigma());
-    std::nth_element(s.begin(), s.begin() + s.size() / 2, s.end());
-    return s[s.size() / 2];
-  }
-  const std::string meta = data.meta("tracker_sigma_m");
-  if (!meta.empty()) {
-    char* end = nullptr;
-    const double v = std::strtod(meta.c_str(), &end);
-    if (end != meta.c_str() && std::isfinite(v) && v > 0) return v;
-  }
-  return 0.0;
-}
+}  // namespace
 
 FitResult fit_for_model(const FitResult& fit,
                         const RobotModel& robot,

@@ -99,18 +99,12 @@ double stated_noise_m(const Dataset& data);
 /// points, rounded to 1e-9 m and rad): a fit identified on one robot is refused on another.
 std::string kinematics_digest(const RobotModel& robot);
 
-/// Throws InvalidArgument (prefixed by `what`) unless the fit applies to this robot and model:
-/// the same robot (digest, or name for files without one), the model's parameters by effect and
-/// name in order, every value finite and within its physical range.
-void check_fit_applies(const FitResult& fit,
-                       const RobotModel& robot,
-                       const DeflectionModel& model,
-                       const std::string& what);
-
-/// The fit as this model takes it: every optional term of the model that the fit lacks (a term
-/// its effect gained after the fit was written, ParameterSpec::optional_term) inserted at its
-/// null value, held and without a variance, as a fit that left the term out holds it; then
-/// checked as check_fit_applies does, which throws what it throws.
+/// The fit as this model takes it, checked. Every optional term of the model that the fit lacks
+/// (a term its effect gained after the fit was written, ParameterSpec::optional_term) is
+/// inserted at its null value, held and without a variance, as a fit that left the term out
+/// holds it. Throws InvalidArgument (prefixed by `what`) unless the fit then applies to this
+/// robot and model: the same robot (digest, or name for files without one), the model's
+/// parameters by effect and name in order, every value finite and within its physical range.
 FitResult fit_for_model(const FitResult& fit,
                         const RobotModel& robot,
                         const DeflectionModel& model,
@@ -122,7 +116,7 @@ FitResult fit_for_model(const FitResult& fit,
 /// general convention, named "<name>_calibrated". Effects that depend on the pose or the load
 /// (compliance, gravity, harmonics, temperature) or describe the instrument (registration) are
 /// not part of a robot description: each is named with why in `left_out`. Throws
-/// InvalidArgument unless the fit applies to this robot (check_fit_applies).
+/// InvalidArgument unless the fit applies to this robot (fit_for_model).
 RobotModel calibrated_robot(const RobotModel& robot,
                             const FitResult& fit,
                             std::vector<std::string>* left_out = nullptr);
