@@ -293,8 +293,6 @@ std::string Chain::decide(size_t i, std::string* why) {
     if (!omnibus && top.p_adjusted > alpha / 10)
       return nothing(" (" + top.effect + " reached p_adj = " + num(top.p_adjusted, 2) + " but " +
                      reason + ")");
-    // Strong evidence for the top in the calibration, and only marginal evidence against its
-    // chain: neither confirmed nor refuted, so no claim either way.
     // The lead: the top, or a rival whose confirmed step replaced a top the validation poses
     // refuted (explained_by_chain).
     const CandidateScore& lead = L.scores[L.pick];
@@ -302,6 +300,8 @@ std::string Chain::decide(size_t i, std::string* why) {
         (L.pick > 0 ? top.effect + " does not validate (" + top_reason + "); " : "") + lead.effect +
         " explains part of the misfit (partial F = " + num(lead.statistic, 4) +
         ", p_adj = " + num(lead.p_adjusted, 2) + ") but " + reason;
+    // Strong evidence for the lead in the calibration, and only marginal evidence against its
+    // chain: neither confirmed nor refuted, so no claim either way.
     if (weak) {
       levels[i].tentative = levels[i].validated;
       levels[i].group = {lead.effect};
