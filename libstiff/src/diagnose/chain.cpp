@@ -211,6 +211,9 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
     bool deeper_weak = false;
     if (explained_by_chain(i + 1, depth - 1, &deeper, nullptr, &deeper_weak)) return true;
     if (floor && levels[i + 1].scores[0].p_adjusted > cx->opt->alpha / 10) return true;
+    // At a stated noise floor, a candidate whose calibration gain the validation poses do not
+    // confirm is calibration noise taken up, not structure.
+    if (floor && cx->noise->known && nq.has_validation && !levels[i + 1].validated) return true;
     // The candidate left predicts the new poses significantly worse: what it takes up on the
     // calibration poses does not carry over. That may be a few rows a jump decided on the
     // wrong side, or an effect outside the list that no candidate reproduces: neither a
@@ -289,8 +292,10 @@ std::string Chain::decide(size_t i, std::string* why) {
   std::string reason, top_reason;
   bool weak = false;
   if (!explained_by_chain(i, cx->opt->max_steps, &reason, &top_reason, &weak)) {
-    // A marginal candidate that does not validate on a model at the noise floor: no claim.
-    if (!omnibus && top.p_adjusted > alpha / 10)
+    // A marginal candidate that does not validate on a model at the noise floor, or any
+    // candidate the validation poses do not confirm on a model at a stated floor: no claim.
+    if (!omnibus && (top.p_adjusted > alpha / 10 ||
+                     (known && q.has_validation && !levels[i].validated)))
       return nothing(" (" + top.effect + " reached p_adj = " + num(top.p_adjusted, 2) + " but " +
                      reason + ")");
     // The lead: the top, or a rival whose confirmed step replaced a top the validation poses

@@ -1003,24 +1003,26 @@ Diagnosis auto_loop(const Truth& calib_truth,
 // validation session, on a robot with link compliance (both sessions): after link, the
 // force-frame candidate is significant on the calibration poses and predicts the validation
 // poses worse. Such a candidate neither confirms nor refutes the step the validation poses
-// confirmed: the verdict names link (alone in an ambiguous group, or as missing), never
-// `unexplained`, and `--auto` keeps link in the final model with the validation error lower.
-// (Without that rule the first seed already ended `unexplained` with the model `joint`.)
+// confirmed: the verdict names link, never `unexplained`, and `--auto` keeps link in the final
+// model with the validation error lower. (Without that rule the first seed already ended
+// `unexplained` with the model `joint`.) With the noise stated and link's model at the floor,
+// the candidate the validation poses do not confirm is calibration noise taken up: link is
+// named `missing_effect` (before that rule 3 of 4 seeds left it `ambiguous`).
 TEST(DiagnoseAuto, ACandidateTheValidationRefutesDoesNotUndoAConfirmedStep) {
   const auto [calib_truth, valid_truth] = clocked_in_calibration_only({"joint", "link"});
-  int named = 0, refuted = 0;
+  int kept = 0, claimed = 0;
   for (uint64_t seed = 1; seed <= 4; ++seed) {
     const Diagnosis d = auto_loop(calib_truth, valid_truth, seed, 0);
     print("link, force frame in calibration only", seed, d);
-    named += found(d, "link");
-    refuted += d.summary.find("validation poses refute") != std::string::npos;
+    kept += found(d, "link");
+    claimed += d.verdict == "missing_effect" && named(d) == "link";
     EXPECT_NE(d.verdict, "unexplained") << d.summary;
     EXPECT_NE(d.final_model.find("link"), std::string::npos) << d.final_model;
     ASSERT_GE(d.steps.size(), 2u);
     EXPECT_LT(d.steps[1].quality.validation_rms_m, d.steps[0].quality.validation_rms_m);
   }
-  EXPECT_EQ(named, 4);
-  EXPECT_GE(refuted, 1);
+  EXPECT_EQ(kept, 4);
+  EXPECT_GE(claimed, 3);
 }
 
 // The same one level deeper: an SMR offset and link compliance in both sessions, the force
