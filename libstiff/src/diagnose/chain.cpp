@@ -294,8 +294,8 @@ std::string Chain::decide(size_t i, std::string* why) {
   if (!explained_by_chain(i, cx->opt->max_steps, &reason, &top_reason, &weak)) {
     // A marginal candidate that does not validate on a model at the noise floor, or any
     // candidate the validation poses do not confirm on a model at a stated floor: no claim.
-    if (!omnibus && (top.p_adjusted > alpha / 10 ||
-                     (known && q.has_validation && !levels[i].validated)))
+    if (!omnibus &&
+        (top.p_adjusted > alpha / 10 || (known && q.has_validation && !levels[i].validated)))
       return nothing(" (" + top.effect + " reached p_adj = " + num(top.p_adjusted, 2) + " but " +
                      reason + ")");
     // The lead: the top, or a rival whose confirmed step replaced a top the validation poses
