@@ -204,6 +204,11 @@ struct Chain {
   /// Level i+1 (computed on demand), or null when level i claims nothing or the re-fit fails.
   const Level* next(size_t i);
 
+  /// Does adding one of the members of level L's ambiguity group lower the validation error?
+  /// (A group that does not separate is not followed by the chain; this asks whether what it
+  /// takes up on the calibration poses carries over at all.)
+  bool group_validates(const Level& L) const;
+
   /// Is the residual of level L at the noise floor? With a stated noise: the chi-square test,
   /// allowing for the uncertainty of the stated level. Without: a model that explains the data
   /// predicts the validation poses about as well as it fits (F test of the two mean squares),

@@ -86,6 +86,20 @@ double comparable_validation(const ModelQuality& q) {
 }
 }  // namespace
 
+bool Chain::group_validates(const Level& L) const {
+  const double before = comparable_validation(L.a.quality);
+  for (const auto& g : L.group) {
+    std::vector<std::string> eff = L.a.effects;
+    eff.push_back(g);
+    try {
+      const Analysis a = analyse(*cx, eff, fixed);
+      if (a.quality.has_validation && comparable_validation(a.quality) < before) return true;
+    } catch (const NumericalError&) {
+    }
+  }
+  return false;
+}
+
 bool Chain::explained_by_chain(
     size_t i, int depth, std::string* why, std::string* top_why, bool* weak) {
   static constexpr size_t kAlternatives = 3;
@@ -234,6 +248,19 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
   }
   if (floor && marginal) return true;
   n = &levels[i + 1];
+  // A group that does not separate and whose members the validation poses do not confirm,
+  // on a model that passes the floor test: what they take up on the calibration poses does
+  // not carry over. At a stated floor that is noise taken up; without a statement, marginal.
+  if (claims(*n) && !n->separable && (floor || floor_weak) && nq.has_validation &&
+      !group_validates(*n)) {
+    if (floor && cx->noise->known) return true;
+    *why = "after adding " + added + ", " + join(n->group, ", ") +
+           " take up structure on the calibration poses that none of them carries over to the "
+           "validation poses" +
+           (floor ? "" : " and " + floor_why);
+    *weak = true;
+    return false;
+  }
   if (floor)
     floor_why = "structure remains (" + n->scores[0].effect +
                 " is significant, p_adj = " + num(n->scores[0].p_adjusted, 2) +
