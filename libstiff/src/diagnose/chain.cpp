@@ -210,6 +210,18 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
     return false;
   }
   levels[i].validated = q.has_validation;
+  // Without a stated noise, a step after the first must earn its place on the new poses: the
+  // score tests' scale is the model's own residual variance, which shrinks as the chain grows,
+  // so a flexible candidate can be significant on structure of the calibration poses alone.
+  if (q.has_validation && !cx->noise->known && i > 0) {
+    const double p = paired_fall_p(q.validation_error_m, nq.validation_error_m);
+    if (!(p < cx->opt->alpha)) {
+      *why = "adding " + added + " lowers the validation error by no more than chance (" +
+             um(q.validation_rms_m) + " -> " + um(nq.validation_rms_m) + ", p = " + num(p, 2) + ")";
+      *weak = true;
+      return false;
+    }
+  }
   // Explained: the residual is at the floor and no candidate finds structure in it (the
   // partial F-tests do not depend on the stated noise, so they also catch a residual that
   // the noise allowance would let pass).
