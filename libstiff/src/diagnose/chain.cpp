@@ -95,6 +95,7 @@ bool Chain::group_validates(const Level& L) const {
       const Analysis a = analyse(*cx, eff, fixed);
       if (a.quality.has_validation && comparable_validation(a.quality) < before) return true;
     } catch (const NumericalError&) {
+      // A member whose re-fit fails confirms nothing; the others are still asked.
     }
   }
   return false;
