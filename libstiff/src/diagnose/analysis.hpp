@@ -89,6 +89,7 @@ struct Context {
   const DiagnosisOptions* opt;
   bool had_time = true;                    ///< the calibration data has a `t` column
   const ValidationSplit* split = nullptr;  ///< with `validation`
+  bool absolute = false;                   ///< the calibration has absolute rows (rule 5)
 };
 
 /// A fitted model on the calibration rows that are not outliers, with everything the tests need.

@@ -215,9 +215,7 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
   // score tests' scale is the model's own residual variance, which shrinks as the chain grows,
   // so a flexible candidate can be significant on structure of the calibration poses alone.
   // (Absolute data are judged on the cross-validated poses too, after the chain: rule 5.)
-  const bool absolute = std::any_of(cx->calib->rows.begin(), cx->calib->rows.end(),
-                                    [](const Measurement& m) { return m.absolute; });
-  if (q.has_validation && !cx->noise->known && i > 0 && !absolute) {
+  if (q.has_validation && !cx->noise->known && i > 0 && !cx->absolute) {
     const double p = paired_fall_p(q.validation_error_m, nq.validation_error_m);
     if (!(p < cx->opt->alpha)) {
       *why = "adding " + added + " lowers the validation error by no more than chance (" +

@@ -97,6 +97,8 @@ Diagnosis diagnose(const RobotModel& robot,
   const Dataset* scored = validation ? &split.scored : nullptr;
   const Noise vnoise = validation ? noise_of(split.scored) : Noise{};
   Context cx{&robot, &calib, scored, &noise, &vnoise, &options, calibration.has_time, &split};
+  cx.absolute = std::any_of(calibration.rows.begin(), calibration.rows.end(),
+                            [](const Measurement& m) { return m.absolute; });
 
   Diagnosis d;
   d.notes = split.notes;
@@ -130,11 +132,9 @@ Diagnosis diagnose(const RobotModel& robot,
   }
   // Held-out evidence on absolute data: the validation rows and the calibration's own poses,
   // cross-validated (docs/diagnosis.md, section 3, rule 5).
-  const bool absolute = std::any_of(calibration.rows.begin(), calibration.rows.end(),
-                                    [](const Measurement& m) { return m.absolute; });
   auto held_out = [&](Level& L) {
     ModelQuality& q = L.a.quality;
-    if (absolute && options.cross_validation_folds >= 2 && !L.cross_validated) {
+    if (cx.absolute && options.cross_validation_folds >= 2 && !L.cross_validated) {
       L.cross_validated = true;
       q.cross_validation_error_m = cross_validation_errors(cx, L.a, options.cross_validation_folds);
     }
@@ -145,7 +145,7 @@ Diagnosis diagnose(const RobotModel& robot,
   // A model whose held-out mean error is within the robot's stated repeatability predicts the
   // robot within its own scatter: nothing beyond it can be shown on single measurements.
   auto at_repeatability = [&](Level& L, std::string* reason) {
-    if (!absolute || !(options.repeatability_m > 0)) return false;
+    if (!cx.absolute || !(options.repeatability_m > 0)) return false;
     double sum = 0;
     int n = 0;
     for (double e : held_out(L))
@@ -296,8 +296,8 @@ Diagnosis diagnose(const RobotModel& robot,
     std::string verdict = d.verdict;
     for (size_t i = 0; static_cast<int>(i) < options.max_steps; ++i) {
       const bool go = verdict == "missing_effect" ||
-                      (!absolute && verdict == "ambiguous" && chain.levels[i].tentative) ||
-                      (absolute && (verdict == "unexplained" || verdict == "ambiguous") &&
+                      (!cx.absolute && verdict == "ambiguous" && chain.levels[i].tentative) ||
+                      (cx.absolute && (verdict == "unexplained" || verdict == "ambiguous") &&
                        choose_by_held_out(i));
       if (!go || !chain.next(i)) break;
       const std::string added = chain.levels[i].scores[chain.levels[i].pick].effect;
