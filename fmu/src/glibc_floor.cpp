@@ -8,6 +8,8 @@
 //                                            the getrandom system call
 //   hypot (2.35)                          <- hypot@GLIBC_2.2.5, the same correctly computed
 //                                            function behind the SVID error wrapper
+//   exp (2.29)                            <- exp@GLIBC_2.2.5, the same function behind the
+//                                            SVID error wrapper (the derivative of erf calls it)
 //   pthread_once (2.34)                   <- pthread_once@GLIBC_2.2.5, the same function
 //   stat, lstat, fstat64 (2.33)           <- __xstat, __lxstat, __fxstat64 (version 1), which
 //                                            the 2.33 functions call
@@ -28,6 +30,8 @@ extern "C" {
 
 double stiff_glibc_hypot(double x, double y);
 __asm__(".symver stiff_glibc_hypot,hypot@GLIBC_2.2.5");
+double stiff_glibc_exp(double x);
+__asm__(".symver stiff_glibc_exp,exp@GLIBC_2.2.5");
 int stiff_glibc_pthread_once(void* once, void (*init)(void));
 __asm__(".symver stiff_glibc_pthread_once,pthread_once@GLIBC_2.2.5");
 int __xstat(int version, const char* path, struct stat* buf);
@@ -35,6 +39,7 @@ int __lxstat(int version, const char* path, struct stat* buf);
 int __fxstat64(int version, int fd, struct stat64* buf);
 
 double __wrap_hypot(double x, double y) { return stiff_glibc_hypot(x, y); }
+double __wrap_exp(double x) { return stiff_glibc_exp(x); }
 
 int __wrap_pthread_once(void* once, void (*init)(void)) {
   return stiff_glibc_pthread_once(once, init);

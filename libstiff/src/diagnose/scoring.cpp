@@ -162,9 +162,11 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
       }
     }
     // Parameters the effect decided from these data by a search (backlash's link masses) were
-    // fitted too: the F test counts them, or the search's freedom reads as evidence.
+    // fitted too: the F test counts them, or the search's freedom reads as evidence. A spread
+    // (what the search left open) is no freedom of its own.
     int decided = 0;
-    for (const auto& ps : eg.parameters()) decided += ps.from_data && ps.null_value != 0.0;
+    for (const auto& ps : eg.parameters())
+      decided += ps.from_data && !ps.spread && ps.null_value != 0.0;
     if (decided > 0 && best.df > 0) partial_f(a, best.df + decided, &best);
     best.log_p = std::min(0.0, best.log_p + std::log(static_cast<double>(forms.size() + 1)));
     for (int k : g.null_columns) c.unidentifiable.push_back(eg.parameters()[k].name);

@@ -28,13 +28,19 @@ Eigen::Vector3d closest_error(const DeflectionModel& model,
                               const MeasurementContext& c,
                               const Eigen::Vector3d& e,
                               bool* uncertain) {
-  constexpr double kChange = 1e-12;  // m: a prediction that moves (not tanh's far tail)
+  constexpr double kChange = 1e-12;  // m: a prediction that moves (not a smooth sign's far tail)
   // Decisions of one row combined exhaustively (2^6 predictions); beyond that the parameters
   // that move its prediction most.
   constexpr size_t kMaxCombined = 6;
-  const Eigen::Vector3d point = model.predict(theta, m, c).head<3>();
-  std::vector<std::pair<double, int>> moves;  // (largest change of the prediction, parameter)
+  // From the prediction at the decided values: trying the ends of the confidence sets is this
+  // scoring's own account of what the calibration left open, which a spread would count twice.
   VectorXd t = theta;
+  for (int k = 0; k < model.parameter_count(); ++k)
+    if (model.spec(k).spread) t(k) = 0;
+  const Eigen::Vector3d blurred = model.predict(theta, m, c).head<3>();
+  const Eigen::Vector3d point = model.predict(t, m, c).head<3>();
+  const Eigen::Vector3d sharp = e - (point - blurred);
+  std::vector<std::pair<double, int>> moves;  // (largest change of the prediction, parameter)
   for (int k = 0; k < model.parameter_count(); ++k) {
     const ParameterSpec& sp = model.spec(k);
     if (!sp.from_data || !std::isfinite(sp.confidence_lower) || !std::isfinite(sp.confidence_upper))
@@ -51,13 +57,13 @@ Eigen::Vector3d closest_error(const DeflectionModel& model,
             [](const auto& a, const auto& b) { return a.first > b.first; });
   if (moves.size() > kMaxCombined) moves.resize(kMaxCombined);
   *uncertain = !moves.empty();
-  Eigen::Vector3d best = e;
+  Eigen::Vector3d best = sharp;
   for (unsigned mask = 0; !moves.empty() && mask < (1u << moves.size()); ++mask) {
     for (size_t i = 0; i < moves.size(); ++i) {
       const ParameterSpec& sp = model.spec(moves[i].second);
       t(moves[i].second) = (mask >> i) & 1u ? sp.confidence_upper : sp.confidence_lower;
     }
-    const Eigen::Vector3d ei = e - (model.predict(t, m, c).head<3>() - point);
+    const Eigen::Vector3d ei = sharp - (model.predict(t, m, c).head<3>() - point);
     if (ei.squaredNorm() < best.squaredNorm()) best = ei;
   }
   return best;

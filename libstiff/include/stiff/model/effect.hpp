@@ -66,6 +66,11 @@ struct ParameterSpec {
   /// there; the diagnosis's fit-versus-validation test takes the one closest to the row.
   double confidence_lower = std::numeric_limits<double>::quiet_NaN();
   double confidence_upper = std::numeric_limits<double>::quiet_NaN();
+  /// A parameter decided from the data that spreads the prediction of a new pose over what the
+  /// data leave open (backlash's mass covariance: the expected jump near a reversal); 0 gives
+  /// the prediction at the decided values alone, which the diagnosis's closest-value scoring
+  /// starts from before it tries the confidence sets' ends.
+  bool spread = false;
   /// A parameter of the measurement session (its thermal state, its instrument set-up), not of
   /// the robot: another session has its own value (a warm-up restarts, its course depends on
   /// the day and on the protocol), which only that session's own readings can tell. A

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <deque>
 #include <limits>
@@ -25,15 +26,21 @@ namespace {
 /// estimates them from the data it is built on by threshold regression (Hansen 2000) over every
 /// link's mass at once, from none to twice the file's, and holds them there (their start and
 /// null value: b_j = 0 switches the effect off whatever m_k is; a fit keeps them).
-/// The sign is smoothed, sgn(x) ~ tanh(x / eps) with eps = 0.05 N*m (well below the load
-/// torques of a test), so that the model has a derivative with respect to everything that
-/// changes the torques (force frame, offsets). A joint without preload (tau_g = 0, e.g. a
+/// What the data leave open of the masses (their posterior second moments V about m, held as
+/// v_kl) makes a new pose's jump a matter of chance near its reversal: there the model predicts
+/// the expected jump, sgn(x) ~ erf(x / w sqrt 2) with w^2 = t^T V t (t_k = tau_g,jk), and on the
+/// poses the masses were decided on the decided one. w is at least eps = 0.05 N*m (well below
+/// the load torques of a test), so that the model has a derivative with respect to everything
+/// that changes the torques (force frame, offsets). A joint without preload (tau_g = 0, e.g. a
 /// vertical joint 1) jumps by b/2 sgn(tau_F): the mean over its unknown start in the gap.
 class Backlash : public EffectT<Backlash> {
  public:
   explicit Backlash(const EffectSetup& s) {
     const int n = s.robot->dof();
     const Preload s0 = preload_correction(s);
+    if (s.data)
+      for (const Measurement& m : s.data->rows) decided_.push_back(pose_key(m));
+    std::sort(decided_.begin(), decided_.end());
     for (int j = 0; j < n; ++j)
       params_.push_back(effects::parameter(
           "b" + std::to_string(j + 1), "rad",
@@ -50,6 +57,16 @@ class Backlash : public EffectT<Backlash> {
       params_.back().confidence_lower = s0.lower(k);
       params_.back().confidence_upper = s0.upper(k);
     }
+    for (int k = 0; k < n; ++k)
+      for (int l = k; l < n; ++l) {
+        params_.push_back(effects::parameter(
+            "v" + std::to_string(k + 1) + std::to_string(l + 1), "1",
+            "covariance of m" + std::to_string(k + 1) + " and m" + std::to_string(l + 1) +
+                " left by the data (new poses near a reversal get the expected jump)",
+            -4.0, 4.0, kMassUncertainty * kMassUncertainty, s0.cov(k, l), s0.cov(k, l)));
+        params_.back().from_data = true;
+        params_.back().spread = true;
+      }
     for (int j = 0; j < n; ++j) {
       params_.push_back(effects::parameter(
           "g" + std::to_string(j + 1), "1",
@@ -74,7 +91,8 @@ class Backlash : public EffectT<Backlash> {
   std::string description() const override {
     return "backlash with gravity preload: dtheta_j += b_j/2 [sgn(tau_p,j + tau_F) - "
            "sgn(tau_p,j)], tau_p,j = sum_k (1+m_k) tau_g,jk, the link masses' errors m_k found "
-           "from the data (smooth sign, eps 0.05 N*m); independent of the load level";
+           "from the data; a new pose near its reversal gets the expected jump over what the data "
+           "leave open of them (erf, covariance v_kl); independent of the load level";
   }
   std::string reference() const override {
     return "Harmonic Drive / Nabtesco RV catalogues (lost motion <= 1 arcmin); FIGAROH "
@@ -95,21 +113,37 @@ class Backlash : public EffectT<Backlash> {
 
   template <typename T>
   void joint_t(const T* p, EvalState<T>& s) const {
-    using std::tanh;
     const Eigen::MatrixXd& tl = s.context->tau_gravity_links;
     const int n = static_cast<int>(s.dtheta.size());
     assert(tl.rows() == n && tl.cols() == n);  // every context comes from DeflectionModel
     // The turns g_j are 0 but where the diagnosis tries the ends of their confidence sets.
+    const T* mass = p + n;
+    const T* cov = p + 2 * n;  // upper triangle, row by row
+    const T* turn = cov + n * (n + 1) / 2;
+    // A pose and load the masses were decided on had its jumps observed: the data, not the
+    // posterior's spread, decide it (the spread is what a new pose does not know).
+    const bool on_decided_pose =
+        std::binary_search(decided_.begin(), decided_.end(), pose_key(*s.measurement));
     Eigen::VectorXd tq;
     for (int j = 0; j < n && tq.size() == 0; ++j)
-      if (scalar(p[2 * n + j]) != 0.0) gravity_torques(*s.robot, s.context->chain, &tq);
+      if (scalar(turn[j]) != 0.0) gravity_torques(*s.robot, s.context->chain, &tq);
     for (int j = 0; j < n; ++j) {
-      // m_k, g_j by their value only: the threshold regression decides them, not a derivative.
-      double pre = 0;
-      for (int k = 0; k < n; ++k) pre += tl(j, k) * (1 + scalar(p[n + k]));
-      if (scalar(p[2 * n + j]) != 0.0) pre += scalar(p[2 * n + j]) * tq(j);
-      const T loaded = tanh((T(pre) + s.tau(j)) / T(kEps));
-      const T preload = T(std::tanh(pre / kEps));
+      // m_k, v_kl, g_j by their value only: the threshold regression decides them, not a
+      // derivative. The expected sign over a Gaussian preload of variance w^2 is
+      // erf(x / w sqrt 2); w^2 = t^T V t for the torques t_k = tau_g,jk and the masses' posterior
+      // covariance V, and at least eps^2 (the smoothing).
+      double pre = 0, var = 0;
+      for (int k = 0, at = 0; k < n; ++k) {
+        pre += tl(j, k) * (1 + scalar(mass[k]));
+        for (int l = k; l < n; ++l, ++at)
+          var += (l == k ? 1.0 : 2.0) * tl(j, k) * tl(j, l) * scalar(cov[at]);
+      }
+      if (scalar(turn[j]) != 0.0) pre += scalar(turn[j]) * tq(j);
+      if (on_decided_pose) var = 0;
+      const double scale = 1.0 / std::sqrt(2.0 * std::max(var, kEps * kEps));
+      using std::erf;
+      const T loaded = erf((T(pre) + s.tau(j)) * T(scale));
+      const T preload = T(std::erf(pre * scale));
       s.dtheta(j) += T(0.5) * p[j] * (loaded - preload);
     }
   }
@@ -155,9 +189,11 @@ class Backlash : public EffectT<Backlash> {
   /// crossed, so no derivative finds them. A low-discrepancy design of the box, then coordinate
   /// sweeps from its best points, maximising the posterior with the file's masses as the
   /// prior. The file's masses (m = 0) stand unless the data reject them. The estimate m and its
-  /// confidence box [lower, upper], and the range of each joint's turn (NaN without data).
+  /// confidence box [lower, upper], the range of each joint's turn (NaN without data), and the
+  /// posterior's second moments of m about the estimate (0 without data).
   struct Preload {
     Eigen::VectorXd m, lower, upper, turn_lower, turn_upper;
+    Eigen::MatrixXd cov;
   };
   /// preload_correction() of the same inputs again (a diagnosis builds one model several
   /// times: to score it, to fit it, to cross-fit a session) is looked up, not searched again:
@@ -218,6 +254,7 @@ class Backlash : public EffectT<Backlash> {
     out.m = Eigen::VectorXd::Zero(n);
     out.lower = out.upper = out.turn_lower = out.turn_upper =
         Eigen::VectorXd::Constant(n, std::numeric_limits<double>::quiet_NaN());
+    out.cov = Eigen::MatrixXd::Zero(n, n);
     if (!setup.data || !robot.has_masses()) return out;
     struct Row {
       Eigen::Matrix3Xd jp;  // J_j(P), translational columns
@@ -471,6 +508,35 @@ class Backlash : public EffectT<Backlash> {
           out.lower(k) = std::min(out.lower(k), point.m(k));
           out.upper(k) = std::max(out.upper(k), point.m(k));
         }
+    // How far the masses may sit from the estimate: the posterior's second moments about it,
+    // by importance sampling (Halton points of the confidence box, each weighted by its
+    // posterior, exp(score / 2 s^2)). A pose whose preload is that close to its reversal is
+    // decided by chance, and the model predicts the expected jump there (joint_t). The moments
+    // are joint ones: the masses the rows decide only in combination (the wrist's and the
+    // tool's) are correlated, and their independent spreads would blur decided rows.
+    if (var > 0) {
+      constexpr int kPosterior = 256;
+      double top = -std::numeric_limits<double>::infinity();
+      std::vector<std::pair<Eigen::VectorXd, double>> drawn;
+      for (int i = 1; i <= kPosterior; ++i) {
+        Eigen::VectorXd m = out.m;
+        for (int d = 0; d < dims; ++d) {
+          const int k = links[d];
+          m(k) = out.lower(k) + (out.upper(k) - out.lower(k)) * radical_inverse(i, kPrimes[d]);
+        }
+        decide(m, none);
+        drawn.emplace_back(m, score(m, gain()));
+        top = std::max(top, drawn.back().second);
+      }
+      double total = 0;
+      Eigen::MatrixXd sq = Eigen::MatrixXd::Zero(n, n);
+      for (const auto& [m, sc] : drawn) {
+        const double w = std::exp((sc - top) / (2 * var));
+        total += w;
+        sq += w * (m - out.m) * (m - out.m).transpose();
+      }
+      if (total > 0) out.cov = sq / total;
+    }
     // The turn of each joint's lumped centre of mass (a centre of mass off the file's line,
     // which no mass reproduces): the range over which the decided masses' fit stays in the set.
     // It only widens what is uncertain: the model holds it at 0 (estimating it over-fits:
@@ -493,7 +559,22 @@ class Backlash : public EffectT<Backlash> {
     return out;
   }
 
+  /// Hash of a row's joint angles and load (FNV-1a over their bytes): what decides its jumps.
+  static uint64_t pose_key(const Measurement& m) {
+    uint64_t h = 1469598103934665603ull;
+    auto mix = [&h](const double* x, Eigen::Index count) {
+      const auto* b = reinterpret_cast<const unsigned char*>(x);
+      for (size_t i = 0; i < static_cast<size_t>(count) * sizeof(double); ++i)
+        h = (h ^ b[i]) * 1099511628211ull;
+    };
+    mix(m.q.data(), m.q.size());
+    mix(m.force.data(), 3);
+    mix(m.moment.data(), 3);
+    return h;
+  }
+
   std::string name_ = "backlash";
+  std::vector<uint64_t> decided_;  ///< pose_key of the rows the masses were decided on
   std::vector<ParameterSpec> params_;
 };
 
