@@ -123,6 +123,7 @@ class Backlash : public EffectT<Backlash> {
     // A pose and load the masses were decided on had its jumps observed: the data, not the
     // posterior's spread, decide it (the spread is what a new pose does not know).
     const bool on_decided_pose =
+        !decided_.empty() &&
         std::binary_search(decided_.begin(), decided_.end(), pose_key(*s.measurement));
     Eigen::VectorXd tq;
     for (int j = 0; j < n && tq.size() == 0; ++j)
@@ -559,18 +560,21 @@ class Backlash : public EffectT<Backlash> {
     return out;
   }
 
-  /// Hash of a row's joint angles and load (FNV-1a over their bytes): what decides its jumps.
+  /// Hash of a row's joint angles and load, what decides its jumps (their bit patterns, word by
+  /// word, FNV-1a's multiplier with a final avalanche; read on every evaluation).
   static uint64_t pose_key(const Measurement& m) {
     uint64_t h = 1469598103934665603ull;
     auto mix = [&h](const double* x, Eigen::Index count) {
-      const auto* b = reinterpret_cast<const unsigned char*>(x);
-      for (size_t i = 0; i < static_cast<size_t>(count) * sizeof(double); ++i)
-        h = (h ^ b[i]) * 1099511628211ull;
+      for (Eigen::Index i = 0; i < count; ++i) {
+        uint64_t w;
+        std::memcpy(&w, x + i, sizeof w);
+        h = (h ^ w) * 1099511628211ull;
+      }
     };
     mix(m.q.data(), m.q.size());
     mix(m.force.data(), 3);
     mix(m.moment.data(), 3);
-    return h;
+    return h ^ (h >> 29);
   }
 
   std::string name_ = "backlash";
