@@ -830,7 +830,15 @@ FitResult identify(const RobotModel& robot,
       continue;
     }
     f.parameters.push_back(fp);
-    if (!fp.identified && sp.from_data) {
+    if (!fp.identified && sp.spread) {
+      // A block of spread values (backlash's mass covariance): one line for the block.
+      if (k > 0 && model.spec(k - 1).spread) continue;
+      int last = k;
+      while (last + 1 < model.parameter_count() && model.spec(last + 1).spread) ++last;
+      f.warnings.push_back(qualified(model, k) + " to " + qualified(model, last) +
+                           " are decided from the data, not fitted: what the data leave open, "
+                           "which spreads the prediction of new poses");
+    } else if (!fp.identified && sp.from_data) {
       // Decided by the effect from the data before the fit (no derivative): not a failure.
       f.warnings.push_back(qualified(model, k) + " is decided from the data, not fitted: " +
                            num(theta(k)) + (sp.unit == "1" ? std::string() : " " + sp.unit) +
