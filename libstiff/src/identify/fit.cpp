@@ -355,7 +355,9 @@ Eigen::MatrixXd predict_dataset(const RobotModel& robot,
                                 const FitResult& fit,
                                 const Dataset& data) {
   validate_dataset(data, robot.dof(), false);
-  DeflectionModel model(robot, fit.model, &data);
+  // Built as the C API's model is, from the fit alone: an effect built on these rows would
+  // take them for rows it has decided something on (backlash's jumps).
+  const DeflectionModel model(robot, fit.model, nullptr, fit.sessions);
   const Eigen::VectorXd theta = fit_for_model(fit, robot, model, "predict").theta();
   Eigen::MatrixXd out(data.rows.size(), 6);
   const auto ctx = model.contexts(data);  // the one time axis (model.cpp)

@@ -727,6 +727,21 @@ TEST(DiagnoseMassModel, BacklashPredictsTheExpectedJumpWhereTheDataLeaveItOpen) 
   EXPECT_GT(spread_rows, 0);
   EXPECT_LT(expected, decided);
   EXPECT_EQ(calib_change, 0.0);
+  // One path: a fit's prediction of new poses (predict_dataset builds its model on the new
+  // data, for their own time axis) is the expected jump of a model that has seen no data.
+  const RobotModel file = light_file(truth);
+  const Dataset calib = simulate(truth, t, test::design60(1, 60), realistic_noise(7401));
+  const Dataset fresh = simulate(truth, t, test::design60(62001, 200), NoiseModel{});
+  const FitResult fit = identify(file, calib, effects);
+  const Eigen::MatrixXd pred = predict_dataset(file, fit, fresh);
+  const DeflectionModel blind(file, effects);
+  double most = 0;
+  for (size_t r = 0; r < fresh.rows.size(); ++r)
+    most = std::max(most, (pred.row(r).transpose() -
+                           blind.predict(fit.theta(), fresh.rows[r],
+                                         blind.context(fresh.rows[r], static_cast<int>(r))))
+                              .norm());
+  EXPECT_LT(most, 1e-12);
 }
 
 int control_claims(int seeds, double outlier_rate, int* adequate, int* missed_outliers) {
