@@ -318,7 +318,7 @@ FitResult fit_for_model(const FitResult& fit,
           fit.parameters[j].name == sp.name) {
         params.push_back(fit.parameters[j]);
         from.push_back(static_cast<int>(j++));
-      } else if (sp.optional_term) {
+      } else if (sp.optional_term || sp.spread) {  // a fit from before it: its null value
         FitParameter q;
         q.effect = effect;
         q.name = sp.name;

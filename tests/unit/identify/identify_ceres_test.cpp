@@ -139,6 +139,42 @@ TEST(FitCompatibility, AFitWithoutLaterOptionalTermsStillApplies) {
   EXPECT_THROW(predict_dataset(robot, broken, data), InvalidArgument);
 }
 
+// A backlash fit written before the masses' spread (v11..v66) was reported still applies: the
+// spread enters at 0, the decided jumps of that version's prediction.
+TEST(FitCompatibility, ABacklashFitWithoutTheSpreadPredictsTheDecidedJumps) {
+  const RobotModel robot = test::rokae();
+  RobotModel file = robot;
+  for (auto& j : file.joints) j.mass *= 0.7;
+  file.tool_mass *= 0.7;
+  const Truth truth = test::effect_truth("backlash", robot);
+  const Dataset data = simulated(truth, 5);
+  FitResult full = identify(file, data, truth.effects);
+  FitResult old = full;
+  old.parameters.clear();
+  std::vector<int> kept;
+  int spread = 0;
+  for (size_t k = 0; k < full.parameters.size(); ++k) {
+    const auto& p = full.parameters[k];
+    if (p.effect == "backlash" && p.name[0] == 'v') {
+      spread += p.value != 0.0;
+      full.parameters[k].value = 0.0;  // the decided jumps
+      continue;
+    }
+    old.parameters.push_back(p);
+    kept.push_back(static_cast<int>(k));
+  }
+  ASSERT_GT(spread, 0);  // the data left the masses a spread: the test can tell
+  old.covariance = Eigen::MatrixXd(kept.size(), kept.size());
+  for (size_t a = 0; a < kept.size(); ++a)
+    for (size_t b = 0; b < kept.size(); ++b)
+      old.covariance(a, b) = full.covariance(kept[a], kept[b]);
+  const FitResult back = fit_from_json(fit_to_json(old), "old_fit.json");
+  const Dataset fresh = simulated(truth, 6);
+  const Eigen::MatrixXd a = predict_dataset(file, back, fresh);
+  const Eigen::MatrixXd b = predict_dataset(file, full, fresh);
+  EXPECT_LT((a - b).cwiseAbs().maxCoeff(), 1e-15);
+}
+
 // 5 % gross tracker errors of 0.5 mm (50 sigma): Huber keeps the validation error at the
 // clean fit's level; plain least squares is pulled away; the flagged rows are the outliers.
 TEST(IdentifyCeres, RobustLossResistsGrossOutliers) {
