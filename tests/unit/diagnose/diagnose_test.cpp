@@ -727,8 +727,8 @@ TEST(DiagnoseMassModel, BacklashPredictsTheExpectedJumpWhereTheDataLeaveItOpen) 
   EXPECT_GT(spread_rows, 0);
   EXPECT_LT(expected, decided);
   EXPECT_EQ(calib_change, 0.0);
-  // One path: a fit's prediction of new poses (predict_dataset builds its model on the new
-  // data, for their own time axis) is the expected jump of a model that has seen no data.
+  // One path: a fit's prediction of new poses by predict_dataset is the expected jump of a
+  // model that has seen no data, as the C API's is.
   const RobotModel file = light_file(truth);
   const Dataset calib = simulate(truth, t, test::design60(1, 60), realistic_noise(7401));
   const Dataset fresh = simulate(truth, t, test::design60(62001, 200), NoiseModel{});

@@ -95,6 +95,28 @@ TEST(IdentifyCeres, CommonForceScaleIsNamedAndHeld) {
   EXPECT_TRUE(named) << "warning must name the combination";
 }
 
+// `full` as a version without the parameters `later` names wrote it: those left out, with their
+// rows and columns of the covariance; in `full` they are set to 0, as that version holds them.
+template <typename Later>
+FitResult as_older_fit(FitResult* full, Later later) {
+  FitResult old = *full;
+  old.parameters.clear();
+  std::vector<int> kept;
+  for (size_t k = 0; k < full->parameters.size(); ++k) {
+    if (later(full->parameters[k])) {
+      full->parameters[k].value = 0.0;
+      continue;
+    }
+    old.parameters.push_back(full->parameters[k]);
+    kept.push_back(static_cast<int>(k));
+  }
+  old.covariance = Eigen::MatrixXd(kept.size(), kept.size());
+  for (size_t a = 0; a < kept.size(); ++a)
+    for (size_t b = 0; b < kept.size(); ++b)
+      old.covariance(a, b) = full->covariance(kept[a], kept[b]);
+  return old;
+}
+
 // A fit written before its effect gained optional terms (link's column and wrist springs) still
 // applies: the terms it lacks enter at their null value, held, and it predicts as the same fit
 // with them written at 0 does. A fit that lacks a term that is not optional is refused.
@@ -103,25 +125,11 @@ TEST(FitCompatibility, AFitWithoutLaterOptionalTermsStillApplies) {
   const Truth truth = test::effect_truth("link", robot);
   const Dataset data = simulated(truth, 3);
   FitResult full = identify(robot, data, truth.effects);
-  FitResult old = full;
-  old.parameters.clear();
-  std::vector<int> kept;
-  for (size_t k = 0; k < full.parameters.size(); ++k) {
-    const auto& p = full.parameters[k];
-    const bool later = p.effect == "link" && p.name != "c_link2_x" && p.name != "c_link2_y" &&
-                       p.name != "c_link3_x";
-    if (later) {
-      full.parameters[k].value = 0.0;  // as the older fit holds them
-      continue;
-    }
-    old.parameters.push_back(p);
-    kept.push_back(static_cast<int>(k));
-  }
+  const FitResult old = as_older_fit(&full, [](const FitParameter& p) {
+    return p.effect == "link" && p.name != "c_link2_x" && p.name != "c_link2_y" &&
+           p.name != "c_link3_x";
+  });
   ASSERT_EQ(old.parameters.size() + 3, full.parameters.size());
-  old.covariance = Eigen::MatrixXd(kept.size(), kept.size());
-  for (size_t a = 0; a < kept.size(); ++a)
-    for (size_t b = 0; b < kept.size(); ++b)
-      old.covariance(a, b) = full.covariance(kept[a], kept[b]);
   const FitResult back = fit_from_json(fit_to_json(old), "old_fit.json");
   const Eigen::MatrixXd a = predict_dataset(robot, back, data);
   const Eigen::MatrixXd b = predict_dataset(robot, full, data);
@@ -149,25 +157,11 @@ TEST(FitCompatibility, ABacklashFitWithoutTheSpreadPredictsTheDecidedJumps) {
   const Truth truth = test::effect_truth("backlash", robot);
   const Dataset data = simulated(truth, 5);
   FitResult full = identify(file, data, truth.effects);
-  FitResult old = full;
-  old.parameters.clear();
-  std::vector<int> kept;
+  auto is_spread = [](const FitParameter& p) { return p.effect == "backlash" && p.name[0] == 'v'; };
   int spread = 0;
-  for (size_t k = 0; k < full.parameters.size(); ++k) {
-    const auto& p = full.parameters[k];
-    if (p.effect == "backlash" && p.name[0] == 'v') {
-      spread += p.value != 0.0;
-      full.parameters[k].value = 0.0;  // the decided jumps
-      continue;
-    }
-    old.parameters.push_back(p);
-    kept.push_back(static_cast<int>(k));
-  }
+  for (const auto& p : full.parameters) spread += is_spread(p) && p.value != 0.0;
   ASSERT_GT(spread, 0);  // the data left the masses a spread: the test can tell
-  old.covariance = Eigen::MatrixXd(kept.size(), kept.size());
-  for (size_t a = 0; a < kept.size(); ++a)
-    for (size_t b = 0; b < kept.size(); ++b)
-      old.covariance(a, b) = full.covariance(kept[a], kept[b]);
+  const FitResult old = as_older_fit(&full, is_spread);  // full's spread 0: the decided jumps
   const FitResult back = fit_from_json(fit_to_json(old), "old_fit.json");
   const Dataset fresh = simulated(truth, 6);
   const Eigen::MatrixXd a = predict_dataset(file, back, fresh);

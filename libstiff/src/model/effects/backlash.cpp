@@ -136,11 +136,10 @@ class Backlash : public EffectT<Backlash> {
       double pre = 0, var = 0;
       for (int k = 0, at = 0; k < n; ++k) {
         pre += tl(j, k) * (1 + scalar(mass[k]));
-        for (int l = k; l < n; ++l, ++at)
+        for (int l = k; l < n && !on_decided_pose; ++l, ++at)
           var += (l == k ? 1.0 : 2.0) * tl(j, k) * tl(j, l) * scalar(cov[at]);
       }
       if (scalar(turn[j]) != 0.0) pre += scalar(turn[j]) * tq(j);
-      if (on_decided_pose) var = 0;
       const double scale = 1.0 / std::sqrt(2.0 * std::max(var, kEps * kEps));
       using std::erf;
       const T loaded = erf((T(pre) + s.tau(j)) * T(scale));
