@@ -94,19 +94,31 @@ def run(args):
     # 1. Plan.
     from ..plan import plan
 
-    story.step(1, f"plan {args.count} poses and loads (q6 held at 0 as in the paper)")
     kw = {} if args.criterion is None else {"criterion": args.criterion}
-    p = plan(robot, args.count, q_fixed=[np.nan] * (robot.dof - 1) + [0.0], seed=args.seed,
-             annealing_iterations=20000, **kw)
-    p.write(out / "plan.csv")
+
+    def measure(count):
+        """Plan `count` poses and loads, measure them on the virtual robot; both files written."""
+        p = plan(robot, count, q_fixed=[np.nan] * (robot.dof - 1) + [0.0], seed=args.seed,
+                 annealing_iterations=20000, **kw)
+        p.write(out / "plan.csv")
+        calib = api.simulate(robot, p.dataset, truth=truth, **noise)
+        calib.write(out / "calibration.csv")
+        return p, calib
+
+    def identify_joint(calib):
+        """The paper's model on `calib`, written, and its errors on the validation poses."""
+        fit = api.identify(robot, calib)
+        fit.write(out / "fit_joint.json")
+        return fit, _validation_error(robot, fit, valid)
+
+    story.step(1, f"plan {args.count} poses and loads (q6 held at 0 as in the paper)")
+    p, calib = measure(args.count)
     s = p.summary
     story.text(f"criterion {s['criterion']} = {s['value']:.4g} (found by {s['found_by']}; pool "
                f"{s['pool']['elements']} poses x loads); wrote {out / 'plan.csv'}")
 
     # 2. Simulate.
     story.step(2, "simulate the experiment on the virtual robot, which hides an effect")
-    calib = api.simulate(robot, p.dataset, truth=truth, **noise)
-    calib.write(out / "calibration.csv")
     vnoise = dict(noise, seed=args.seed + 1000)
     valid = api.simulate(robot, api.random_design(robot, 20, seed=args.seed + 1000), truth=truth, **vnoise)
     valid.write(out / "validation.csv")
@@ -118,15 +130,13 @@ def run(args):
 
     # 3. Identify the paper's model.
     story.step(3, "identify the paper's model: diagonal joint compliance, least squares")
-    fit1 = api.identify(robot, calib)
-    fit1.write(out / "fit_joint.json")
+    fit1, e1 = identify_joint(calib)
     import contextlib
 
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         print_fit(fit1, truth_stiffness=PAPER_STIFFNESS)
     story.text(buf.getvalue().rstrip())
-    e1 = _validation_error(robot, fit1, valid)
 
     # 4. Diagnose.
     from ..diagnose import diagnose
@@ -157,14 +167,8 @@ def run(args):
                    "unconfirmed on the validation poses (the verdict's summary in diagnosis.json "
                    f"says why); as the verdict asks, the experiment is repeated with {more} "
                    "planned measurements and the joint model identified again on them")
-        p = plan(robot, more, q_fixed=[np.nan] * (robot.dof - 1) + [0.0], seed=args.seed,
-                 annealing_iterations=20000, **kw)
-        p.write(out / "plan.csv")
-        calib = api.simulate(robot, p.dataset, truth=truth, **noise)
-        calib.write(out / "calibration.csv")
-        fit1 = api.identify(robot, calib)
-        fit1.write(out / "fit_joint.json")
-        e1 = _validation_error(robot, fit1, valid)
+        _, calib = measure(more)
+        fit1, e1 = identify_joint(calib)
         d, top = diagnose_and_show(calib)
 
     # 5. Add it and watch the error fall.
@@ -175,12 +179,13 @@ def run(args):
     fit2 = api.identify(robot, calib, model=model2, loss="huber")
     fit2.write(out / "fit_full.json")
     e2 = _validation_error(robot, fit2, valid)
+    # The models compared from here on: the paper's, and the one with the effect when one is named.
+    models = [("joint", fit1, e1)] + ([(model2, fit2, e2)] if top else [])
     floor = d["noise_floor_m"]
     story.text(table(["model", "fit RMS", "validation RMS", "validation max", "noise floor"],
-                     [["joint", fmt(fit1.statistics.rms_m * 1e6, ".1f", " um"), fmt(_rms(e1) * 1e6, ".1f", " um"),
-                       fmt(np.linalg.norm(e1, axis=1).max() * 1e6, ".1f", " um"), fmt(floor * 1e6, ".1f", " um")],
-                      [model2, fmt(fit2.statistics.rms_m * 1e6, ".1f", " um"), fmt(_rms(e2) * 1e6, ".1f", " um"),
-                       fmt(np.linalg.norm(e2, axis=1).max() * 1e6, ".1f", " um"), fmt(floor * 1e6, ".1f", " um")]]))
+                     [[label, fmt(fit.statistics.rms_m * 1e6, ".1f", " um"), fmt(_rms(e) * 1e6, ".1f", " um"),
+                       fmt(np.linalg.norm(e, axis=1).max() * 1e6, ".1f", " um"), fmt(floor * 1e6, ".1f", " um")]
+                      for label, fit, e in models]))
     k2 = fit2.stiffness
     story.text("stiffness with the effect added: " + ", ".join(
         f"k{j + 1} = {fmt(k2[j], '.5g')}" for j in range(robot.dof)) + " N*m/rad")
@@ -206,13 +211,13 @@ def run(args):
         path = cp.read_path(data_dir() / "paths" / "rokae_contour.csv")
         poses, wrench = path.poses, path.wrench
         dev = {}
-        for label, fit in (("joint", fit1), (model2, fit2))[:2 if top else 1]:
+        for label, fit, _ in models:
             comp = cp.compensate_path(api.Model(robot, fit), poses, wrench)
             dev[label] = cp.truth_deviation(robot, truth, comp.q_cmd, poses, wrench)
             q_nom = comp.q_nominal
         dev["uncompensated"] = cp.truth_deviation(robot, truth, q_nom, poses, wrench)
         rows = []
-        for label in ("uncompensated", "joint") + ((model2,) if top else ()):
+        for label in ["uncompensated"] + [label for label, _, _ in models]:
             n = np.linalg.norm(dev[label][:, :3], axis=1) * 1e6
             rows.append([label, fmt(_rms(n), ".1f", " um"), fmt(n.max(), ".1f", " um")])
         story.text(f"{len(poses)} points of {Path(path.source).name}, process force "
