@@ -833,9 +833,10 @@ FitResult identify(const RobotModel& robot,
     if (!fp.identified && sp.spread) {
       // A block of spread values (backlash's mass covariance): one line for the block.
       if (k > 0 && model.spec(k - 1).spread) continue;
-      int last = k;
-      while (last + 1 < model.parameter_count() && model.spec(last + 1).spread) ++last;
-      f.warnings.push_back(qualified(model, k) + " to " + qualified(model, last) +
+      int block_end = k;
+      while (block_end + 1 < model.parameter_count() && model.spec(block_end + 1).spread)
+        ++block_end;
+      f.warnings.push_back(qualified(model, k) + " to " + qualified(model, block_end) +
                            " are decided from the data, not fitted: what the data leave open, "
                            "which spreads the prediction of new poses");
     } else if (!fp.identified && sp.from_data) {
