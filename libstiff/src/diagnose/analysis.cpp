@@ -84,9 +84,16 @@ FitResult fit_model(const RobotModel& robot,
   return identify(robot, data, effects, o);
 }
 
-MatrixXd orthonormal_basis(
-    const MatrixXd& a, double tol, VectorXd* sv, MatrixXd* v_null, double scale_ref) {
-  if (a.cols() == 0) return MatrixXd(a.rows(), 0);
+MatrixXd orthonormal_basis(const MatrixXd& a,
+                           double tol,
+                           VectorXd* sv,
+                           MatrixXd* v_null,
+                           double scale_ref,
+                           MatrixXd* pinv_factor) {
+  if (a.cols() == 0) {
+    if (pinv_factor) *pinv_factor = MatrixXd(0, 0);
+    return MatrixXd(a.rows(), 0);
+  }
   Eigen::JacobiSVD<MatrixXd> svd(a, Eigen::ComputeThinU | Eigen::ComputeThinV);
   const VectorXd s = svd.singularValues();
   const double ref = scale_ref > 0 ? scale_ref : (s.size() ? s(0) : 0.0);
@@ -95,6 +102,8 @@ MatrixXd orthonormal_basis(
     if (s(i) > tol * ref) ++rank;
   if (sv) *sv = s;
   if (v_null) *v_null = svd.matrixV().rightCols(s.size() - rank);
+  if (pinv_factor)
+    *pinv_factor = svd.matrixV().leftCols(rank) * s.head(rank).cwiseInverse().asDiagonal();
   return svd.matrixU().leftCols(rank);
 }
 
@@ -210,8 +219,13 @@ Analysis analyse(const Context& cx,
   for (int k = 0; k < pc; ++k)
     if (a.identified[k] && x.col(k).norm() > 0) cols.push_back(k);
   MatrixXd xs(a.n, cols.size());
-  for (size_t i = 0; i < cols.size(); ++i) xs.col(i) = x.col(cols[i]) / x.col(cols[i]).norm();
-  a.qx = orthonormal_basis(xs, 1e-8);
+  VectorXd col_norm(cols.size());
+  for (size_t i = 0; i < cols.size(); ++i) {
+    col_norm(i) = x.col(cols[i]).norm();
+    xs.col(i) = x.col(cols[i]) / col_norm(i);
+  }
+  MatrixXd pinv_factor;  // F with F F^T = (X^T X)^+ of the scaled columns
+  a.qx = orthonormal_basis(xs, 1e-8, nullptr, nullptr, 0.0, &pinv_factor);
   a.p = static_cast<int>(a.qx.cols());
   // A nonlinear fit leaves r orthogonal to X only approximately: remove the rest so that the
   // tests see what the current model cannot absorb.
@@ -238,7 +252,6 @@ Analysis analyse(const Context& cx,
     q.parameter_values.push_back(a.theta(k));
   }
   if (cx.validation) {
-    const Dataset& v = *cx.validation;
     double ss = 0, ss_closest = 0, session_leverage = 0;
     int aligned = 0, uncertain = 0;
     std::vector<Eigen::Vector3d> closest;
@@ -249,24 +262,55 @@ Analysis analyse(const Context& cx,
     }
     // Weighted by the validation rows' stated sigma (the calibration's floor when they state
     // none): the pooled floor test below.
-    double chi2_closest = 0;
-    for (size_t r = 0; r < closest.size(); ++r) {
-      const double sr =
-          cx.vnoise->known ? cx.vnoise->sigma(static_cast<Eigen::Index>(r)) : noise.floor_m;
-      ss_closest += closest[r].squaredNorm();
-      chi2_closest += closest[r].squaredNorm() / (sr * sr);
-    }
+    for (const auto& e : closest) ss_closest += e.squaredNorm();
     q.has_validation = true;
     q.validation_uncertain_rows = uncertain;
     q.validation_session_parameters = aligned;
     q.validation_session_leverage = session_leverage;
-    const double vdof = 3.0 * v.rows.size();
+    const Dataset& scored = cx.split->scored;  // a new set-up's registering rows are not scored
+    const double vdof = 3.0 * scored.rows.size();
     q.validation_rms_m = std::sqrt(ss / vdof);
+    // Each scored row's sigma in the calibration's weighting: the stated one (the calibration's
+    // floor when the validation states none), unit weights when the calibration's is unknown.
+    std::vector<double> sr(scored.rows.size(), 1.0);
+    if (noise.known)
+      for (size_t r = 0; r < sr.size(); ++r)
+        sr[r] = cx.vnoise->known ? cx.vnoise->sigma(static_cast<Eigen::Index>(r)) : noise.floor_m;
+    // The identified parameters' share of each row's prediction variance, per component and in
+    // units of the row's sigma^2: h_r = |J_r F|^2 / 3 with F F^T = (X^T X)^+ of the weighted
+    // calibration Jacobian X. A calibration row's mean is p/n; a validation pose far from the
+    // calibration design (a point offset's lever arm, a load the plan did not apply) has more,
+    // and a right model predicts it worse by exactly that much. The validation session's own
+    // parameters are re-estimated on it (session_leverage), and a new set-up's registration
+    // by the rigid fit: their columns are not carried over.
+    std::vector<bool> carried(cols.size(), true);
+    for (size_t i = 0; i < cols.size(); ++i) carried[i] = !a.model->spec(cols[i]).per_session;
+    std::vector<double> lev(scored.rows.size(), 0.0);
+    double v_sum = 0, s2_sum = 0;
+    if (pinv_factor.size() > 0) {
+      const auto vctx = a.model->contexts(scored);
+      for (size_t r = 0; r < scored.rows.size(); ++r) {
+        const Measurement& m = scored.rows[r];
+        const auto jac = a.model->displacement_jacobian(a.theta, m, vctx[r]);
+        const bool new_setup = m.absolute && !a.model->has_session(m.session);
+        MatrixXd j = MatrixXd::Zero(3, cols.size());
+        for (size_t i = 0; i < cols.size(); ++i)
+          if (carried[i] && !(new_setup && a.model->owner(cols[i]).name() == "registration"))
+            j.col(i) = jac.col(cols[i]) / (sr[r] * col_norm(i));
+        lev[r] = (j * pinv_factor).squaredNorm() / 3.0;
+        v_sum += lev[r] * sr[r] * sr[r];
+        s2_sum += sr[r] * sr[r];
+      }
+    }
+    // Mean over the scored rows, in units of their mean sigma^2 (p/n without validation rows).
+    const double leverage = s2_sum > 0 ? v_sum / s2_sum : static_cast<double>(a.p) / a.n;
+    q.validation_leverage = leverage;
     const double vs = cx.vnoise->known ? cx.vnoise->floor_m : noise.floor_m;  // RMS sigma
-    q.validation_floor_m = vs * std::sqrt(1.0 + static_cast<double>(a.p) / a.n);
+    q.validation_floor_m = vs * std::sqrt(1.0 + leverage);
     // Prediction error of new poses expected from the fit residual alone: E[RSS] = s^2 (n - p)
-    // and E[validation SS] = s^2 3m (1 + p/n) for a right model (mean leverage p/n), so the
-    // ratio of the two mean squares is ~ F(3m, n - p) (unweighted: no stated noise needed).
+    // and E[validation SS] = s^2 3m (1 + h) for a right model (h the validation rows' mean
+    // leverage), so the ratio of the two mean squares is ~ F(3m, n - p) (unweighted: no
+    // stated noise needed).
     // The validation session's own parameters, cross-fitted on its other half, add their
     // prediction variance (mean leverage session_leverage). A row whose prediction the
     // calibration leaves undecided between values (a parameter decided from the data, anywhere
@@ -275,7 +319,7 @@ Analysis analyse(const Context& cx,
     // the right model's, so the test keeps its level (conservatively) instead of rejecting the
     // right model for what the calibration could not decide.
     // With a stated noise the floor test pools the validation rows: their weighted squared
-    // errors over the prediction variance a right model has there, sigma^2 (1 + p/n) plus the
+    // errors over the prediction variance a right model has there, sigma^2 (1 + h_r) plus the
     // validation session's own cross-fitted parameters, are chi2(3m). A chain that mimics an
     // effect outside the library (a pedestal tilting under the base moment, mimicked by link
     // compliance and a force-frame rotation) can fit the calibration poses within the noise
@@ -285,10 +329,12 @@ Analysis analyse(const Context& cx,
     // smaller of the two p-values, Bonferroni-corrected. Not for a model that predicts by a
     // decision taken from the data (a backlash jump's side): a new pose decided on the wrong
     // side beyond the confidence set errs by a whole jump, which the prediction variance
-    // sigma^2 (1 + p/n) does not describe; there the calibration rows keep the test pooled.
+    // sigma^2 (1 + h_r) does not describe; there the calibration rows keep the test pooled.
     if (noise.known && q.dof > 0 && vdof > 0) {
       const double u2 = std::pow(1.0 + cx.opt->noise_uncertainty, 2);
-      const double vchi2 = chi2_closest / (1.0 + double(a.p) / a.n + session_leverage);
+      double vchi2 = 0;
+      for (size_t r = 0; r < closest.size(); ++r)
+        vchi2 += closest[r].squaredNorm() / (sr[r] * sr[r] * (1.0 + lev[r] + session_leverage));
       q.validation_to_floor = std::sqrt(vchi2 / vdof);
       const double pooled = stats::chi2_sf((a.rss + vchi2) / u2, q.dof + vdof);
       q.floor_p = decided ? pooled
@@ -296,7 +342,7 @@ Analysis analyse(const Context& cx,
     }
     if (q.dof > 0 && ss_m > 0) {
       const double fit_ms = ss_m / q.dof;
-      const double pred_ms = fit_ms * (1.0 + double(a.p) / a.n + session_leverage);
+      const double pred_ms = fit_ms * (1.0 + leverage + session_leverage);
       // The fit's mean square is over the rows the outlier rule kept. A model that predicts by
       // a discrete decision taken from the data (a backlash jump's side, `decided`) has rows
       // the calibration decides wrongly beyond its interval when the file's masses are off: a

@@ -127,12 +127,15 @@ std::vector<double> cross_validation_errors(const Context& cx, const Analysis& a
 
 /// Orthonormal basis of the column space of `a` (columns scaled to unit norm first); columns
 /// whose relative singular value is below `tol` are dropped. `v_null` (optional) receives the
-/// right singular vectors of the dropped directions.
+/// right singular vectors of the dropped directions; `pinv_factor` (optional) a factor F of
+/// the pseudo-inverse of the kept part, F F^T = (A^T A)^+ (leverage of a new row j:
+/// |j F|^2).
 MatrixXd orthonormal_basis(const MatrixXd& a,
                            double tol,
                            VectorXd* sv = nullptr,
                            MatrixXd* v_null = nullptr,
-                           double scale_ref = 0.0);
+                           double scale_ref = 0.0,
+                           MatrixXd* pinv_factor = nullptr);
 
 /// The calibration data with its time axis made explicit (row index when it has no `t`), so
 /// that subsets keep each row's time.

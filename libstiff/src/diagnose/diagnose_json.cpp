@@ -38,6 +38,7 @@ nlohmann::json quality_json(const ModelQuality& q) {
   if (q.has_validation) {
     j["validation_rms_m"] = q.validation_rms_m;
     j["validation_floor_m"] = q.validation_floor_m;
+    j["validation_leverage"] = q.validation_leverage;
     j["validation_error_m"] = q.validation_error_m;
     j["validation_to_fit"] = finite(q.validation_to_fit);
     j["validation_to_fit_p"] = q.validation_to_fit_p;

@@ -23,13 +23,13 @@ std::string qualified(const DeflectionModel& model, int k) {
   return model.owner(k).name() + "." + model.spec(k).name;
 }
 
-namespace {
-
 std::string num(double v) {
   char b[64];
   std::snprintf(b, sizeof b, "%.3g", v);
   return b;
 }
+
+namespace {
 
 /// Which parameters the data cannot identify at theta. Columns are taken in priority order
 /// (joint compliances first, then the effects in model order), normalised, and a column is

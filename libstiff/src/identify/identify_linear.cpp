@@ -315,6 +315,7 @@ FitResult identify_joint_linear(const RobotModel& robot,
   const int n = robot.dof();
   std::vector<bool> held(n, false);
   std::vector<std::string> reasons(n);
+  std::vector<bool> below(n, false);  // held at the bound 0, not for want of data
   const DeflectionModel model(robot, {"joint"});
   Eigen::VectorXd typical(n);
   for (int j = 0; j < n; ++j) typical(j) = model.spec(j).typical;
@@ -329,6 +330,20 @@ FitResult identify_joint_linear(const RobotModel& robot,
       const auto why = std::find_if(reasons.begin(), reasons.end(),
                                     [](const std::string& r) { return !r.empty(); });
       if (why == reasons.end()) throw;
+      bool against = true;  // every compliance the data had was pulled below 0
+      for (int j = 0; j < n; ++j) against = against && (reasons[j].empty() || below[j]);
+      if (against) {
+        std::string list;
+        for (int j = 0; j < n; ++j)
+          if (below[j]) list += (list.empty() ? "" : ", ") + std::to_string(j + 1);
+        throw NumericalError(
+            "identify: the measured displacements go against the loads: least squares puts the "
+            "compliance of joint(s) " +
+            list +
+            " below 0 and, held at 0, leaves nothing the data determine. Check the sign "
+            "conventions: a displacement is loaded minus unloaded, and the force and moment are "
+            "those applied to the robot at the load point (not the sensor's reaction)");
+      }
       throw NumericalError(
           "identify: no joint compliance is determined by this data (joint " +
           std::to_string(why - reasons.begin() + 1) + ": " + *why +
@@ -348,9 +363,42 @@ FitResult identify_joint_linear(const RobotModel& robot,
         reasons[j] = idf.reason[j];
         more = true;
       }
+    // A compliance is not negative: where least squares puts one below 0 (the data pull that
+    // joint against its load, noise or an effect the model lacks), the bounded solution holds
+    // it at its bound 0 and fits the rest again, as the nonlinear identification's bounds do
+    // (the most negative in standard errors first, one per round, as an active-set solver of
+    // non-negative least squares proceeds: Lawson & Hanson 1974, ch. 23). A fit with a negative
+    // compliance would predict the joint deflecting against its load, and no model can be
+    // built from it.
+    if (!more) {
+      int worst = -1;
+      double worst_t = 0;
+      for (int j = 0; j < n; ++j) {
+        const FitParameter& fp = f.parameters[j];
+        const double t = fp.value / fp.standard_error;
+        if (fp.identified && fp.value < 0 && (worst < 0 || t < worst_t)) {
+          worst = j;
+          worst_t = t;
+        }
+      }
+      if (worst >= 0) {
+        const FitParameter& fp = f.parameters[worst];
+        held[worst] = true;
+        below[worst] = true;
+        reasons[worst] = "least squares puts its compliance below 0 (" + detail::num(fp.value) +
+                         " +- " + detail::num(fp.standard_error) + " " + fp.unit +
+                         "), which no joint has: held at its bound c = 0 (infinitely stiff), as "
+                         "a bounded fit does; several standard errors below 0 mean the model "
+                         "misses an effect (stiff diagnose) or a sign convention is crossed";
+        more = true;
+      }
+    }
     if (!more) {
       for (int j = 0; j < n; ++j)
-        if (!reasons[j].empty())
+        if (below[j])
+          f.warnings.push_back("joint " + std::to_string(j + 1) + " (joint.c" +
+                               std::to_string(j + 1) + "): " + reasons[j]);
+        else if (!reasons[j].empty())
           f.warnings.push_back(
               "joint " + std::to_string(j + 1) + " is not identifiable from this data (joint.c" +
               std::to_string(j + 1) + "): " + reasons[j] + "; held at c = 0 (infinitely stiff)");
@@ -538,10 +586,6 @@ FitResult linear_fit(const RobotModel& robot,
     for (int l = 0; l < p; ++l)
       f.covariance(ident[k], ident[l]) = s2 * inv(k, l) / (scale(k) * scale(l));
     fp.standard_error = std::sqrt(f.covariance(ident[k], ident[k]));
-    if (fp.value <= 0)
-      f.warnings.push_back("joint " + std::to_string(ident[k] + 1) +
-                           ": identified compliance is not positive (" + std::to_string(fp.value) +
-                           " rad/(N*m)); the data cannot resolve this joint's stiffness");
   }
   f.weights = Eigen::VectorXd::Ones(N);
   f.rms_m = std::sqrt(f.residuals.squaredNorm() / m);

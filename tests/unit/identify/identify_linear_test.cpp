@@ -63,6 +63,39 @@ TEST(IdentifyLinear, StandardErrorsAreCalibratedOver200Seeds) {
   EXPECT_GE(inside, 0.95 * total) << inside << " of " << total;
 }
 
+TEST(IdentifyLinear, ANegativeComplianceIsHeldAtItsBoundAsTheBoundedFitDoes) {
+  // Joint 4 nearly rigid: its least-squares compliance falls below 0 in about half the seeds.
+  // The fit then holds it at 0 and fits the rest again, which is the solution the bounded
+  // nonlinear identification (Ceres, lower bound 0) finds; and a model can be built from it.
+  const RobotModel robot = test::rokae();
+  Eigen::VectorXd k = test::paper_stiffness();
+  k(3) = 1e9;
+  const DeflectionModel model(robot, {"joint"});
+  int held = 0;
+  for (uint64_t seed = 1; seed <= 12; ++seed) {
+    NoiseModel noise;
+    noise.tracker_sigma_m = 20e-6;
+    noise.seed = seed;
+    const Dataset data = simulate(robot, joint_truth(k), test::paper_design_a(), noise);
+    const FitResult lin = identify_joint_linear(robot, data);
+    for (int j = 0; j < 6; ++j) EXPECT_GE(lin.parameters[j].value, 0.0) << "seed " << seed;
+    EXPECT_NO_THROW(fit_for_model(lin, robot, model, "")) << "seed " << seed;
+    if (lin.parameters[3].identified) continue;
+    ++held;
+    EXPECT_EQ(lin.parameters[3].value, 0.0);
+    EXPECT_TRUE(std::any_of(lin.warnings.begin(), lin.warnings.end(), [](const std::string& w) {
+      return w.find("joint 4") != std::string::npos && w.find("below 0") != std::string::npos;
+    }));
+    const FitResult bounded = identify(robot, data, {"joint"});
+    EXPECT_LT(bounded.parameters[3].value, 1e-3 * lin.parameters[4].standard_error);
+    for (int j : {0, 1, 2, 4})
+      EXPECT_NEAR(bounded.parameters[j].value, lin.parameters[j].value,
+                  1e-3 * lin.parameters[j].standard_error)
+          << "seed " << seed << " joint " << j + 1;
+  }
+  EXPECT_GE(held, 3);
+}
+
 TEST(IdentifyLinear, ResidualMatchesTheNoiseLevel) {
   const RobotModel robot = test::rokae();
   RandomDesignOptions o;

@@ -70,12 +70,16 @@ class Overflow : public ::testing::Test {
               STIFF_OK);
   }
   void TearDown() override { stiff_robot_destroy(robot); }
-  stiff_status identify(double moment_x, double displacement_y, const char* model = nullptr) {
+  stiff_status identify(double moment_x,
+                        double displacement_y,
+                        const char* model = nullptr,
+                        double sign = 1.0) {
     const double q[18] = {0.4,  0.3,  0.2, 0.1, 0.5, 0.0, 0.0,  0.0, 0.0,
                           -0.5, -0.5, 0.5, 0.1, 0.8, 0.4, -0.3, 1.0, 0.2};
     const double f[9] = {40, 50, 50, 50, 50, 50, 50, 50, 50};
     const double m[9] = {moment_x, -0.4, -0.5, 0, 5, 5, 5, 4.9, 5};
-    const double d[9] = {-1.6e-5, displacement_y, 0, -1.4e-5, -9.2e-5, 1e-16, 1.3e-5, 2e-5, -3e-5};
+    double d[9] = {-1.6e-5, displacement_y, 0, -1.4e-5, -9.2e-5, 1e-16, 1.3e-5, 2e-5, -3e-5};
+    for (double& v : d) v *= sign;
     stiff_dataset* ds = nullptr;
     EXPECT_EQ(stiff_dataset_create(&ds, 3, 6, q, f, m, d, nullptr), STIFF_OK);
     stiff_result* fit = nullptr;
@@ -113,7 +117,20 @@ TEST_F(Overflow, HugeDisplacementWithCeresIsANumericalError) {
       << stiff_last_error();
 }
 
-TEST_F(Overflow, OrdinaryValuesStillIdentify) { EXPECT_EQ(identify(5.0, 1e-5), STIFF_OK); }
+// Ordinary values, with displacements along the loads (the joint model fits them with
+// compliances >= 0).
+TEST_F(Overflow, OrdinaryValuesStillIdentify) {
+  EXPECT_EQ(identify(5.0, 1e-5, nullptr, -1), STIFF_OK);
+}
+
+// The same displacements with the opposite sign go against the loads: least squares puts every
+// compliance the data determine below 0. A fit of them could not be used (no model is built
+// from a negative compliance); the error says what to check.
+TEST_F(Overflow, DisplacementsAgainstTheLoadsAreAClearError) {
+  EXPECT_EQ(identify(5.0, 1e-5), STIFF_E_NUMERICAL);
+  EXPECT_NE(std::string(stiff_last_error()).find("sign conventions"), std::string::npos)
+      << stiff_last_error();
+}
 
 // A G1 move of 1e30 mm with segmentation converted ~1e31 segments to int (UB).
 TEST(FuzzRegressions, GcodeMoveWithTooManySegmentsIsAParseError) {

@@ -157,14 +157,18 @@ struct ModelQuality {
   double residual_to_floor = NAN;
   double floor_p = 1.0;
   /// With a stated noise and validation rows: sqrt of their weighted mean squared error over its
-  /// expectation for a right model (1 + p/n + the session's leverage), how far the validation
+  /// expectation for a right model (1 + h + the session's leverage), how far the validation
   /// errors sit from the floor (NaN otherwise).
   double validation_to_floor = NAN;
   double sigma_hat_m = 0.0;
   bool has_validation = false;
   double validation_rms_m = 0.0;
-  double validation_floor_m = 0.0;  ///< sigma sqrt(1 + p/n)
-  /// Validation RMS over what the fit residual predicts for new poses, sigma_hat sqrt(1 + p/n)
+  double validation_floor_m = 0.0;  ///< sigma sqrt(1 + h)
+  /// Mean leverage h of the validation rows on the identified parameters, per component:
+  /// their prediction variance over sigma^2 (a calibration row's mean is p/n; a pose outside
+  /// the calibration design has more).
+  double validation_leverage = 0.0;
+  /// Validation RMS over what the fit residual predicts for new poses, sigma_hat sqrt(1 + h)
   /// (1 when the model explains the data), and P(F(3m, n - p) > ratio^2): a model that leaves
   /// structure predicts new poses worse than it fits them.
   double validation_to_fit = NAN;
@@ -193,7 +197,7 @@ struct ModelQuality {
   /// is its own. Their prediction variance enters the fit-versus-validation test.
   int validation_session_parameters = 0;
   /// Their mean leverage on a scored component: the validation mean square of a right model is
-  /// sigma^2 (1 + p/n + this); comparisons between models divide it out.
+  /// sigma^2 (1 + h + this); comparisons between models divide it out.
   double validation_session_leverage = 0.0;
   std::vector<std::string> parameter_names;
   std::vector<double> parameter_values;
