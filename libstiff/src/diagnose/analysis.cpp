@@ -73,6 +73,39 @@ std::vector<bool> improbable_rows(
   return flag;
 }
 
+/// The identified parameters' share of each row's prediction variance, per component and in
+/// units of the row's sigma^2 (`sigma`, in the calibration's weighting): h_r = |J_r F|^2 / 3,
+/// J_r the row's Jacobian on the columns `cols` (scaled by `col_norm` as the calibration's were)
+/// and F F^T = (X^T X)^+ of the weighted calibration Jacobian X. A calibration row's mean is
+/// p/n; a validation pose far from the calibration design (a point offset's lever arm, a load
+/// the plan did not apply) has more, and a right model predicts it worse by exactly that much.
+/// The validation session's own parameters are re-estimated on it (its session leverage), and
+/// a new set-up's registration by the rigid fit: their columns are not carried over.
+std::vector<double> prediction_leverages(const DeflectionModel& model,
+                                         const VectorXd& theta,
+                                         const Dataset& rows,
+                                         const std::vector<int>& cols,
+                                         const VectorXd& col_norm,
+                                         const MatrixXd& pinv_factor,
+                                         const std::vector<double>& sigma) {
+  std::vector<double> lev(rows.rows.size(), 0.0);
+  if (pinv_factor.size() == 0) return lev;
+  const auto ctx = model.contexts(rows);
+  for (size_t r = 0; r < rows.rows.size(); ++r) {
+    const Measurement& m = rows.rows[r];
+    const auto jac = model.displacement_jacobian(theta, m, ctx[r]);
+    const bool new_setup = m.absolute && !model.has_session(m.session);
+    MatrixXd j = MatrixXd::Zero(3, cols.size());
+    for (size_t i = 0; i < cols.size(); ++i) {
+      const bool carried = !model.spec(cols[i]).per_session &&
+                           !(new_setup && model.owner(cols[i]).name() == "registration");
+      if (carried) j.col(i) = jac.col(cols[i]) / (sigma[r] * col_norm(i));
+    }
+    lev[r] = (j * pinv_factor).squaredNorm() / 3.0;
+  }
+  return lev;
+}
+
 }  // namespace
 
 FitResult fit_model(const RobotModel& robot,
@@ -260,8 +293,6 @@ Analysis analyse(const Context& cx,
       q.validation_error_m.push_back(e.norm());
       ss += e.squaredNorm();
     }
-    // Weighted by the validation rows' stated sigma (the calibration's floor when they state
-    // none): the pooled floor test below.
     for (const auto& e : closest) ss_closest += e.squaredNorm();
     q.has_validation = true;
     q.validation_uncertain_rows = uncertain;
@@ -276,34 +307,15 @@ Analysis analyse(const Context& cx,
     if (noise.known)
       for (size_t r = 0; r < sr.size(); ++r)
         sr[r] = cx.vnoise->known ? cx.vnoise->sigma(static_cast<Eigen::Index>(r)) : noise.floor_m;
-    // The identified parameters' share of each row's prediction variance, per component and in
-    // units of the row's sigma^2: h_r = |J_r F|^2 / 3 with F F^T = (X^T X)^+ of the weighted
-    // calibration Jacobian X. A calibration row's mean is p/n; a validation pose far from the
-    // calibration design (a point offset's lever arm, a load the plan did not apply) has more,
-    // and a right model predicts it worse by exactly that much. The validation session's own
-    // parameters are re-estimated on it (session_leverage), and a new set-up's registration
-    // by the rigid fit: their columns are not carried over.
-    std::vector<bool> carried(cols.size(), true);
-    for (size_t i = 0; i < cols.size(); ++i) carried[i] = !a.model->spec(cols[i]).per_session;
-    std::vector<double> lev(scored.rows.size(), 0.0);
+    const std::vector<double> lev =
+        prediction_leverages(*a.model, a.theta, scored, cols, col_norm, pinv_factor, sr);
     double v_sum = 0, s2_sum = 0;
-    if (pinv_factor.size() > 0) {
-      const auto vctx = a.model->contexts(scored);
-      for (size_t r = 0; r < scored.rows.size(); ++r) {
-        const Measurement& m = scored.rows[r];
-        const auto jac = a.model->displacement_jacobian(a.theta, m, vctx[r]);
-        const bool new_setup = m.absolute && !a.model->has_session(m.session);
-        MatrixXd j = MatrixXd::Zero(3, cols.size());
-        for (size_t i = 0; i < cols.size(); ++i)
-          if (carried[i] && !(new_setup && a.model->owner(cols[i]).name() == "registration"))
-            j.col(i) = jac.col(cols[i]) / (sr[r] * col_norm(i));
-        lev[r] = (j * pinv_factor).squaredNorm() / 3.0;
-        v_sum += lev[r] * sr[r] * sr[r];
-        s2_sum += sr[r] * sr[r];
-      }
+    for (size_t r = 0; r < sr.size(); ++r) {
+      v_sum += lev[r] * sr[r] * sr[r];
+      s2_sum += sr[r] * sr[r];
     }
-    // Mean over the scored rows, in units of their mean sigma^2 (p/n without validation rows).
-    const double leverage = s2_sum > 0 ? v_sum / s2_sum : static_cast<double>(a.p) / a.n;
+    // Mean over the scored rows, in units of their mean sigma^2.
+    const double leverage = s2_sum > 0 ? v_sum / s2_sum : 0.0;
     q.validation_leverage = leverage;
     const double vs = cx.vnoise->known ? cx.vnoise->floor_m : noise.floor_m;  // RMS sigma
     q.validation_floor_m = vs * std::sqrt(1.0 + leverage);

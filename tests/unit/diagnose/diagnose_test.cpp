@@ -1266,6 +1266,51 @@ TEST(DiagnoseNoise, UnknownNoiseAndReplicates) {
   EXPECT_EQ(dr.verdict, "adequate");
 }
 
+// ---------------------------------------------------------------- validation leverage
+
+// A right model predicts a new pose with the noise plus its parameters' uncertainty there:
+// sigma^2 (1 + h_r). Validation loads about 2.7 times the calibration's put the validation rows
+// at about 7 times the calibration rows' leverage p/n; over 100 seeds the validation mean
+// square of the right (joint) model matches the floor sigma^2 (1 + h) it reports, and not
+// sigma^2 (1 + p/n). Per seed the ratio scatters by the noise (chi2 of 60: relative sd 0.18)
+// and by the shared parameter error (a quadratic form in 5 estimates, relative sd
+// sqrt(2/5) h/(1 + h) ~ 0.23): about 0.3, so 0.03 for the mean of 100, and 0.1 is more than 3
+// of them.
+TEST(DiagnoseValidation, RightModelPredictsNewPosesAtItsLeverage) {
+  const RobotModel robot = test::rokae();
+  const Truth truth = test::effect_truth("joint", robot);
+  double ratio = 0, ratio_mean_leverage = 0;
+  constexpr int kSeeds = 100;
+  for (int seed = 1; seed <= kSeeds; ++seed) {
+    RandomDesignOptions o;
+    o.count = 20;
+    o.load_min_N = 10.0;
+    o.load_max_N = 20.0;
+    o.seed = static_cast<uint64_t>(seed);
+    const Dataset cdesign = random_design(robot, o);
+    o.load_min_N = 30.0;
+    o.load_max_N = 50.0;
+    o.seed = 1000 + static_cast<uint64_t>(seed);
+    const Dataset vdesign = random_design(robot, o);
+    NoiseModel noise;
+    noise.tracker_sigma_m = kTrackerSigma;
+    noise.seed = static_cast<uint64_t>(seed);
+    const Dataset calib = simulate(robot, truth, cdesign, noise);
+    noise.seed += 5000;
+    const Dataset valid = simulate(robot, truth, vdesign, noise);
+    const Diagnosis d = diagnose(robot, calib, &valid, {"joint"});
+    ASSERT_TRUE(d.fit.has_validation);
+    const double pn = static_cast<double>(d.fit.parameters) / (3.0 * d.fit.used);
+    const double h = d.fit.validation_leverage;
+    EXPECT_GT(h, 3 * pn) << "seed " << seed;
+    const double r = std::pow(d.fit.validation_rms_m / d.fit.validation_floor_m, 2);
+    ratio += r / kSeeds;
+    ratio_mean_leverage += r * (1 + h) / (1 + pn) / kSeeds;
+  }
+  EXPECT_NEAR(ratio, 1.0, 0.1);
+  EXPECT_GT(ratio_mean_leverage, 1.3);  // what p/n would have called 30 % above the floor
+}
+
 // ---------------------------------------------------------------- noise statements
 
 /// Per-axis displacement sigma of a row with a stated tracker sigma and force error, written
