@@ -529,6 +529,13 @@ CASES = [
     dict(id="py-identify-unknown-effect", kind="python", topic="unknown effect names",
          code="stiff.identify(stiff.Robot('{robot}'), stiff.Dataset.read('{data}'), model='joint+warp')",
          error="InvalidArgumentError", status=-1, message="unknown effect 'warp'"),
+    # Displacements written unloaded minus loaded: least squares puts every compliance below 0.
+    dict(id="py-identify-displacements-against-the-loads", kind="python", topic="wrong signs",
+         code="stiff.identify(stiff.Robot('{robot}'), (lambda d: stiff.Dataset.from_arrays("
+              "d.q, d.wrench[:, :3], d.wrench[:, 3:], -d.displacement))"
+              "(stiff.Dataset.read('{data}')))",
+         error="NumericalError", status=-6,
+         message="the measured displacements go against the loads"),
     dict(id="py-predict-wrong-q", kind="python", topic="wrong sizes",
          code="stiff.Model(stiff.Robot('{robot}'), stiff.Fit.read('{fit}')).predict([0.1] * 5, [1] * 6)",
          error="ValueError", message="5"),

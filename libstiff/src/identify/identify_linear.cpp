@@ -316,6 +316,7 @@ FitResult identify_joint_linear(const RobotModel& robot,
   std::vector<bool> held(n, false);
   std::vector<std::string> reasons(n);
   std::vector<bool> below(n, false);  // held at the bound 0, not for want of data
+  bool significantly_below = false;   // one of them by more than 3 standard errors
   const DeflectionModel model(robot, {"joint"});
   Eigen::VectorXd typical(n);
   for (int j = 0; j < n; ++j) typical(j) = model.spec(j).typical;
@@ -330,20 +331,26 @@ FitResult identify_joint_linear(const RobotModel& robot,
       const auto why = std::find_if(reasons.begin(), reasons.end(),
                                     [](const std::string& r) { return !r.empty(); });
       if (why == reasons.end()) throw;
-      bool against = true;  // every compliance the data had was pulled below 0
-      for (int j = 0; j < n; ++j) against = against && (reasons[j].empty() || below[j]);
-      if (against) {
-        std::string list;
-        for (int j = 0; j < n; ++j)
-          if (below[j]) list += (list.empty() ? "" : ", ") + std::to_string(j + 1);
+      std::string below_list, other;
+      for (int j = 0; j < n; ++j) {
+        if (below[j])
+          below_list += (below_list.empty() ? "" : ", ") + std::to_string(j + 1);
+        else if (other.empty() && !reasons[j].empty())
+          other = "joint " + std::to_string(j + 1) + ": " + reasons[j];
+      }
+      // Noise pulls a loosely determined compliance below 0 by a standard error or two; a
+      // fit that loses every compliance to the bound, one of them far below 0, has data whose
+      // displacements oppose their loads.
+      if (significantly_below)
         throw NumericalError(
             "identify: the measured displacements go against the loads: least squares puts the "
             "compliance of joint(s) " +
-            list +
-            " below 0 and, held at 0, leaves nothing the data determine. Check the sign "
-            "conventions: a displacement is loaded minus unloaded, and the force and moment are "
-            "those applied to the robot at the load point (not the sensor's reaction)");
-      }
+            below_list + " below 0, held at 0" +
+            (other.empty() ? std::string()
+                           : ", and the data do not determine the others (" + other + ")") +
+            ", which leaves no compliance to fit. Check the sign conventions: a displacement is "
+            "loaded minus unloaded, and the force and moment are those applied to the robot at "
+            "the load point (not the sensor's reaction)");
       throw NumericalError(
           "identify: no joint compliance is determined by this data (joint " +
           std::to_string(why - reasons.begin() + 1) + ": " + *why +
@@ -385,6 +392,7 @@ FitResult identify_joint_linear(const RobotModel& robot,
         const FitParameter& fp = f.parameters[worst];
         held[worst] = true;
         below[worst] = true;
+        significantly_below = significantly_below || worst_t < -3.0;
         reasons[worst] = "least squares puts its compliance below 0 (" + detail::num(fp.value) +
                          " +- " + detail::num(fp.standard_error) + " " + fp.unit +
                          "), which no joint has: held at its bound c = 0 (infinitely stiff), as "
