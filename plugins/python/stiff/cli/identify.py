@@ -73,12 +73,21 @@ def register(sub):
     p.set_defaults(func=run)
 
 
+def _at_bound(fit: api.Fit) -> set:
+    """Joints (1-based) the linear fit held at the bound c = 0 because least squares put their
+    compliance below 0 (named so in the fit's warnings): determined, but not as a compliance."""
+    return {j for j in range(1, 65)
+            if any(w.startswith(f"joint {j} (joint.c{j}): least squares puts") for w in fit.warnings)}
+
+
 def print_fit(fit: api.Fit, truth_stiffness=None) -> None:
     js = fit.json
     k, kse, ident = fit.stiffness, fit.stiffness_se, fit.identified
+    bound = _at_bound(fit)
     rows = []
     for j in range(len(k)):
-        row = [f"{j + 1}", fmt(k[j], ".5g") if ident[j] else "not identifiable",
+        held = "rigid (c < 0 held at 0)" if j + 1 in bound else "not identifiable"
+        row = [f"{j + 1}", fmt(k[j], ".5g") if ident[j] else held,
                fmt(kse[j], ".2g") if ident[j] else "-",
                fmt(100 * kse[j] / k[j], ".2f", " %") if ident[j] and k[j] > 0 else "-"]
         if truth_stiffness is not None:
@@ -117,7 +126,10 @@ def print_fit(fit: api.Fit, truth_stiffness=None) -> None:
         o = (f" and {math.degrees(s.model_error_rad):.4f} deg" if s.model_error_rad > 0 else "")
         print(f"      the model's error, {s.model_error_m * 1e6:.2f} um{o} per axis, is added to each "
               "row's stated sigma in the weights")
-    bad = [j + 1 for j in range(len(k)) if not ident[j]]
+    bad = [j + 1 for j in range(len(k)) if not ident[j] and j + 1 not in bound]
+    if bound:
+        print(f"held at the bound c = 0 (least squares put the compliance below 0): "
+              f"joint{'s' if len(bound) > 1 else ''} {', '.join(map(str, sorted(bound)))}")
     if bad:
         print(f"not identifiable from this data: joint{'s' if len(bad) > 1 else ''} "
               f"{', '.join(map(str, bad))}")
