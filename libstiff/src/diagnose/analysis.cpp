@@ -167,7 +167,12 @@ Analysis analyse(const Context& cx,
       if (!a.outlier[r]) a.used_rows.push_back(r);
     a.used = subset(calib, a.used_rows);
     fit = fit_model(*cx.robot, a.used, effects);
-    a.model = std::make_unique<DeflectionModel>(*cx.robot, effects, &a.used);
+    // Built as the fit decided (identify: an effect that decides from the data decides with
+    // the other effects where the fit has them).
+    std::map<std::string, double> at;
+    for (const FitParameter& q : fit.parameters) at[q.effect + "." + q.name] = q.value;
+    a.model = std::make_unique<DeflectionModel>(*cx.robot, effects, &a.used,
+                                                std::vector<std::string>{}, &at);
     a.theta = fit.theta();
     const auto ctx_all = a.model->contexts(calib);
     a.pred_all.resize(rows, 3);

@@ -79,13 +79,18 @@ void check_identify_options(const IdentifyOptions& opt) {
         "identify: orientation_length_m must be a finite length >= 0 [m] (0: estimated)");
 }
 
-FitResult identify(const RobotModel& robot,
-                   const Dataset& data,
-                   const std::vector<std::string>& effects,
-                   const IdentifyOptions& opt) {
+namespace {
+/// identify() with the effects that decide parameters from the data deciding them at
+/// `decide_at` (DeflectionModel; null: the other effects at their start values).
+FitResult identify_at(const RobotModel& robot,
+                      const Dataset& data,
+                      const std::vector<std::string>& effects,
+                      const IdentifyOptions& opt,
+                      const std::map<std::string, double>* decide_at) {
   check_identify_options(opt);
   detail::validate_identification_data(data, robot.dof());
-  const DeflectionModel model(robot, effects, &data);  // unknown effects, missing masses
+  // Unknown effects, missing masses.
+  const DeflectionModel model(robot, effects, &data, {}, decide_at);
   const int n = static_cast<int>(data.rows.size());
   const int p = model.parameter_count();
   if (p == 0)
@@ -960,6 +965,60 @@ FitResult identify(const RobotModel& robot,
     f.warnings.push_back(std::to_string(f.outliers.size()) + " of " + std::to_string(n) +
                          " measurements look like outliers (see the outlier list)");
   return f;
+}
+
+}  // namespace
+
+FitResult identify(const RobotModel& robot,
+                   const Dataset& data,
+                   const std::vector<std::string>& effects,
+                   const IdentifyOptions& opt) {
+  FitResult fit = identify_at(robot, data, effects, opt, nullptr);
+  // An effect that decides parameters from the data (backlash's link masses, by the sign of
+  // each joint's preload plus load torque) decided them with the model's other effects at
+  // their start values. An effect that moves the points or the wrench (a point offset, a
+  // force-sensor frame) then fitted changes the lever arms and load torques those decisions
+  // rest on: a few centimetres of SMR offset turn the wrist joints' load torques. So the
+  // decision is taken again at the fit and the model refitted from it, until the parameters
+  // that move the points and the wrench change by less than 3 % of their typical size (a
+  // millimetre of point offset), at most kRedecide times. Not for a refit from a given start
+  // (its decisions are the caller's).
+  constexpr int kRedecide = 2;
+  if (opt.start || !opt.refit.empty()) return fit;
+  // Built as identify_at built it (the search's result is cached): the fit's parameter order.
+  const DeflectionModel bare(robot, effects, &data);
+  std::vector<int> moving;  // parameters of effects with a wrench stage
+  bool decides = false;
+  for (size_t e = 0; e < bare.effects().size(); ++e) {
+    const Effect& eff = *bare.effects()[e];
+    for (int k = 0; k < eff.size(); ++k) {
+      decides = decides || eff.parameters()[k].from_data;
+      if (eff.stages() & kWrenchStage) moving.push_back(bare.offset(static_cast<int>(e)) + k);
+    }
+  }
+  if (!decides || moving.empty() ||
+      static_cast<int>(fit.parameters.size()) != bare.parameter_count())
+    return fit;
+  Eigen::VectorXd at = bare.start_parameters();
+  for (int pass = 0; pass < kRedecide; ++pass) {
+    double moved = 0;
+    for (int k : moving)
+      moved = std::max(moved, std::abs(fit.parameters[k].value - at(k)) /
+                                  std::max(std::abs(bare.spec(k).typical), 1e-300));
+    if (!(moved > 0.03)) break;
+    std::map<std::string, double> values;
+    for (const FitParameter& q : fit.parameters) values[q.effect + "." + q.name] = q.value;
+    for (int k : moving) at(k) = fit.parameters[k].value;
+    // The refit starts from the fit, but for what the new decision gives.
+    FitResult start = fit;
+    start.parameters.clear();
+    for (int k = 0; k < bare.parameter_count(); ++k)
+      if (!bare.spec(k).from_data) start.parameters.push_back(fit.parameters[k]);
+    IdentifyOptions o = opt;
+    o.start = &start;
+    fit = identify_at(robot, data, effects, o, &values);
+  }
+  return fit;
 }
 
 }  // namespace stiff

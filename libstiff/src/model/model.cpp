@@ -41,14 +41,16 @@ std::vector<std::string> parse_model_string(const std::string& text) {
 DeflectionModel::DeflectionModel(const RobotModel& robot,
                                  const std::vector<std::string>& effects,
                                  const Dataset* data,
-                                 const std::vector<std::string>& sessions)
-    : DeflectionModel(robot, effects, data, sessions, true) {}
+                                 const std::vector<std::string>& sessions,
+                                 const std::map<std::string, double>* decide_at)
+    : DeflectionModel(robot, effects, data, sessions, true, decide_at) {}
 
 DeflectionModel::DeflectionModel(const RobotModel& robot,
                                  const std::vector<std::string>& effects,
                                  const Dataset* data,
                                  const std::vector<std::string>& sessions,
-                                 bool backfit)
+                                 bool backfit,
+                                 const std::map<std::string, double>* decide_at)
     : robot_(robot) {
   if (robot.dof() == 0) throw InvalidArgument("robot has no joints");
   if (effects.empty()) throw InvalidArgument("model has no effect (e.g. 'joint')");
@@ -83,8 +85,22 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
       bare.data = nullptr;
       const auto probe = make_effect(name, bare);  // owns what ps refers to
       const auto& ps = probe->parameters();
-      if (std::any_of(ps.begin(), ps.end(), [](const ParameterSpec& p) { return p.from_data; }))
+      if (std::any_of(ps.begin(), ps.end(), [](const ParameterSpec& p) { return p.from_data; })) {
         with_others.companion_columns = companion_columns(robot_, effects, name, *data, sessions);
+        if (decide_at) {
+          // Only when they move something: the rows as the robot file has them are the
+          // default (and the decision's cache key).
+          auto rows = companion_rows(robot_, effects, name, *data, sessions, *decide_at);
+          bool moved = false;
+          for (size_t r = 0; r < rows.size() && !moved; ++r) {
+            const Measurement& m = data->rows[r];
+            moved = rows[r].r_meas != robot_.measured_point ||
+                    rows[r].r_load != robot_.load_point || rows[r].force != m.force ||
+                    rows[r].moment != m.moment;
+          }
+          if (moved) with_others.companion_rows = std::move(rows);
+        }
+      }
     }
     auto e = make_effect(name, with_others);
     jet_jacobians_ = jet_jacobians_ || e->reads_jacobians();
@@ -172,7 +188,7 @@ Eigen::MatrixXd DeflectionModel::companion_columns(const RobotModel& robot,
   std::vector<std::string> others;
   for (const auto& name : effects)
     if (name != skip) others.push_back(name);
-  const DeflectionModel model(robot, others, &data, sessions, false);
+  const DeflectionModel model(robot, others, &data, sessions, false, nullptr);
   const Eigen::VectorXd theta = model.start_parameters();
   const int n = static_cast<int>(data.rows.size());
   Eigen::MatrixXd all = Eigen::MatrixXd::Zero(3 * n, model.parameter_count());
@@ -188,6 +204,41 @@ Eigen::MatrixXd DeflectionModel::companion_columns(const RobotModel& robot,
   Eigen::MatrixXd out(3 * n, keep.size());
   for (size_t i = 0; i < keep.size(); ++i) out.col(i) = all.col(keep[i]);
   return out;
+}
+
+std::vector<EffectSetup::CompanionRow> DeflectionModel::companion_rows(
+    const RobotModel& robot,
+    const std::vector<std::string>& effects,
+    const std::string& skip,
+    const Dataset& data,
+    const std::vector<std::string>& sessions,
+    const std::map<std::string, double>& values) {
+  std::vector<std::string> others;
+  for (const auto& name : effects)
+    if (name != skip) others.push_back(name);
+  const DeflectionModel model(robot, others, &data, sessions, false, nullptr);
+  Eigen::VectorXd theta = model.start_parameters();
+  for (int k = 0; k < model.parameter_count(); ++k) {
+    const auto it = values.find(model.owner(k).name() + "." + model.spec(k).name);
+    if (it != values.end() && std::isfinite(it->second)) theta(k) = it->second;
+  }
+  const std::vector<MeasurementContext> ctx = model.contexts(data);
+  std::vector<EffectSetup::CompanionRow> rows(data.rows.size());
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    const Measurement& m = data.rows[r];
+    EvalState<double> s;
+    s.robot = &model.robot_;
+    s.measurement = &m;
+    s.context = &ctx[r];
+    s.force = m.force;
+    s.moment = m.moment;
+    s.r_meas = robot.measured_point;
+    s.r_load = robot.load_point;
+    for (size_t e = 0; e < model.effects_.size(); ++e)
+      model.effects_[e]->wrench(theta.data() + model.offsets_[e], s);
+    rows[r] = {s.r_meas, s.r_load, s.force, s.moment};
+  }
+  return rows;
 }
 
 std::vector<std::string> DeflectionModel::session_labels() const {

@@ -42,6 +42,36 @@ bool has_warning(const FitResult& f, const std::string& text) {
   return false;
 }
 
+// A point offset of several centimetres turns the wrist joints' load torques, and with them the
+// side a backlash jump falls on. identify decides the jumps again with the offset it fitted
+// (docs/effects.md, backlash). Pooled over 8 seeds the model predicts 40 new poses each within
+// the 1.25 times the floor a right model reaches that the diagnosis asks of a suggested model
+// (floor: the noise with the prediction variance, sigma sqrt(1 + p/n), 18 parameters on 180
+// equations): 1.19 measured. Deciding once, with the robot file's points, gave 1.34 (seeds 1, 3
+// and 6 at 1.3-1.9).
+TEST(IdentifyCeres, BacklashDecidesWithTheFittedPointOffset) {
+  const RobotModel robot = test::rokae();
+  const std::vector<std::string> effects = {"joint", "point_offset", "backlash"};
+  const DeflectionModel model(robot, effects);
+  Truth truth;
+  truth.effects = effects;
+  truth.theta = model.null_parameters();
+  truth.theta.head(6) = test::paper_stiffness().cwiseInverse();
+  const double offset[6] = {0.06, 0.03, 0.05, 0.06, 0.03, 0.06};  // meas, load [m]
+  for (int k = 0; k < 6; ++k) truth.theta(model.offset(1) + k) = offset[k];
+  for (int j = 0; j < 6; ++j) truth.theta(model.offset(2) + j) = 3e-4;  // b_j [rad]
+  constexpr int kSeeds = 8;
+  double ms = 0;
+  for (uint64_t seed = 1; seed <= kSeeds; ++seed) {
+    const Dataset calib = simulated(truth, seed);
+    const Dataset valid = simulated(truth, 100 + seed, 0.0, nullptr, 40);
+    const FitResult fit = identify(robot, calib, effects);
+    ms += std::pow(validation_rms(fit, valid), 2) / kSeeds;
+  }
+  const double floor = kNoise * std::sqrt(1.0 + 18.0 / 180.0);
+  EXPECT_LT(std::sqrt(ms), 1.25 * floor);
+}
+
 TEST(IdentifyCeres, JointModelEqualsTheLinearSolution) {
   const Truth truth = joint_truth(test::paper_stiffness());
   const Dataset data = simulated(truth, 1);

@@ -348,6 +348,16 @@ struct EffectSetup {
   /// 3-row block per row of `data` (zero for absolute rows), so that it decides on what those
   /// effects leave (backfitting) and not on the raw displacements. Empty otherwise.
   Eigen::MatrixXd companion_columns;
+  /// Where the model's other effects put a row's measured point and load point (flange frame
+  /// [m]) and its applied force and moment (base frame), read after the wrench stage.
+  struct CompanionRow {
+    Eigen::Vector3d r_meas, r_load, force, moment;
+  };
+  /// For such an effect, per row of `data`: the other effects' wrench stage at the values the
+  /// decision is taken at (DeflectionModel's `decide_at`, a previous fit of the model: a point
+  /// offset moves the lever arms and the load torques that decide a backlash jump). Empty: the
+  /// robot file's points and the measured wrench (the other effects at their start values).
+  std::vector<CompanionRow> companion_rows;
 };
 
 using EffectFactory = std::unique_ptr<Effect> (*)(const EffectSetup&);

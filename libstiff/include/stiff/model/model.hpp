@@ -28,11 +28,16 @@ class DeflectionModel {
   /// Build from effect names. `data` (may be null) supplies sessions and time for effects that
   /// need them. Throws InvalidArgument for unknown names or missing requirements.
   /// `sessions` names the sessions when there is no data (a model rebuilt from a fit:
-  /// FitResult::sessions), so that per-session parameters keep their order.
+  /// FitResult::sessions), so that per-session parameters keep their order. `decide_at` (may be
+  /// null) gives values of the model's parameters by qualified name ("point_offset.meas_x"),
+  /// e.g. a previous fit: an effect that decides parameters from the data decides them with
+  /// the other effects' wrench stage at those values (EffectSetup::companion_rows), not at
+  /// their start values.
   DeflectionModel(const RobotModel& robot,
                   const std::vector<std::string>& effects,
                   const Dataset* data = nullptr,
-                  const std::vector<std::string>& sessions = {});
+                  const std::vector<std::string>& sessions = {},
+                  const std::map<std::string, double>* decide_at = nullptr);
 
   const RobotModel& robot() const { return robot_; }
   const std::vector<std::unique_ptr<Effect>>& effects() const { return effects_; }
@@ -196,13 +201,23 @@ class DeflectionModel {
                   const std::vector<std::string>& effects,
                   const Dataset* data,
                   const std::vector<std::string>& sessions,
-                  bool backfit);
+                  bool backfit,
+                  const std::map<std::string, double>* decide_at);
   /// EffectSetup::companion_columns of the effect `skip` in a model of `effects` on `data`.
   static Eigen::MatrixXd companion_columns(const RobotModel& robot,
                                            const std::vector<std::string>& effects,
                                            const std::string& skip,
                                            const Dataset& data,
                                            const std::vector<std::string>& sessions);
+  /// EffectSetup::companion_rows of the effect `skip`: the other effects' wrench stage on each
+  /// row of `data` at `values` (qualified names; the rest at their start values).
+  static std::vector<EffectSetup::CompanionRow> companion_rows(
+      const RobotModel& robot,
+      const std::vector<std::string>& effects,
+      const std::string& skip,
+      const Dataset& data,
+      const std::vector<std::string>& sessions,
+      const std::map<std::string, double>& values);
   template <typename T>
   void evaluate_into(const T* theta,
                      const Measurement& m,

@@ -225,6 +225,10 @@ class Backlash : public EffectT<Backlash> {
     const Eigen::MatrixXd& cols = setup.companion_columns;
     key.push_back(static_cast<double>(cols.rows()));
     key.insert(key.end(), cols.data(), cols.data() + cols.size());
+    key.push_back(static_cast<double>(setup.companion_rows.size()));
+    for (const auto& w : setup.companion_rows)
+      for (const Eigen::Vector3d* v : {&w.r_meas, &w.r_load, &w.force, &w.moment})
+        key.insert(key.end(), v->data(), v->data() + 3);
     struct Entry {
       std::vector<double> key;
       Preload value;
@@ -273,8 +277,15 @@ class Backlash : public EffectT<Backlash> {
       const Measurement& m = setup.data->rows[k];
       if (m.absolute || m.q.size() != n || !m.q.allFinite()) continue;
       const ChainState c = robot.chain(m.q);
-      const Eigen::Vector3d p = robot.point_position(c, robot.measured_point);
-      const Eigen::Vector3d l = robot.point_position(c, robot.load_point);
+      // Where the model's other effects put the points and the wrench (a fitted point offset
+      // moves the wrist's lever arms and load torques), else where the robot file has them.
+      const bool moved = setup.companion_rows.size() == setup.data->rows.size();
+      const EffectSetup::CompanionRow w =
+          moved ? setup.companion_rows[k]
+                : EffectSetup::CompanionRow{robot.measured_point, robot.load_point, m.force,
+                                            m.moment};
+      const Eigen::Vector3d p = robot.point_position(c, w.r_meas);
+      const Eigen::Vector3d l = robot.point_position(c, w.r_load);
       Row r;
       r.jp.resize(3, n);
       r.tau.resize(n);
@@ -284,7 +295,7 @@ class Backlash : public EffectT<Backlash> {
         lever_arm(z, o, p, wp);
         lever_arm(z, o, l, wl);
         r.jp.col(j) = wp;
-        r.tau(j) = joint_torque(wl, z, m.force, m.moment);
+        r.tau(j) = joint_torque(wl, z, w.force, w.moment);
       }
       Eigen::MatrixXd tq;
       tl_all.middleRows(n * rows.size(), n) = gravity_torques_by_link(robot, c, &tq);
