@@ -1016,7 +1016,15 @@ FitResult identify(const RobotModel& robot,
       if (!bare.spec(k).from_data) start.parameters.push_back(fit.parameters[k]);
     IdentifyOptions o = opt;
     o.start = &start;
-    fit = identify_at(robot, data, effects, o, &values);
+    try {
+      fit = identify_at(robot, data, effects, o, &values);
+    } catch (const NumericalError& e) {
+      // The fit with the first decision stands; say why it was not taken again.
+      fit.warnings.push_back(std::string("the decisions of the effects that decide from the "
+                                         "data were not taken again at the fit: ") +
+                             e.what());
+      break;
+    }
   }
   return fit;
 }
