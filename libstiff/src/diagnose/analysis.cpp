@@ -169,8 +169,7 @@ Analysis analyse(const Context& cx,
     fit = fit_model(*cx.robot, a.used, effects);
     // Built as the fit decided (identify: an effect that decides from the data decides with
     // the other effects where the fit has them).
-    std::map<std::string, double> at;
-    for (const FitParameter& q : fit.parameters) at[q.effect + "." + q.name] = q.value;
+    const std::map<std::string, double> at = fit.values();
     a.model = std::make_unique<DeflectionModel>(*cx.robot, effects, &a.used,
                                                 std::vector<std::string>{}, &at);
     a.theta = fit.theta();

@@ -26,6 +26,12 @@ Eigen::VectorXd FitResult::theta() const {
   return t;
 }
 
+std::map<std::string, double> FitResult::values() const {
+  std::map<std::string, double> v;
+  for (const auto& p : parameters) v[p.effect + "." + p.name] = p.value;
+  return v;
+}
+
 Eigen::VectorXd FitResult::joint_stiffness() const {
   std::vector<double> k;
   for (const auto& p : parameters)

@@ -1006,8 +1006,7 @@ FitResult identify(const RobotModel& robot,
       moved = std::max(moved, std::abs(fit.parameters[k].value - at(k)) /
                                   std::max(std::abs(bare.spec(k).typical), 1e-300));
     if (!(moved > 0.03)) break;
-    std::map<std::string, double> values;
-    for (const FitParameter& q : fit.parameters) values[q.effect + "." + q.name] = q.value;
+    const std::map<std::string, double> values = fit.values();
     for (int k : moving) at(k) = fit.parameters[k].value;
     // The refit starts from the fit, but for what the new decision gives.
     FitResult start = fit;

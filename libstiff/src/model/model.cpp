@@ -86,20 +86,12 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
       const auto probe = make_effect(name, bare);  // owns what ps refers to
       const auto& ps = probe->parameters();
       if (std::any_of(ps.begin(), ps.end(), [](const ParameterSpec& p) { return p.from_data; })) {
-        with_others.companion_columns = companion_columns(robot_, effects, name, *data, sessions);
-        if (decide_at) {
-          // Only when they move something: the rows as the robot file has them are the
-          // default (and the decision's cache key).
-          auto rows = companion_rows(robot_, effects, name, *data, sessions, *decide_at);
-          bool moved = false;
-          for (size_t r = 0; r < rows.size() && !moved; ++r) {
-            const Measurement& m = data->rows[r];
-            moved = rows[r].r_meas != robot_.measured_point ||
-                    rows[r].r_load != robot_.load_point || rows[r].force != m.force ||
-                    rows[r].moment != m.moment;
-          }
-          if (moved) with_others.companion_rows = std::move(rows);
-        }
+        std::vector<std::string> others;
+        for (const auto& other : effects)
+          if (other != name) others.push_back(other);
+        const DeflectionModel om(robot_, others, data, sessions, false, nullptr);
+        with_others.companion_columns = companion_columns(om, *data);
+        if (decide_at) with_others.companion_rows = companion_rows(om, *data, *decide_at);
       }
     }
     auto e = make_effect(name, with_others);
@@ -180,15 +172,9 @@ Eigen::VectorXd DeflectionModel::start_parameters() const {
   return t;
 }
 
-Eigen::MatrixXd DeflectionModel::companion_columns(const RobotModel& robot,
-                                                   const std::vector<std::string>& effects,
-                                                   const std::string& skip,
-                                                   const Dataset& data,
-                                                   const std::vector<std::string>& sessions) {
-  std::vector<std::string> others;
-  for (const auto& name : effects)
-    if (name != skip) others.push_back(name);
-  const DeflectionModel model(robot, others, &data, sessions, false, nullptr);
+Eigen::MatrixXd DeflectionModel::companion_columns(const DeflectionModel& model,
+                                                   const Dataset& data) {
+  const RobotModel& robot = model.robot_;
   const Eigen::VectorXd theta = model.start_parameters();
   const int n = static_cast<int>(data.rows.size());
   Eigen::MatrixXd all = Eigen::MatrixXd::Zero(3 * n, model.parameter_count());
@@ -207,16 +193,10 @@ Eigen::MatrixXd DeflectionModel::companion_columns(const RobotModel& robot,
 }
 
 std::vector<EffectSetup::CompanionRow> DeflectionModel::companion_rows(
-    const RobotModel& robot,
-    const std::vector<std::string>& effects,
-    const std::string& skip,
+    const DeflectionModel& model,
     const Dataset& data,
-    const std::vector<std::string>& sessions,
     const std::map<std::string, double>& values) {
-  std::vector<std::string> others;
-  for (const auto& name : effects)
-    if (name != skip) others.push_back(name);
-  const DeflectionModel model(robot, others, &data, sessions, false, nullptr);
+  const RobotModel& robot = model.robot_;
   Eigen::VectorXd theta = model.start_parameters();
   for (int k = 0; k < model.parameter_count(); ++k) {
     const auto it = values.find(model.owner(k).name() + "." + model.spec(k).name);
@@ -224,10 +204,11 @@ std::vector<EffectSetup::CompanionRow> DeflectionModel::companion_rows(
   }
   const std::vector<MeasurementContext> ctx = model.contexts(data);
   std::vector<EffectSetup::CompanionRow> rows(data.rows.size());
+  bool moved = false;
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const Measurement& m = data.rows[r];
     EvalState<double> s;
-    s.robot = &model.robot_;
+    s.robot = &robot;
     s.measurement = &m;
     s.context = &ctx[r];
     s.force = m.force;
@@ -237,7 +218,11 @@ std::vector<EffectSetup::CompanionRow> DeflectionModel::companion_rows(
     for (size_t e = 0; e < model.effects_.size(); ++e)
       model.effects_[e]->wrench(theta.data() + model.offsets_[e], s);
     rows[r] = {s.r_meas, s.r_load, s.force, s.moment};
+    moved = moved || s.r_meas != robot.measured_point || s.r_load != robot.load_point ||
+            s.force != m.force || s.moment != m.moment;
   }
+  // Nothing moved: the default (and the decision's cache key of the robot file's points).
+  if (!moved) rows.clear();
   return rows;
 }
 

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -77,6 +78,9 @@ struct FitResult {
 
   /// Parameter vector theta in model order.
   Eigen::VectorXd theta() const;
+  /// The parameters' values by qualified name ("point_offset.meas_x"): where a model built
+  /// again decides (DeflectionModel's `decide_at`).
+  std::map<std::string, double> values() const;
   /// Joint stiffness k_j = 1/c_j [N*m/rad] from the `joint` effect (inf for c_j = 0).
   Eigen::VectorXd joint_stiffness() const;
   /// Standard error of k_j by the delta method, se(c)/c^2 [N*m/rad].

@@ -203,20 +203,15 @@ class DeflectionModel {
                   const std::vector<std::string>& sessions,
                   bool backfit,
                   const std::map<std::string, double>* decide_at);
-  /// EffectSetup::companion_columns of the effect `skip` in a model of `effects` on `data`.
-  static Eigen::MatrixXd companion_columns(const RobotModel& robot,
-                                           const std::vector<std::string>& effects,
-                                           const std::string& skip,
-                                           const Dataset& data,
-                                           const std::vector<std::string>& sessions);
-  /// EffectSetup::companion_rows of the effect `skip`: the other effects' wrench stage on each
-  /// row of `data` at `values` (qualified names; the rest at their start values).
+  /// EffectSetup::companion_columns on `data` of `others`, the model's other effects (built
+  /// without deciding anything).
+  static Eigen::MatrixXd companion_columns(const DeflectionModel& others, const Dataset& data);
+  /// EffectSetup::companion_rows: the wrench stage of `others` on each row of `data` at
+  /// `values` (qualified names; the rest at their start values). Empty when it moves nothing
+  /// (the robot file's points and the measured wrench are the default).
   static std::vector<EffectSetup::CompanionRow> companion_rows(
-      const RobotModel& robot,
-      const std::vector<std::string>& effects,
-      const std::string& skip,
+      const DeflectionModel& others,
       const Dataset& data,
-      const std::vector<std::string>& sessions,
       const std::map<std::string, double>& values);
   template <typename T>
   void evaluate_into(const T* theta,

@@ -76,7 +76,7 @@ def register(sub):
 def _at_bound(fit: api.Fit) -> set:
     """Joints (1-based) the linear fit held at the bound c = 0 because least squares put their
     compliance below 0 (named so in the fit's warnings): determined, but not as a compliance."""
-    return {j for j in range(1, 65)
+    return {j for j in range(1, len(fit.stiffness) + 1)
             if any(w.startswith(f"joint {j} (joint.c{j}): least squares puts") for w in fit.warnings)}
 
 
