@@ -73,6 +73,9 @@ std::string fit_to_json(const FitResult& f) {
                       {"value", number_or_null(p.value)},
                       {"standard_error", number_or_null(p.standard_error)},
                       {"identified", p.identified}});
+  for (size_t i = 0; i < f.parameters.size(); ++i)
+    if (!f.parameters[i].identified && !f.parameters[i].held.empty())
+      params[i]["held"] = f.parameters[i].held;
   j["parameters"] = params;
   const Eigen::VectorXd k = f.joint_stiffness(), kse = f.joint_stiffness_se();
   const auto ident = f.joint_identified();
@@ -160,6 +163,15 @@ FitResult fit_from_json(const std::string& text, const std::string& file) {
                          "parameter " + q.effect + "." + q.name + " is not a finite number");
       q.standard_error = p.contains("standard_error") ? number_from(p["standard_error"]) : NAN;
       q.identified = p.value("identified", true);
+      if (!q.identified && p.contains("held")) {
+        const auto& h = p["held"];
+        if (!h.is_string() ||
+            (h != "undetermined" && h != "bound" && h != "decided" && h != "left_out"))
+          throw ParseError(file, 0, 0,
+                           "parameter " + q.effect + "." + q.name +
+                               ": \"held\" is none of undetermined, bound, decided, left_out");
+        q.held = h.get<std::string>();
+      }
       f.parameters.push_back(q);
     }
     if (j.contains("fit")) {
@@ -333,6 +345,7 @@ FitResult fit_for_model(const FitResult& fit,
         q.value = sp.null_value;
         q.standard_error = NAN;
         q.identified = false;
+        q.held = sp.spread ? "decided" : "left_out";
         params.push_back(q);
         from.push_back(-1);
       } else {

@@ -829,11 +829,14 @@ FitResult identify_at(const RobotModel& robot,
     if (given[k]) {  // kept as the start fit has it
       const FitParameter& q = opt.start->parameters[from_start[k]];
       fp.identified = q.identified;
+      fp.held = q.held;
       fp.standard_error = q.standard_error;
       f.covariance(k, k) = q.standard_error * q.standard_error;
       f.parameters.push_back(fp);
       continue;
     }
+    if (!fp.identified)
+      fp.held = sp.spread || sp.from_data ? "decided" : left_out[k] ? "left_out" : "undetermined";
     f.parameters.push_back(fp);
     if (!fp.identified && sp.spread) {
       // A block of spread values (backlash's mass covariance): one line for the block.

@@ -403,6 +403,8 @@ FitResult identify_joint_linear(const RobotModel& robot,
     }
     if (!more) {
       for (int j = 0; j < n; ++j)
+        if (!f.parameters[j].identified) f.parameters[j].held = below[j] ? "bound" : "undetermined";
+      for (int j = 0; j < n; ++j)
         if (below[j])
           f.warnings.push_back("joint " + std::to_string(j + 1) + " (joint.c" +
                                std::to_string(j + 1) + "): " + reasons[j]);

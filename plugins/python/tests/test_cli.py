@@ -57,9 +57,14 @@ def test_a_compliance_below_zero_is_held_at_its_bound_and_the_fit_predicts(tmp_p
         run("simulate", "--robot", "rokae", "--count", "10", "--seed", seed,
             "--stiffness", "50914,16382,31311,1e9,5614,4000", "-o", data)
         out = run("identify", "--robot", "rokae", "--data", data, "-o", fit).stdout
-        c = [q["value"] for q in json.loads(fit.read_text())["parameters"] if q["effect"] == "joint"]
+        joint = [q for q in json.loads(fit.read_text())["parameters"] if q["effect"] == "joint"]
+        c = [q["value"] for q in joint]
         assert len(c) == 6 and min(c) >= 0, c
+        held = [q.get("held") for q in joint]
         run("predict", "--robot", "rokae", "--fit", fit, "--data", data, "-o", tmp_path / "p.csv")
+        # The table shows what the fit file says (`held`), for joint 4 alone.
+        assert ("rigid (c < 0 held at 0)" in out) == (held[3] == "bound"), (held, out)
+        assert all(h != "bound" for j, h in enumerate(held) if j != 3), held
         if "rigid (c < 0 held at 0)" in out:
             shown += 1
             assert "held at the bound c = 0 (least squares put the compliance below 0): joint 4" \

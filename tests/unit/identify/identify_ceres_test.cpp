@@ -67,6 +67,12 @@ TEST(IdentifyCeres, BacklashDecidesWithTheFittedPointOffset) {
     const Dataset valid = simulated(truth, 100 + seed, 0.0, nullptr, 40);
     const FitResult fit = identify(robot, calib, effects);
     ms += std::pow(validation_rms(fit, valid), 2) / kSeeds;
+    // The link masses and their spread are decided from the data, not fitted, and say so.
+    for (int k = 0; k < model.parameter_count(); ++k)
+      if (model.spec(k).from_data) {
+        EXPECT_FALSE(fit.parameters[k].identified) << fit.parameters[k].name;
+        EXPECT_EQ(fit.parameters[k].held, "decided") << fit.parameters[k].name;
+      }
   }
   const double floor = kNoise * std::sqrt(1.0 + 18.0 / 180.0);
   EXPECT_LT(std::sqrt(ms), 1.25 * floor);
@@ -106,6 +112,7 @@ TEST(IdentifyCeres, JointSixOnTheFlangeAxisIsHeldAndReported) {
   EXPECT_TRUE(std::isnan(fit.parameters[5].standard_error));
   EXPECT_TRUE(std::isnan(fit.covariance(5, 5)));
   EXPECT_TRUE(has_warning(fit, "joint.c6 is not identifiable")) << fit.warnings.size();
+  EXPECT_EQ(fit.parameters[5].held, "undetermined");
   for (int j = 0; j < 5; ++j) EXPECT_TRUE(fit.parameters[j].identified);
 }
 

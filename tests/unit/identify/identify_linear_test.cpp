@@ -80,9 +80,17 @@ TEST(IdentifyLinear, ANegativeComplianceIsHeldAtItsBoundAsTheBoundedFitDoes) {
     const FitResult lin = identify_joint_linear(robot, data);
     for (int j = 0; j < 6; ++j) EXPECT_GE(lin.parameters[j].value, 0.0) << "seed " << seed;
     EXPECT_NO_THROW(fit_for_model(lin, robot, model, "")) << "seed " << seed;
-    if (lin.parameters[3].identified) continue;
+    // Joint 6 (no lever arm on the flange axis) is held for want of data, never at the bound.
+    EXPECT_EQ(lin.parameters[5].held, "undetermined") << "seed " << seed;
+    if (lin.parameters[3].identified) {
+      EXPECT_EQ(lin.parameters[3].held, "") << "seed " << seed;
+      continue;
+    }
     ++held;
     EXPECT_EQ(lin.parameters[3].value, 0.0);
+    EXPECT_EQ(lin.parameters[3].held, "bound") << "seed " << seed;
+    // A fit file says so, and reads back the same.
+    EXPECT_EQ(fit_from_json(fit_to_json(lin), "fit.json").parameters[3].held, "bound");
     EXPECT_TRUE(std::any_of(lin.warnings.begin(), lin.warnings.end(), [](const std::string& w) {
       return w.find("joint 4") != std::string::npos && w.find("below 0") != std::string::npos;
     }));
@@ -129,6 +137,18 @@ TEST(FitJson, RoundTripKeepsEveryParameter) {
   for (size_t k = 0; k < f.parameters.size(); ++k) {
     EXPECT_EQ(g.parameters[k].value, f.parameters[k].value);
     EXPECT_EQ(g.parameters[k].identified, f.parameters[k].identified);
+  }
+  // Why a parameter is held: kept through the file; an unknown reason is refused, naming it.
+  EXPECT_EQ(g.parameters[5].held, "undetermined");
+  std::string text = fit_to_json(f);
+  const std::string said = "\"held\": \"undetermined\"";
+  ASSERT_NE(text.find(said), std::string::npos);
+  text.replace(text.find(said), said.size(), "\"held\": \"unknown\"");
+  try {
+    fit_from_json(text, "fit.json");
+    ADD_FAILURE() << "an unknown held reason was read";
+  } catch (const ParseError& e) {
+    EXPECT_NE(std::string(e.what()).find("joint.c6"), std::string::npos) << e.what();
   }
   EXPECT_THROW(fit_from_json("{\"format\": \"other\"}", "x.json"), ParseError);
   EXPECT_THROW(fit_from_json("{not json", "x.json"), ParseError);

@@ -20,6 +20,12 @@ struct FitParameter {
   double value = 0.0;
   double standard_error = 0.0;  ///< NaN when not identified
   bool identified = true;       ///< false: the data could not identify it; held at `value`
+  /// Why a parameter that is not identified is held (empty when identified or unknown, as in
+  /// files written before it): "undetermined" (the data do not determine it), "bound" (least
+  /// squares put it past its physical bound, e.g. a negative compliance, and the bounded fit
+  /// holds it there), "decided" (decided by its effect from the data, not fitted), "left_out"
+  /// (an optional term the information criterion left out).
+  std::string held;
 };
 
 /// A measurement the robust fit down-weighted.

@@ -74,10 +74,10 @@ def register(sub):
 
 
 def _at_bound(fit: api.Fit) -> set:
-    """Joints (1-based) the linear fit held at the bound c = 0 because least squares put their
-    compliance below 0 (named so in the fit's warnings): determined, but not as a compliance."""
-    return {j for j in range(1, len(fit.stiffness) + 1)
-            if any(w.startswith(f"joint {j} (joint.c{j}): least squares puts") for w in fit.warnings)}
+    """Joints (1-based) the fit held at the bound c = 0 because least squares put their
+    compliance below 0 (`held` is "bound"): determined, but not as a compliance."""
+    return {int(p["name"][1:]) for p in fit.json["parameters"]
+            if p["effect"] == "joint" and p.get("held") == "bound"}
 
 
 def print_fit(fit: api.Fit, truth_stiffness=None) -> None:
