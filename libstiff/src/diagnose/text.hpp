@@ -1,17 +1,14 @@
 // Number and list formatting of the diagnosis's messages (private to diagnose/).
 #pragma once
 
-#include <cstdio>
 #include <string>
 #include <vector>
 
+#include "io/number_text.hpp"
+
 namespace stiff::diagnose_detail {
 
-inline std::string num(double v, int precision = 3) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.*g", precision, v);
-  return b;
-}
+using detail::num;
 inline std::string um(double m) { return num(m * 1e6, 3) + " um"; }
 inline std::string mm(double m) { return num(m * 1e3, 3) + " mm"; }
 

@@ -13,6 +13,7 @@
 #include <set>
 #include <sstream>
 
+#include "io/number_text.hpp"
 #include "io/xml.hpp"
 #include "io/zip.hpp"
 #include "stiff/error.hpp"
@@ -50,11 +51,7 @@ bool is_identifier(const std::string& s) {
   return true;
 }
 
-std::string num(double v) {
-  char b[40];
-  std::snprintf(b, sizeof b, "%.17g", v);
-  return b;
-}
+using detail::exact;
 
 std::string xml(const std::string& s) { return detail::xml_attribute(s); }
 
@@ -178,21 +175,21 @@ std::string model_file(const RobotModel& robot,
   for (const auto& j : robot.joints) {
     o << "joint";
     for (int r = 0; r < 4; ++r)
-      for (int c = 0; c < 4; ++c) o << ' ' << num(j.pre(r, c));
-    for (int r = 0; r < 3; ++r) o << ' ' << num(j.axis(r));
+      for (int c = 0; c < 4; ++c) o << ' ' << exact(j.pre(r, c));
+    for (int r = 0; r < 3; ++r) o << ' ' << exact(j.axis(r));
     for (int r = 0; r < 4; ++r)
-      for (int c = 0; c < 4; ++c) o << ' ' << num(j.post(r, c));
-    o << ' ' << num(j.lower) << ' ' << num(j.upper) << ' ' << num(j.mass);
-    for (int r = 0; r < 3; ++r) o << ' ' << num(j.com(r));
+      for (int c = 0; c < 4; ++c) o << ' ' << exact(j.post(r, c));
+    o << ' ' << exact(j.lower) << ' ' << exact(j.upper) << ' ' << exact(j.mass);
+    for (int r = 0; r < 3; ++r) o << ' ' << exact(j.com(r));
     o << "\n";
   }
   auto v3 = [&](const char* key, const Eigen::Vector3d& v) {
-    o << key << ' ' << num(v(0)) << ' ' << num(v(1)) << ' ' << num(v(2)) << "\n";
+    o << key << ' ' << exact(v(0)) << ' ' << exact(v(1)) << ' ' << exact(v(2)) << "\n";
   };
   v3("measured_point", robot.measured_point);
   v3("load_point", robot.load_point);
-  o << "tool " << num(robot.tool_mass) << ' ' << num(robot.tool_com(0)) << ' '
-    << num(robot.tool_com(1)) << ' ' << num(robot.tool_com(2)) << "\n";
+  o << "tool " << exact(robot.tool_mass) << ' ' << exact(robot.tool_com(0)) << ' '
+    << exact(robot.tool_com(1)) << ' ' << exact(robot.tool_com(2)) << "\n";
   v3("gravity", robot.gravity);
   o << "effects " << model.effects().size();
   for (const auto& e : model.effects()) o << ' ' << e->name();
@@ -203,8 +200,8 @@ std::string model_file(const RobotModel& robot,
     o << "var " << v.vr << ' ' << v.name << ' ' << fmu_format::kRoleNames[static_cast<int>(v.role)]
       << ' ' << v.index;
     for (int e = 0; e < v.size; ++e)
-      o << ' ' << num(v.starts.empty() ? v.start : v.starts[static_cast<size_t>(e)]);
-    o << ' ' << num(v.min) << ' ' << num(v.max) << "\n";
+      o << ' ' << exact(v.starts.empty() ? v.start : v.starts[static_cast<size_t>(e)]);
+    o << ' ' << exact(v.min) << ' ' << exact(v.max) << "\n";
   }
   o << "end\n";
   return o.str();
@@ -299,13 +296,13 @@ std::string model_description(const std::vector<Var>& vars,
     std::string attrs;
     if (!v.unit.empty() && type != "Integer" && type != "Int32")
       attrs += " unit=\"" + xml(v.unit) + "\"";
-    if (has_bound(v.min) && v.role != Role::time) attrs += " min=\"" + num(v.min) + "\"";
-    if (has_bound(v.max) && v.role != Role::time) attrs += " max=\"" + num(v.max) + "\"";
+    if (has_bound(v.min) && v.role != Role::time) attrs += " min=\"" + exact(v.min) + "\"";
+    if (has_bound(v.max) && v.role != Role::time) attrs += " max=\"" + exact(v.max) + "\"";
     std::string start;
     if (with_start) {
       for (int e = 0; e < v.size; ++e)
         start +=
-            (e ? " " : "") + num(v.starts.empty() ? v.start : v.starts[static_cast<size_t>(e)]);
+            (e ? " " : "") + exact(v.starts.empty() ? v.start : v.starts[static_cast<size_t>(e)]);
       if (type == "Integer" || type == "Int32") start = std::to_string(static_cast<int>(v.start));
       attrs += " start=\"" + start + "\"";
     }

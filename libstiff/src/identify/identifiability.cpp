@@ -23,12 +23,6 @@ std::string qualified(const DeflectionModel& model, int k) {
   return model.owner(k).name() + "." + model.spec(k).name;
 }
 
-std::string num(double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.3g", v);
-  return b;
-}
-
 namespace {
 
 /// Which parameters the data cannot identify at theta. Columns are taken in priority order

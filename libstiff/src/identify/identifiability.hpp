@@ -7,15 +7,13 @@
 #include <string>
 #include <vector>
 
+#include "io/number_text.hpp"
 #include "stiff/model/model.hpp"
 
 namespace stiff::detail {
 
 /// "effect.parameter" of theta's k-th parameter.
 std::string qualified(const DeflectionModel& model, int k);
-
-/// A number in messages: three significant digits.
-std::string num(double v);
 
 /// J^T J of `j`, both triangles (a rank update of the lower one, then mirrored).
 Eigen::MatrixXd gram_of(const Eigen::MatrixXd& j);

@@ -29,16 +29,6 @@ namespace detail {
 // validate_dataset(data, dof, true) without strings per row (identify_linear.cpp).
 void validate_identification_data(const Dataset& data, int dof);
 }  // namespace detail
-namespace {
-
-std::string num(double v, int precision = 3) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.*g", precision, v);
-  return b;
-}
-
-}  // namespace
-
 using detail::check_identifiability;
 using detail::Evaluations;
 using detail::gram_of;
@@ -46,6 +36,7 @@ using detail::held_has_effect;
 using detail::Identifiability;
 using detail::known_losses;
 using detail::make_loss;
+using detail::num;
 using detail::qualified;
 using detail::Setup;
 using detail::solve;

@@ -9,6 +9,7 @@
 #include <set>
 #include <sstream>
 
+#include "io/number_text.hpp"
 #include "stiff/error.hpp"
 #include "stiff/io/text_io.hpp"
 #include "stiff/kinematics/robot_model.hpp"
@@ -254,11 +255,7 @@ std::string quote_if_needed(const std::string& s) {
   return o + "\"";
 }
 
-std::string num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.17g", v);
-  return buf;
-}
+using detail::exact;
 
 }  // namespace
 
@@ -624,16 +621,16 @@ std::string format_measurements_csv(const Dataset& data) {
   for (size_t k = 0; k < head.size(); ++k) o << (k ? "," : "") << head[k];
   o << "\n";
   // A cell of the other kind's group stays empty.
-  auto cell = [&](bool present, double v) { o << "," << (present ? num(v) : std::string()); };
+  auto cell = [&](bool present, double v) { o << "," << (present ? exact(v) : std::string()); };
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const auto& m = data.rows[r];
     const bool abs = m.absolute;
     o << quote_if_needed(m.id.empty() ? std::to_string(r + 1) : m.id);
-    for (int j = 0; j < data.dof; ++j) o << "," << num(j < m.q.size() ? m.q(j) : 0.0);
+    for (int j = 0; j < data.dof; ++j) o << "," << exact(j < m.q.size() ? m.q(j) : 0.0);
     if (force)
-      for (int k = 0; k < 3; ++k) o << "," << num(m.force(k));
+      for (int k = 0; k < 3; ++k) o << "," << exact(m.force(k));
     if (data.has_moment)
-      for (int k = 0; k < 3; ++k) o << "," << num(m.moment(k));
+      for (int k = 0; k < 3; ++k) o << "," << exact(m.moment(k));
     if (data.has_displacement)
       for (int k = 0; k < 3; ++k) cell(!abs, m.displacement(k));
     if (data.has_rotation)
@@ -648,7 +645,7 @@ std::string format_measurements_csv(const Dataset& data) {
     if (data.has_temperature) cell(abs, m.temperature);
     if (data.has_sigma_p) cell(abs && m.sigma_p > 0, m.sigma_p);
     if (data.has_sigma_o) cell(abs && m.sigma_o > 0, m.sigma_o);
-    if (data.has_time) o << "," << num(m.time);
+    if (data.has_time) o << "," << exact(m.time);
     if (data.has_session) o << "," << quote_if_needed(m.session);
     for (size_t e = 0; e < data.extra_columns.size(); ++e)
       o << "," << quote_if_needed(e < m.extra.size() ? m.extra[e] : std::string());

@@ -3,6 +3,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "io/number_text.hpp"
 #include "stiff/plan/plan.hpp"
 
 namespace stiff {
@@ -10,13 +11,8 @@ namespace {
 
 using nlohmann::json;
 
-std::string num(double v) {
-  if (!std::isfinite(v)) return std::isnan(v) ? "nan" : (v > 0 ? "inf" : "-inf");
-  std::ostringstream o;
-  o.precision(10);
-  o << v;
-  return o.str();
-}
+/// Plan files: ten significant digits.
+std::string num(double v) { return detail::num(v, 10); }
 
 json number(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 

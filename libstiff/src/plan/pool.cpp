@@ -5,6 +5,7 @@
 #include <set>
 #include <sstream>
 
+#include "io/number_text.hpp"
 #include "plan_internal.hpp"
 #include "stiff/error.hpp"
 #include "stiff/kinematics/joint_torque.hpp"
@@ -18,12 +19,7 @@
 namespace stiff {
 namespace {
 
-std::string num(double v) {
-  std::ostringstream o;
-  o.precision(6);
-  o << v;
-  return o.str();
-}
+std::string num(double v) { return detail::num(v, 6); }
 
 struct PoseData {
   Eigen::Matrix3Xd jm, jl;

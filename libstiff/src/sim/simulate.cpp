@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "../io/yaml_load.hpp"
+#include "io/number_text.hpp"
 #include "stiff/error.hpp"
 #include "stiff/io/text_io.hpp"
 #include "stiff/kinematics/sampling.hpp"
@@ -38,12 +39,7 @@ YAML::Node load_yaml(const std::string& text, const std::string& file) {
   return root;
 }
 
-std::string fmt(double v) {
-  std::ostringstream o;
-  o.precision(6);
-  o << v;
-  return o.str();
-}
+std::string fmt(double v) { return detail::num(v, 6); }
 
 }  // namespace
 
