@@ -37,8 +37,27 @@ bool Chain::at_floor(const Level& L, std::string* why, bool* weak) const {
   // model that fails only on such evidence is not refuted, only not confirmed.
   auto marginal = [&](double p) { return p >= alpha / 10; };
   *weak = true;
+  bool at = true;
   if (cx->noise->known) {
-    if (q.floor_p >= alpha) return true;
+    if (q.floor_p >= alpha) {
+      // At the stated floor, unless the residual keeps a trend beyond the marginal that no
+      // candidate takes up (a stated noise level can be generous, and allows for some): a
+      // significant candidate's own evidence is the chain's to judge (decide()).
+      for (const auto& c : L.scores)
+        if (c.significant) return true;
+      Diagnosis d;
+      where(*cx, L, d);
+      for (const auto& c : d.covariates)
+        if (c.significant && !marginal(c.p_adjusted)) {
+          *why = "it reaches the stated noise floor, but its residual still follows " +
+                 c.description + " (partial F = " + num(c.statistic, 3) +
+                 ", p_adj = " + num(c.p_adjusted, 2) +
+                 "): structure remains that no candidate explains";
+          *weak = false;
+          return false;
+        }
+      return true;
+    }
     const std::string held_out =
         std::isfinite(q.validation_to_floor)
             ? " and the validation errors " + num(q.validation_to_floor, 3) + " times"
@@ -49,7 +68,6 @@ bool Chain::at_floor(const Level& L, std::string* why, bool* weak) const {
     *weak = marginal(q.floor_p);
     return false;
   }
-  bool at = true;
   if (q.has_validation && q.validation_to_fit_p < alpha) {
     *why = "it predicts the validation poses " + num(q.validation_to_fit, 3) +
            " times worse than its fit residual allows (p = " + num(q.validation_to_fit_p, 2) +
