@@ -330,6 +330,17 @@ std::string Chain::decide(size_t i, std::string* why) {
           "): the missing effect is probably not in the candidate list" + extra;
       return std::string("unexplained");
     }
+    // A strong trend left against a covariate is structure whatever the noise level says: no
+    // candidate explains it (marginal ones, alpha/10 <= p_adj < alpha, are left to chance).
+    Diagnosis d;
+    where(*cx, L, d);
+    for (const auto& c : d.covariates)
+      if (c.significant && c.p_adjusted < alpha / 10) {
+        *why = "no candidate effect is significant, but the residual follows " + c.description +
+               " (partial F = " + num(c.statistic, 3) + ", p_adj = " + num(c.p_adjusted, 2) +
+               "): the missing effect is probably not in the candidate list" + extra;
+        return std::string("unexplained");
+      }
     *why = known
                ? "the residuals are at the noise floor (" + chi + ") and no candidate " +
                      "effect is significant" + extra
