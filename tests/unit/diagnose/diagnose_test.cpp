@@ -848,6 +848,19 @@ TEST(DiagnoseHonesty, LeftOutEffectIsUnexplainedNotMisattributed) {
     }
 }
 
+/// The joint-only virtual robot's scenario of `seed` with `alter` applied to both data sets (an
+/// effect outside the library added by hand), its noise statement removed unless `stated`.
+Scenario altered_scenario(const std::function<void(Dataset&)>& alter, uint64_t seed, bool stated) {
+  Scenario s = make_scenario("joint", seed);
+  alter(s.calib);
+  alter(s.valid);
+  if (!stated) {
+    hide_noise(s.calib);
+    hide_noise(s.valid);
+  }
+  return s;
+}
+
 /// Claims (`missing_effect` or `adequate`) in `seeds` seeds of the virtual robot's joints-only
 /// scenario, the noise stated or not, with `alter` putting an effect outside the library into
 /// both sessions' data; an `unexplained` verdict must say what the residual follows.
@@ -857,14 +870,7 @@ int claims_outside_library(const char* what,
                            int seeds = 4) {
   int claims = 0;
   for (uint64_t seed = 1; seed <= static_cast<uint64_t>(seeds); ++seed) {
-    Scenario s = make_scenario("joint", seed);
-    alter(s.calib);
-    alter(s.valid);
-    if (!stated) {
-      hide_noise(s.calib);
-      hide_noise(s.valid);
-    }
-    const Diagnosis d = run(s);
+    const Diagnosis d = run(altered_scenario(alter, seed, stated));
     print(what, seed, d);
     claims += d.verdict == "missing_effect" || d.verdict == "adequate";
     if (d.verdict == "unexplained") {
@@ -916,14 +922,7 @@ TEST(DiagnoseHonesty, TheModelThatMimicsAPedestalTiltIsNotAdequate) {
   int adequate = 0, named = 0;
   for (const bool stated : {true, false})
     for (uint64_t seed = 1; seed <= 4; ++seed) {
-      Scenario s = make_scenario("joint", seed);
-      tilt_pedestal(s.calib);
-      tilt_pedestal(s.valid);
-      if (!stated) {
-        hide_noise(s.calib);
-        hide_noise(s.valid);
-      }
-      const Diagnosis d = run(s, {}, mimic);
+      const Diagnosis d = run(altered_scenario(tilt_pedestal, seed, stated), {}, mimic);
       print(stated ? "pedestal, mimic" : "pedestal, mimic, noise unknown", seed, d);
       adequate += d.verdict == "adequate";
       named +=
