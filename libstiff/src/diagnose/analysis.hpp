@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -193,6 +194,10 @@ inline bool claims(const Level& L) { return !L.scores.empty() && L.scores[0].sig
 /// Residual structure against covariates ("where it fails"): per-pose residuals and partial-F
 /// trend tests into `d`.
 void where(const Context& cx, const Level& L, Diagnosis& d);
+
+/// The trend of level L's residual at p_adj < alpha/10 (the strongest), or none: structure
+/// whatever the noise level, where a trend at alpha/10 <= p_adj < alpha is left to chance.
+std::optional<CovariateTest> strong_trend(const Context& cx, const Level& L);
 
 /// The covariates and axes the residual follows, in one sentence (for `unexplained`).
 std::string signature_of(const Diagnosis& d);

@@ -45,18 +45,13 @@ bool Chain::at_floor(const Level& L, std::string* why, bool* weak) const {
       // significant candidate's own evidence is the chain's to judge (decide()).
       for (const auto& c : L.scores)
         if (c.significant) return true;
-      Diagnosis d;
-      where(*cx, L, d);
-      for (const auto& c : d.covariates)
-        if (c.significant && !marginal(c.p_adjusted)) {
-          *why = "it reaches the stated noise floor, but its residual still follows " +
-                 c.description + " (partial F = " + num(c.statistic, 3) +
-                 ", p_adj = " + num(c.p_adjusted, 2) +
-                 "): structure remains that no candidate explains";
-          *weak = false;
-          return false;
-        }
-      return true;
+      const std::optional<CovariateTest> t = strong_trend(*cx, L);
+      if (!t) return true;
+      *why = "it reaches the stated noise floor, but its residual still follows " + t->description +
+             " (partial F = " + num(t->statistic, 3) + ", p_adj = " + num(t->p_adjusted, 2) +
+             "): structure remains that no candidate explains";
+      *weak = false;
+      return false;
     }
     const std::string held_out =
         std::isfinite(q.validation_to_floor)
@@ -330,17 +325,13 @@ std::string Chain::decide(size_t i, std::string* why) {
           "): the missing effect is probably not in the candidate list" + extra;
       return std::string("unexplained");
     }
-    // A strong trend left against a covariate is structure whatever the noise level says: no
-    // candidate explains it (marginal ones, alpha/10 <= p_adj < alpha, are left to chance).
-    Diagnosis d;
-    where(*cx, L, d);
-    for (const auto& c : d.covariates)
-      if (c.significant && c.p_adjusted < alpha / 10) {
-        *why = "no candidate effect is significant, but the residual follows " + c.description +
-               " (partial F = " + num(c.statistic, 3) + ", p_adj = " + num(c.p_adjusted, 2) +
-               "): the missing effect is probably not in the candidate list" + extra;
-        return std::string("unexplained");
-      }
+    // A strong trend left against a covariate is structure whatever the noise level says.
+    if (const std::optional<CovariateTest> t = strong_trend(*cx, L)) {
+      *why = "no candidate effect is significant, but the residual follows " + t->description +
+             " (partial F = " + num(t->statistic, 3) + ", p_adj = " + num(t->p_adjusted, 2) +
+             "): the missing effect is probably not in the candidate list" + extra;
+      return std::string("unexplained");
+    }
     *why = known
                ? "the residuals are at the noise floor (" + chi + ") and no candidate " +
                      "effect is significant" + extra

@@ -149,12 +149,12 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
     tests.push_back(ct);
     lps.push_back(g.log_p);
   }
-  // The arm turning as a whole about the base's horizontal axes under the load's moment there
-  // (a compliant pedestal, floor or mounting plate): theta = (c_x M_x, c_y M_y, 0), the base
-  // moment M = L x F + m, and the displacement theta x (P + h e_z) about a pivot h below the
-  // base frame (four columns: c_x, c_y and their products with h). No effect of the library
-  // has this form; the joints, the links and a force-frame error take part of it up, and what
-  // they leave shows here.
+  // The arm turning as a whole about the axes of its mounting plane (base x and y) under the
+  // load's moment there (a compliant pedestal, floor, wall or mounting plate): theta = (c_x M_x,
+  // c_y M_y, 0), the base moment M = L x F + m, and the displacement theta x (P + h e_z) about a
+  // pivot h below the base frame (four columns: c_x, c_y and their products with h). No effect of
+  // the library has this form; the joints, the links and a force-frame error take part of it up,
+  // and what they leave shows here.
   {
     MatrixXd z = MatrixXd::Zero(a.n, 4);
     for (int i = 0; i < nu; ++i) {
@@ -174,8 +174,8 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
       CovariateTest ct;
       ct.covariate = "base_tilt";
       ct.description =
-          "the arm turning as a whole about the base x and y axes under the load's "
-          "moment there (pedestal or floor compliance, not in the library)";
+          "the arm turning as a whole about the base x and y axes (its mounting plane) under the "
+          "load's moment there (pedestal or floor compliance, not in the library)";
       ct.df = g.df;
       ct.statistic = g.f;
       ct.p_value = std::exp(g.log_p);
@@ -192,6 +192,14 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
     return x.p_value < y.p_value;
   });
   d.covariates = tests;
+}
+
+std::optional<CovariateTest> strong_trend(const Context& cx, const Level& L) {
+  Diagnosis d;
+  where(cx, L, d);
+  for (const auto& c : d.covariates)  // sorted by p
+    if (c.significant && c.p_adjusted < cx.opt->alpha / 10) return c;
+  return std::nullopt;
 }
 
 std::string signature_of(const Diagnosis& d) {
