@@ -581,6 +581,9 @@ CASES = [
     dict(id="py-fit-asymmetric-covariance", kind="python", topic="bad JSON fit",
          code="stiff.Fit.read(fit_edit('{fit}', '{tmp}', lambda j: put(j['covariance'][0], 1, 1.0)))",
          error="ParseError", status=-3, message="not symmetric at (2, 1)"),
+    dict(id="py-fit-unknown-held-reason", kind="python", topic="bad JSON fit",
+         code="stiff.Fit.read(fit_edit('{fit}', '{tmp}', lambda j: j['parameters'][0].update(identified=False, held='tired')))",
+         error="ParseError", status=-3, message='joint.c1: "held" is none of'),
     # ------------------------------------------------------------------ FMU (fmpy)
     dict(id="fmu2-negative-compliance", kind="fmu", topic="FMU bad parameters",
          code="fmu_set('{fmu2}', joint_c2=-1e-5)", message="joint_c2"),
