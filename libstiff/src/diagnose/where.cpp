@@ -102,6 +102,21 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
   add("time", cx.had_time ? "measurement time" : "measurement order", time);
   std::vector<CovariateTest> tests;
   std::vector<double> lps;
+  // A test of the residual against the group `z`, kept when the group survives projection.
+  auto record = [&](const std::string& name, const std::string& desc,
+                    const MatrixXd& z) -> CovariateTest* {
+    const GroupScore g = score_group(a, z, VectorXd::Ones(z.cols()), 1e-6);
+    if (g.df == 0) return nullptr;
+    CovariateTest ct;
+    ct.covariate = name;
+    ct.description = desc;
+    ct.df = g.df;
+    ct.statistic = g.f;
+    ct.p_value = std::exp(g.log_p);
+    tests.push_back(ct);
+    lps.push_back(g.log_p);
+    return &tests.back();
+  };
   for (size_t t = 0; t < names.size(); ++t) {
     const auto& v = values[t];
     double mean = 0;
@@ -116,14 +131,8 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
       for (int k = 0; k < 3; ++k) z(3 * i + k, k) = c * a.w(i);
     }
     if (!(var > 1e-24)) continue;
-    const GroupScore g = score_group(a, z, VectorXd::Ones(3), 1e-6);
-    CovariateTest ct;
-    ct.covariate = names[t].first;
-    ct.description = names[t].second;
-    ct.df = g.df;
-    if (g.df == 0) continue;
-    ct.statistic = g.f;
-    ct.p_value = std::exp(g.log_p);
+    CovariateTest* ct = record(names[t].first, names[t].second, z);
+    if (!ct) continue;
     for (int k = 0; k < 3; ++k) {
       if (constant) {
         double s = 0, ss = 0;
@@ -131,7 +140,7 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
           s += a.r(3 * i + k);
           ss += a.r(3 * i + k) * a.r(3 * i + k);
         }
-        ct.correlation[k] = ss > 0 ? s / std::sqrt(nu * ss) : 0.0;
+        ct->correlation[k] = ss > 0 ? s / std::sqrt(nu * ss) : 0.0;
         continue;
       }
       double sxy = 0, syy = 0, sxx = 0, ym = 0;
@@ -144,10 +153,8 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
         sxx += x * x;
         syy += y * y;
       }
-      ct.correlation[k] = sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : 0.0;
+      ct->correlation[k] = sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : 0.0;
     }
-    tests.push_back(ct);
-    lps.push_back(g.log_p);
   }
   // The arm turning as a whole about the axes of its mounting plane (base x and y) under the
   // load's moment there (a compliant pedestal, floor, wall or mounting plate): theta = (c_x M_x,
@@ -169,19 +176,10 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
                                        mb.x() * ex.cross(ez), mb.y() * ey.cross(ez)};
       for (int k = 0; k < 4; ++k) z.block<3, 1>(3 * i, k) = a.w(i) * cols[k];
     }
-    const GroupScore g = score_group(a, z, VectorXd::Ones(4), 1e-6);
-    if (g.df > 0) {
-      CovariateTest ct;
-      ct.covariate = "base_tilt";
-      ct.description =
-          "the arm turning as a whole about the base x and y axes (its mounting plane) under the "
-          "load's moment there (pedestal or floor compliance, not in the library)";
-      ct.df = g.df;
-      ct.statistic = g.f;
-      ct.p_value = std::exp(g.log_p);
-      tests.push_back(ct);
-      lps.push_back(g.log_p);
-    }
+    record("base_tilt",
+           "the arm turning as a whole about the base x and y axes (its mounting plane) under "
+           "the load's moment there (pedestal or floor compliance, not in the library)",
+           z);
   }
   const auto adj = stats::holm_adjust(lps);
   for (size_t t = 0; t < tests.size(); ++t) {

@@ -192,6 +192,21 @@ Eigen::MatrixXd DeflectionModel::companion_columns(const DeflectionModel& model,
   return out;
 }
 
+template <typename T>
+inline void DeflectionModel::wrench_stage(const T* theta,
+                                          const Measurement& m,
+                                          const MeasurementContext& c,
+                                          EvalState<T>& s) const {
+  s.robot = &robot_;
+  s.measurement = &m;
+  s.context = &c;
+  s.force = m.force.cast<T>();
+  s.moment = m.moment.cast<T>();
+  s.r_meas = robot_.measured_point.cast<T>();
+  s.r_load = robot_.load_point.cast<T>();
+  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->wrench(theta + offsets_[e], s);
+}
+
 std::vector<EffectSetup::CompanionRow> DeflectionModel::companion_rows(
     const DeflectionModel& model,
     const Dataset& data,
@@ -208,15 +223,7 @@ std::vector<EffectSetup::CompanionRow> DeflectionModel::companion_rows(
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const Measurement& m = data.rows[r];
     EvalState<double> s;
-    s.robot = &robot;
-    s.measurement = &m;
-    s.context = &ctx[r];
-    s.force = m.force;
-    s.moment = m.moment;
-    s.r_meas = robot.measured_point;
-    s.r_load = robot.load_point;
-    for (size_t e = 0; e < model.effects_.size(); ++e)
-      model.effects_[e]->wrench(theta.data() + model.offsets_[e], s);
+    model.wrench_stage(theta.data(), m, ctx[r], s);
     rows[r] = {s.r_meas, s.r_load, s.force, s.moment};
     moved = moved || s.r_meas != robot.measured_point || s.r_load != robot.load_point ||
             s.force != m.force || s.moment != m.moment;
@@ -321,14 +328,7 @@ void DeflectionModel::evaluate_double(const double* theta,
     return;
   }
   // evaluate_into without the 6 x n Jacobians that no effect of this model reads.
-  s.robot = &robot_;
-  s.measurement = &m;
-  s.context = &c;
-  s.force = m.force;
-  s.moment = m.moment;
-  s.r_meas = robot_.measured_point;
-  s.r_load = robot_.load_point;
-  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->wrench(theta + offsets_[e], s);
+  wrench_stage(theta, m, c, s);
   const Eigen::Matrix4d& fl = c.chain.flange;
   for (int k = 0; k < 3; ++k) {
     s.p_meas(k) =
@@ -659,14 +659,7 @@ void DeflectionModel::evaluate_into(const T* theta,
     set_identity(s.probe);
     set_identity(s.orientation);
   }
-  s.robot = &robot_;
-  s.measurement = &m;
-  s.context = &c;
-  s.force = m.force.cast<T>();
-  s.moment = m.moment.cast<T>();
-  s.r_meas = robot_.measured_point.cast<T>();
-  s.r_load = robot_.load_point.cast<T>();
-  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->wrench(theta + offsets_[e], s);
+  wrench_stage(theta, m, c, s);
 
   // Stage 1 geometry: Jacobians at the (possibly offset) measured and load points.
   const Matrix3<T> rf = c.chain.flange.block<3, 3>(0, 0).cast<T>();
@@ -773,16 +766,7 @@ void DeflectionModel::evaluate_jet(const Jet* theta,
     set_identity(s.orientation);
   }
   const bool gravity = m.absolute && c.tau_gravity.size() == n;
-  s.robot = &robot_;
-  s.measurement = &m;
-  s.context = &c;
-  for (int k = 0; k < 3; ++k) {
-    s.force(k) = Jet(m.force(k));
-    s.moment(k) = Jet(m.moment(k));
-    s.r_meas(k) = Jet(robot_.measured_point(k));
-    s.r_load(k) = Jet(robot_.load_point(k));
-  }
-  for (size_t e = 0; e < effects_.size(); ++e) effects_[e]->wrench(theta + offsets_[e], s);
+  wrench_stage(theta, m, c, s);
 
   // Stage 1 geometry in double, derivative parts as [3][S] arrays (plain loops over S that
   // vectorise); the derivative work only when the wrench stage moved the points or the wrench.

@@ -213,6 +213,13 @@ class DeflectionModel {
       const DeflectionModel& others,
       const Dataset& data,
       const std::map<std::string, double>& values);
+  /// The wrench stage of row `m`: `s` set to the measured wrench and the robot file's points,
+  /// then every effect's wrench() (a point offset, a force-sensor frame) applied at `theta`.
+  template <typename T>
+  void wrench_stage(const T* theta,
+                    const Measurement& m,
+                    const MeasurementContext& c,
+                    EvalState<T>& s) const;
   template <typename T>
   void evaluate_into(const T* theta,
                      const Measurement& m,
