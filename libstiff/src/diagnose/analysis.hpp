@@ -197,7 +197,14 @@ void where(const Context& cx, const Level& L, Diagnosis& d);
 
 /// The trend of level L's residual at p_adj < alpha/10 (the strongest), or none: structure
 /// whatever the noise level, where a trend at alpha/10 <= p_adj < alpha is left to chance.
-std::optional<CovariateTest> strong_trend(const Context& cx, const Level& L);
+/// `outside_only`: only the trends of mechanisms outside the library (is_outside_library).
+std::optional<CovariateTest> strong_trend(const Context& cx,
+                                          const Level& L,
+                                          bool outside_only = false);
+
+/// Is `covariate` the signature of a mechanism outside the library (the base tilting or
+/// shifting, a force sensor's cross-talk) rather than a generic covariate?
+bool is_outside_library(const std::string& covariate);
 
 /// The covariates and axes the residual follows, in one sentence (for `unexplained`).
 std::string signature_of(const Diagnosis& d);

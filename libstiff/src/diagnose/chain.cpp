@@ -244,6 +244,24 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
   bool floor_weak = false;
   const bool floor = at_floor(*n, &floor_why, &floor_weak);
   if (floor && !claims(*n)) return true;
+  // At a stated floor a significant candidate defers the trend tests to the chain (at_floor);
+  // when the chain then dismisses that candidate as noise taken up, the level is judged as one
+  // with no candidate left: a strong trend still refutes it.
+  // Only a trend of a mechanism outside the library counts here: a trend against the generic
+  // covariates is what the candidates are for, and the dismissed candidate's evidence was
+  // judged (a force-frame error in the calibration session only follows the load torques).
+  auto dismissed = [&]() {
+    if (!cx->noise->known) return true;
+    const std::optional<CovariateTest> t = strong_trend(*cx, levels[i + 1], true);
+    if (!t) return true;
+    *why = "after adding " + added +
+           ", the residual reaches the stated noise floor but still "
+           "follows " +
+           t->description + " (partial F = " + num(t->statistic, 3) +
+           ", p_adj = " + num(t->p_adjusted, 2) + "): structure remains that no candidate explains";
+    *weak = false;
+    return false;
+  };
   // At the floor with a marginal candidate left (p_adj > alpha/10, the rule of decide()) that
   // does not validate: not structure.
   const bool marginal = n->scores[0].p_adjusted > cx->opt->alpha / 10;
@@ -251,10 +269,11 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
     std::string deeper;
     bool deeper_weak = false;
     if (explained_by_chain(i + 1, depth - 1, &deeper, nullptr, &deeper_weak)) return true;
-    if (floor && levels[i + 1].scores[0].p_adjusted > cx->opt->alpha / 10) return true;
+    if (floor && levels[i + 1].scores[0].p_adjusted > cx->opt->alpha / 10) return dismissed();
     // At a stated noise floor, a candidate whose calibration gain the validation poses do not
     // confirm is calibration noise taken up, not structure.
-    if (floor && cx->noise->known && nq.has_validation && !levels[i + 1].validated) return true;
+    if (floor && cx->noise->known && nq.has_validation && !levels[i + 1].validated)
+      return dismissed();
     // The candidate left predicts the new poses significantly worse: what it takes up on the
     // calibration poses does not carry over. That may be a few rows a jump decided on the
     // wrong side, or an effect outside the list that no candidate reproduces: neither a
@@ -273,14 +292,14 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
     *weak = deeper_weak && (floor || floor_weak || levels[i + 1].validated);
     return false;
   }
-  if (floor && marginal) return true;
+  if (floor && marginal) return dismissed();
   n = &levels[i + 1];
   // A group that does not separate and whose members the validation poses do not confirm,
   // on a model that passes the floor test: what they take up on the calibration poses does
   // not carry over. At a stated floor that is noise taken up; without a statement, marginal.
   if (claims(*n) && !n->separable && (floor || floor_weak) && nq.has_validation &&
       !group_validates(*n)) {
-    if (floor && cx->noise->known) return true;
+    if (floor && cx->noise->known) return dismissed();
     *why = "after adding " + added + ", " + join(n->group, ", ") +
            " take up structure on the calibration poses that none of them carries over to the "
            "validation poses" +

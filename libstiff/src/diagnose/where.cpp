@@ -8,6 +8,17 @@
 
 namespace stiff::diagnose_detail {
 
+namespace {
+// The trend groups of mechanisms outside the library.
+constexpr const char* kBaseTilt = "base_tilt";
+constexpr const char* kBaseShift = "base_shift";
+constexpr const char* kSensorCrosstalk = "sensor_crosstalk";
+}  // namespace
+
+bool is_outside_library(const std::string& covariate) {
+  return covariate == kBaseTilt || covariate == kBaseShift || covariate == kSensorCrosstalk;
+}
+
 /// Residual structure against covariates ("where it fails").
 void where(const Context& cx, const Level& L, Diagnosis& d) {
   const Analysis& a = L.a;
@@ -176,9 +187,58 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
                                        mb.x() * ex.cross(ez), mb.y() * ey.cross(ez)};
       for (int k = 0; k < 4; ++k) z.block<3, 1>(3 * i, k) = a.w(i) * cols[k];
     }
-    record("base_tilt",
+    record(kBaseTilt,
            "the arm turning as a whole about the base x and y axes (its mounting plane) under "
            "the load's moment there (pedestal or floor compliance, not in the library)",
+           z);
+  }
+  // The arm shifting as a whole under the load's force (a compliant base plate or floor):
+  // d = C_b F with C_b symmetric in the base frame (six columns). A series compliance at the
+  // tool turns with the flange; this does not.
+  {
+    MatrixXd z = MatrixXd::Zero(a.n, 6);
+    for (int i = 0; i < nu; ++i) {
+      const Eigen::Vector3d& f = a.used.rows[i].force;
+      const int pairs[6][2] = {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {0, 2}, {1, 2}};
+      for (int k = 0; k < 6; ++k) {
+        z(3 * i + pairs[k][0], k) += a.w(i) * f(pairs[k][1]);
+        if (pairs[k][0] != pairs[k][1]) z(3 * i + pairs[k][1], k) += a.w(i) * f(pairs[k][0]);
+      }
+    }
+    record(kBaseShift,
+           "the arm shifting as a whole under the load's force, fixed in the base frame (base "
+           "plate or floor compliance, not in the library)",
+           z);
+  }
+  // Cross-talk of a force sensor on the flange: its reading off by a symmetric matrix with a
+  // zero diagonal in the sensor frame (the off-diagonal part of its calibration matrix; the
+  // diagonal gains and the rotation are force_frame's). The displacement it leaves is the
+  // model's own response to the force error, G(q) R E_k R^T F, with G the model's
+  // displacement per unit force at the row: the response is taken from the fitted model by a
+  // small step of the force, so the columns are those of whatever the arm's compliance is.
+  {
+    constexpr double step = 1e-4;  // relative: a backlash decision flips only at its threshold
+    MatrixXd z = MatrixXd::Zero(a.n, 3);
+    for (int i = 0; i < nu; ++i) {
+      const auto& m = a.used.rows[i];
+      if (m.force.squaredNorm() == 0.0) continue;  // an unloaded (absolute) row: no cross-talk
+      const auto& c = a.ctx[i];
+      const Eigen::Matrix3d rot = c.chain.flange.topLeftCorner<3, 3>();
+      const Eigen::Vector3d fs = rot.transpose() * m.force;
+      const Eigen::Vector3d d0 = a.model->predict(a.theta, m, c).head<3>();
+      const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+      for (int k = 0; k < 3; ++k) {
+        Eigen::Vector3d df = Eigen::Vector3d::Zero();
+        df(pairs[k][0]) = fs(pairs[k][1]);
+        df(pairs[k][1]) = fs(pairs[k][0]);
+        Measurement mk = m;
+        mk.force += step * (rot * df);
+        z.block<3, 1>(3 * i, k) = a.w(i) / step * (a.model->predict(a.theta, mk, c).head<3>() - d0);
+      }
+    }
+    record(kSensorCrosstalk,
+           "the model's response to a force error symmetric between the sensor's axes (force "
+           "sensor cross-talk, not in the library)",
            z);
   }
   const auto adj = stats::holm_adjust(lps);
@@ -192,11 +252,13 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
   d.covariates = tests;
 }
 
-std::optional<CovariateTest> strong_trend(const Context& cx, const Level& L) {
+std::optional<CovariateTest> strong_trend(const Context& cx, const Level& L, bool outside_only) {
   Diagnosis d;
   where(cx, L, d);
   for (const auto& c : d.covariates)  // sorted by p
-    if (c.significant && c.p_adjusted < cx.opt->alpha / 10) return c;
+    if (c.significant && c.p_adjusted < cx.opt->alpha / 10 &&
+        (!outside_only || is_outside_library(c.covariate)))
+      return c;
   return std::nullopt;
 }
 

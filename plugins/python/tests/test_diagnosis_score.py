@@ -107,3 +107,57 @@ def test_harness_skips_without_data(root, tmp_path):
     p = subprocess.run([sys.executable, str(root / "bench" / "diagnosis_score.py"), "--data",
                         str(tmp_path / "absent")], capture_output=True, text=True, timeout=60)
     assert p.returncode == 0 and "skipped" in p.stdout
+
+
+def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_path):
+    """bench/outside_probes.py on the control: each probe's displacements are the control's
+    plus its effect (checked here against the effect's parameters in truth.json, computed
+    independently with numpy), at the requested size; the diagnosis claims none of the two
+    effects its trend tests were made for (section 2 of docs/diagnosis.md)."""
+    np = pytest.importorskip("numpy")
+    import stiff
+
+    out = tmp_path / "probes"
+    p = subprocess.run([sys.executable, str(root / "bench" / "outside_probes.py"), "--data",
+                        str(suite), "--out", str(out), "--sets", "base", "--seeds", "0",
+                        "--size", "60"], capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    index = json.loads((out / "index.json").read_text())
+    assert sorted(e["type"] for e in index) == sorted(
+        ["base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth"])
+
+    robot = stiff.Robot("rokae")
+    base = stiff.Dataset.read(suite / "base" / "none_00" / "calib.csv", robot)
+    for kind in ("base_shift", "growth"):
+        folder = out / "base" / f"{kind}_00"
+        probe = stiff.Dataset.read(folder / "calib.csv", robot)
+        assert np.array_equal(probe.q, base.q) and np.array_equal(probe.force, base.force)
+        added = probe.displacement - base.displacement
+        truth = json.loads((folder / "truth.json").read_text())
+        assert np.sqrt(np.mean(added ** 2)) == pytest.approx(60e-6, rel=1e-9)
+        if kind == "base_shift":
+            cb = np.array(truth["effect_parameters"]["C_b_m_per_N"])
+            assert np.allclose(cb, cb.T) and np.all(np.linalg.eigvalsh(cb) > 0)
+            expect = base.force @ cb.T
+        else:
+            pos = robot.tool_pose(base.q)[:, :3, 3]
+            expect = pos * len(base) * truth["effect_parameters"]["strain_per_row"]
+        assert np.allclose(added, expect, rtol=0, atol=1e-12)
+    scores = tmp_path / "scores.json"
+    p = subprocess.run([sys.executable, str(root / "bench" / "diagnosis_score.py"), "--data",
+                        str(out), "--sets", "base", "--seeds", "0", "--noise", "both",
+                        "--types", "base_shift,crosstalk", "--jobs", "1", "--json",
+                        str(scores)], capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    rows = json.loads(scores.read_text())
+    assert len(rows) == 4
+    for r in rows:
+        assert r["outcome"] == "right", r
+
+
+def test_outside_probes_refuse_an_unknown_kind(root, suite, tmp_path):
+    p = subprocess.run([sys.executable, str(root / "bench" / "outside_probes.py"), "--data",
+                        str(suite), "--out", str(tmp_path / "x"), "--kinds", "pedestal"],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and "unknown kind 'pedestal'" in p.stderr
+    assert not (tmp_path / "x").exists()

@@ -1,0 +1,210 @@
+"""Make scenarios with effects outside the library from a scenario directory's controls.
+
+The development scenarios have two effects outside the library (a pedestal tilt and a joint
+stiffness that varies with another joint's angle). This script adds other physical effects
+that no candidate has the form of to the displacements of the control scenarios (type `none`)
+of a directory laid out as bench/diagnosis_score.py reads it, so that their noise and base
+compliance are the independent simulator's, and writes a directory that the scoring harness
+reads (expected verdict: no confident claim):
+
+  base_shift   the arm shifting as a whole under the force (a compliant base plate):
+               d += C_b F, C_b symmetric positive definite in the base frame, 0.8-2.5 um/N
+  angle_joint  joint 3's compliance varying with its own angle (a reducer whose stiffness
+               changes over the output turn): d += J_3 c(q3) tau_3, c = a cos(2 q3 + phi)
+  crosstalk    a force sensor on the flange with cross-axis sensitivity: the written force is
+               the true one off by R X R^T F, X symmetric with a zero diagonal (8-12 %)
+  crosstalk_base  the same sensor fixed in the base frame (a force plate under a fixture)
+  growth       thermal growth of the arm between the unloaded and the loaded pass: d += k P,
+               k proportional to the session's length (the library's drift is a translation)
+
+Usage:
+  .venv/bin/python bench/outside_probes.py --data DIR --out /tmp/probes --seeds 0-9
+  .venv/bin/python bench/diagnosis_score.py --data /tmp/probes --sets base,sigma --noise given
+
+The effect's RMS is set to `--size` (default 55 um per axis on the calibration rows, about
+1.8 times the development data's noise), the same scale on the validation rows; crosstalk's
+size follows from its 8-12 % and the joint compliances fitted to the control. Each scenario's
+truth.json records the effect's parameters and RMS. Needs the `stiff` Python package and numpy.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+
+import numpy as np
+
+KINDS = ("base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth")
+DESCRIPTION = {
+    "base_shift": "outside the library: the arm shifts as a whole under the force (base plate "
+                  "compliance fixed in the base frame)",
+    "angle_joint": "outside the library: joint 3's compliance varies with its own angle",
+    "crosstalk": "outside the library: cross-axis sensitivity of a flange force sensor",
+    "crosstalk_base": "outside the library: cross-axis sensitivity of a base-fixed force sensor",
+    "growth": "outside the library: thermal growth of the arm scaling its position",
+}
+
+
+def parse_seeds(text: str) -> list[int]:
+    out: list[int] = []
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out.extend(range(int(a), int(b or a) + 1))
+    return out
+
+
+def read_csv(path):
+    comments, header, rows = [], None, []
+    with open(path) as f:
+        for line in f:
+            if line.startswith("#"):
+                comments.append(line)
+            elif header is None:
+                header = line.strip().split(",")
+            elif line.strip():
+                rows.append(line.strip().split(","))
+    return comments, header, rows
+
+
+DISPLACEMENT_UNITS = {"m": 1.0, "mm": 1e3, "um": 1e6}
+
+
+def displacement_columns(header, path):
+    """(column index, scale from metres) of dx, dy, dz in any unit the format allows."""
+    out = []
+    for axis in ("dx", "dy", "dz"):
+        found = [(i, DISPLACEMENT_UNITS[h.split("_", 1)[1]]) for i, h in enumerate(header)
+                 if h.split("_", 1)[0] == axis and h.split("_", 1)[-1] in DISPLACEMENT_UNITS]
+        if len(found) != 1:
+            raise SystemExit(f"outside_probes: {path}: no {axis} column in m, mm or um")
+        out.append(found[0])
+    return out
+
+
+def rotation(rng):
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
+def symmetric_offdiagonal(rng, low, high):
+    v = rng.uniform(low, high, 3) * rng.choice([-1.0, 1.0], 3)
+    return np.array([[0, v[0], v[1]], [v[0], 0, v[2]], [v[1], v[2], 0]])
+
+
+def make_effect(kind, rng, robot, compliance):
+    """(displacement function of (q [rad], F [N], session rows) -> N x 3 [m], parameters)."""
+    if kind == "base_shift":
+        r = rotation(rng)
+        cb = r @ np.diag(rng.uniform(0.8, 2.5, 3)) @ r.T * 1e-6
+        return (lambda q, f, n: f @ cb.T), {"C_b_m_per_N": cb.tolist()}
+    if kind == "angle_joint":
+        phi = rng.uniform(0, 2 * np.pi)
+
+        def angle_joint(q, f, n):
+            jv = robot.jacobian(q)[:, :3, :]
+            tau3 = np.einsum("ni,ni->n", jv[:, :, 2], f)
+            return jv[:, :, 2] * (np.cos(2 * q[:, 2] + phi) * tau3)[:, None]
+        return angle_joint, {"phase_rad": phi}
+    if kind in ("crosstalk", "crosstalk_base"):
+        x = symmetric_offdiagonal(rng, 0.08, 0.12)
+        flange = kind == "crosstalk"
+
+        def crosstalk(q, f, n):
+            if flange:
+                rot = robot.tool_pose(q)[:, :3, :3]
+                df = np.einsum("nij,jk,nlk,nl->ni", rot, x, rot, f)
+            else:
+                df = f @ x.T
+            jv = robot.jacobian(q)[:, :3, :]
+            tau = np.einsum("nij,ni->nj", jv, df) * compliance
+            return np.einsum("nij,nj->ni", jv, tau)
+        return crosstalk, {"X": x.tolist(), "frame": "flange" if flange else "base"}
+    if kind == "growth":
+        return (lambda q, f, n: robot.tool_pose(q)[:, :3, 3] * n), {"per_row_of_session": True}
+    raise ValueError(kind)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", required=True, help="scenario directory with index.json")
+    ap.add_argument("--out", required=True, help="directory to write (replaced)")
+    ap.add_argument("--sets", default="base,sigma", help="sets whose controls are used")
+    ap.add_argument("--seeds", default="0-9")
+    ap.add_argument("--kinds", default=",".join(KINDS))
+    ap.add_argument("--size", type=float, default=55.0, help="effect RMS per axis [um]")
+    ap.add_argument("--robot", default="rokae")
+    a = ap.parse_args()
+    import stiff
+
+    robot = stiff.Robot(a.robot)
+    with open(os.path.join(a.data, "index.json")) as f:
+        index = json.load(f)
+    seeds, sets, kinds = parse_seeds(a.seeds), a.sets.split(","), a.kinds.split(",")
+    for k in kinds:
+        if k not in KINDS:
+            print(f"outside_probes: unknown kind {k!r} (known: {', '.join(KINDS)})",
+                  file=sys.stderr)
+            return 2
+    if os.path.exists(a.out):
+        shutil.rmtree(a.out)
+    out_index = []
+    for e in index:
+        s, name = e["path"].split("/")
+        seed = int(name.rsplit("_", 1)[1])
+        if e["type"] != "none" or s not in sets or seed not in seeds:
+            continue
+        src = os.path.join(a.data, e["path"])
+        files = {fn: read_csv(os.path.join(src, fn)) for fn in ("calib.csv", "valid.csv")}
+        arrays = {}
+        for fn in files:
+            data = stiff.Dataset.read(os.path.join(src, fn), robot)  # SI, whatever the units
+            arrays[fn] = (data.q, data.force, len(data))
+        compliance = 1.0 / np.asarray(
+            stiff.identify(robot, stiff.Dataset.read(os.path.join(src, "calib.csv"))).stiffness)
+        with open(os.path.join(src, "truth.json")) as f:
+            truth0 = json.load(f)
+        for kind in kinds:
+            rng = np.random.default_rng([seed, KINDS.index(kind)])
+            fn_effect, params = make_effect(kind, rng, robot, compliance)
+            add = {fn: fn_effect(*arrays[fn]) for fn in files}
+            scale = 1.0
+            if kind != "crosstalk" and kind != "crosstalk_base":
+                scale = a.size * 1e-6 / np.sqrt(np.mean(add["calib.csv"] ** 2))
+            # The parameters as applied (the size sets the scale of the drawn ones).
+            if kind == "base_shift":
+                params["C_b_m_per_N"] = (np.array(params["C_b_m_per_N"]) * scale).tolist()
+            elif kind == "angle_joint":
+                params["amplitude_rad_per_Nm"] = scale
+            elif kind == "growth":
+                params["strain_per_row"] = scale
+            dst = os.path.join(a.out, s, f"{kind}_{seed:02d}")
+            os.makedirs(dst)
+            for fn, (comments, header, rows) in files.items():
+                cols = displacement_columns(header, os.path.join(src, fn))
+                with open(os.path.join(dst, fn), "w") as f:
+                    f.writelines(comments)
+                    f.write(",".join(header) + "\n")
+                    for r, d in zip(rows, add[fn] * scale):
+                        r = list(r)
+                        for k, (c, unit) in enumerate(cols):
+                            r[c] = repr(float(float(r[c]) + unit * d[k]))
+                        f.write(",".join(r) + "\n")
+            truth = dict(truth0, type=kind, description=DESCRIPTION[kind],
+                         expected={"verdict": "unexplained"}, effect_parameters=params,
+                         effect_scale_factor=scale,
+                         effect_rms_calib_um=float(1e6 * scale *
+                                                   np.sqrt(np.mean(add["calib.csv"] ** 2))))
+            with open(os.path.join(dst, "truth.json"), "w") as f:
+                json.dump(truth, f, indent=1)
+            out_index.append({"path": f"{s}/{kind}_{seed:02d}", "type": kind,
+                              "expected": {"verdict": "unexplained"}})
+    with open(os.path.join(a.out, "index.json"), "w") as f:
+        json.dump(out_index, f, indent=1)
+    print(f"outside_probes: {len(out_index)} scenarios in {a.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
