@@ -11,6 +11,8 @@ reads (expected verdict: no confident claim):
                d += C_b F, C_b symmetric positive definite in the base frame, 0.8-2.5 um/N
   angle_joint  joint 3's compliance varying with its own angle (a reducer whose stiffness
                changes over the output turn): d += J_3 c(q3) tau_3, c = a cos(2 q3 + phi)
+  k<j>q<k>     joint j's compliance varying with joint k's angle, a cos(q_k + phi) (e.g.
+               k3q2: the forearm's reducer stiffer as the shoulder turns; not in the default set)
   crosstalk    a force sensor on the flange with cross-axis sensitivity: the written force is
                the true one off by R X R^T F, X symmetric with a zero diagonal (8-12 %)
   crosstalk_base  the same sensor fixed in the base frame (a force plate under a fixture)
@@ -31,6 +33,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import sys
 
@@ -93,6 +96,12 @@ def symmetric_offdiagonal(rng, low, high):
     return np.array([[0, v[0], v[1]], [v[0], 0, v[2]], [v[1], v[2], 0]])
 
 
+def angle_pair(kind):
+    """(j, k), 0-based, of a kind `k<j>q<k>`, else None."""
+    m = re.fullmatch(r"k([1-9])q([1-9])", kind)
+    return (int(m.group(1)) - 1, int(m.group(2)) - 1) if m else None
+
+
 def make_effect(kind, rng, robot, compliance):
     """(displacement function of (q [rad], F [N], session rows) -> N x 3 [m], parameters)."""
     if kind == "base_shift":
@@ -107,6 +116,15 @@ def make_effect(kind, rng, robot, compliance):
             tau3 = np.einsum("ni,ni->n", jv[:, :, 2], f)
             return jv[:, :, 2] * (np.cos(2 * q[:, 2] + phi) * tau3)[:, None]
         return angle_joint, {"phase_rad": phi}
+    if angle_pair(kind):
+        j, k = angle_pair(kind)
+        phi = rng.uniform(0, 2 * np.pi)
+
+        def joint_by_angle(q, f, n):
+            jv = robot.jacobian(q)[:, :3, :]
+            tau = np.einsum("ni,ni->n", jv[:, :, j], f)
+            return jv[:, :, j] * (np.cos(q[:, k] + phi) * tau)[:, None]
+        return joint_by_angle, {"phase_rad": phi}
     if kind in ("crosstalk", "crosstalk_base"):
         x = symmetric_offdiagonal(rng, 0.08, 0.12)
         flange = kind == "crosstalk"
@@ -143,7 +161,7 @@ def main() -> int:
         index = json.load(f)
     seeds, sets, kinds = parse_seeds(a.seeds), a.sets.split(","), a.kinds.split(",")
     for k in kinds:
-        if k not in KINDS:
+        if k not in KINDS and not angle_pair(k):
             print(f"outside_probes: unknown kind {k!r} (known: {', '.join(KINDS)})",
                   file=sys.stderr)
             return 2
@@ -166,7 +184,8 @@ def main() -> int:
         with open(os.path.join(src, "truth.json")) as f:
             truth0 = json.load(f)
         for kind in kinds:
-            rng = np.random.default_rng([seed, KINDS.index(kind)])
+            rng = np.random.default_rng(
+                [seed, KINDS.index(kind)] if kind in KINDS else [seed] + [ord(c) for c in kind])
             fn_effect, params = make_effect(kind, rng, robot, compliance)
             add = {fn: fn_effect(*arrays[fn]) for fn in files}
             scale = 1.0
@@ -175,7 +194,7 @@ def main() -> int:
             # The parameters as applied (the size sets the scale of the drawn ones).
             if kind == "base_shift":
                 params["C_b_m_per_N"] = (np.array(params["C_b_m_per_N"]) * scale).tolist()
-            elif kind == "angle_joint":
+            elif kind == "angle_joint" or angle_pair(kind):
                 params["amplitude_rad_per_Nm"] = scale
             elif kind == "growth":
                 params["strain_per_row"] = scale
@@ -191,7 +210,10 @@ def main() -> int:
                         for k, (c, unit) in enumerate(cols):
                             r[c] = repr(float(float(r[c]) + unit * d[k]))
                         f.write(",".join(r) + "\n")
-            truth = dict(truth0, type=kind, description=DESCRIPTION[kind],
+            what = DESCRIPTION.get(kind) or (
+                f"outside the library: joint {kind[1]}'s compliance varies with joint "
+                f"{kind[3]}'s angle")
+            truth = dict(truth0, type=kind, description=what,
                          expected={"verdict": "unexplained"}, effect_parameters=params,
                          effect_scale_factor=scale,
                          effect_rms_calib_um=float(1e6 * scale *

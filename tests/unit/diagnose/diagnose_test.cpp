@@ -955,6 +955,38 @@ TEST(DiagnoseHonesty, SensorCrosstalkIsNotClaimed) {
   EXPECT_EQ(claims_outside_library("sensor crosstalk, no statement", crosstalk, false, 6), 0);
 }
 
+// A joint whose compliance varies with another joint's angle, the form the library does not
+// have (the development data's outside type is joint 2 with q3): the wrist's joint 5 with q4
+// and the forearm's joint 3 with q2, the compliance c_j + a c_j cos(q_k + 0.5) with a = 2.5
+// and 0.5 (the joint model's fit 1.3-1.8 times the floor). Coupling, the gravity compensator,
+// link compliance or backlash take part of it up on the calibration poses; what they leave
+// follows the joint's deflection times the angles' harmonics (the pose_compliance trend tests),
+// so nothing is claimed (one run of twenty, close to the floor, still is).
+TEST(DiagnoseHonesty, AJointCompliancePoseDependentIsNotClaimed) {
+  const RobotModel robot = test::rokae();
+  const Eigen::VectorXd c = test::paper_stiffness().cwiseInverse();
+  int claims = 0;
+  for (const auto& [j, k, a] : {std::tuple{4, 3, 2.5}, std::tuple{2, 1, 0.5}}) {
+    auto vary = [&, j = j, k = k, a = a](Dataset& data) {
+      for (auto& m : data.rows) {
+        const ChainState chain = robot.chain(m.q);
+        const Matrix6X<double> jm =
+            robot.jacobian_at(chain, robot.point_position(chain, robot.measured_point));
+        const Matrix6X<double> jl =
+            robot.jacobian_at(chain, robot.point_position(chain, robot.load_point));
+        Eigen::Matrix<double, 6, 1> w;
+        w << m.force, m.moment;
+        const double tau = jl.col(j).dot(w);
+        m.displacement += jm.block<3, 1>(0, j) * (a * c(j) * std::cos(m.q(k) + 0.5) * tau);
+      }
+    };
+    const std::string what = "joint " + std::to_string(j + 1) + " by q" + std::to_string(k + 1);
+    claims += claims_outside_library(what.c_str(), vary);
+    claims += claims_outside_library((what + ", no statement").c_str(), vary, false, 6);
+  }
+  EXPECT_LE(claims, 1);  // of 20 runs (8 before the pose_compliance trend tests)
+}
+
 // The arm on a compliant base plate: it shifts as a whole under the load's force, by a
 // compliance fixed in the base frame (softer sideways than down, 1-3 um/N). A tool compliance
 // turns with the flange and takes only part of it up; what it leaves follows the force in the
