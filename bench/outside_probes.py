@@ -16,6 +16,8 @@ reads (expected verdict: no confident claim):
   crosstalk    a force sensor on the flange with cross-axis sensitivity: the written force is
                the true one off by R X R^T F, X symmetric with a zero diagonal (8-12 %)
   crosstalk_base  the same sensor fixed in the base frame (a force plate under a fixture)
+  warmup       the joints' compliance growing over the session (a reducer's lubricant warming
+               up): d += s (i / N) J C J^T F, row i of N, C the control's fitted compliances
   growth       thermal growth of the arm between the unloaded and the loaded pass: d += k P,
                k proportional to the session's length (the library's drift is a translation)
 
@@ -39,7 +41,7 @@ import sys
 
 import numpy as np
 
-KINDS = ("base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth")
+KINDS = ("base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth", "warmup")
 DESCRIPTION = {
     "base_shift": "outside the library: the arm shifts as a whole under the force (base plate "
                   "compliance fixed in the base frame)",
@@ -47,6 +49,7 @@ DESCRIPTION = {
     "crosstalk": "outside the library: cross-axis sensitivity of a flange force sensor",
     "crosstalk_base": "outside the library: cross-axis sensitivity of a base-fixed force sensor",
     "growth": "outside the library: thermal growth of the arm scaling its position",
+    "warmup": "outside the library: the joints' compliance growing over the session",
 }
 
 
@@ -139,6 +142,13 @@ def make_effect(kind, rng, robot, compliance):
             tau = np.einsum("nij,ni->nj", jv, df) * compliance
             return np.einsum("nij,nj->ni", jv, tau)
         return crosstalk, {"X": x.tolist(), "frame": "flange" if flange else "base"}
+    if kind == "warmup":
+        def warmup(q, f, n):
+            jv = robot.jacobian(q)[:, :3, :]
+            tau = np.einsum("nij,ni->nj", jv, f) * compliance
+            d = np.einsum("nij,nj->ni", jv, tau)
+            return d * (np.arange(n) / n)[:, None]
+        return warmup, {}
     if kind == "growth":
         return (lambda q, f, n: robot.tool_pose(q)[:, :3, 3] * n), {"per_row_of_session": True}
     raise ValueError(kind)
@@ -198,6 +208,8 @@ def main() -> int:
                 params["amplitude_rad_per_Nm"] = scale
             elif kind == "growth":
                 params["strain_per_row"] = scale
+            elif kind == "warmup":
+                params["compliance_gain_over_session"] = scale
             dst = os.path.join(a.out, s, f"{kind}_{seed:02d}")
             os.makedirs(dst)
             for fn, (comments, header, rows) in files.items():

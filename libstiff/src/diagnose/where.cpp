@@ -13,12 +13,13 @@ namespace {
 constexpr const char* kBaseTilt = "base_tilt";
 constexpr const char* kBaseShift = "base_shift";
 constexpr const char* kSensorCrosstalk = "sensor_crosstalk";
+constexpr const char* kLoadResponseDrift = "load_response_drift";
 const std::string kPoseCompliance = "pose_compliance_";  // + the joint's number
 }  // namespace
 
 bool is_outside_library(const std::string& covariate) {
   return covariate == kBaseTilt || covariate == kBaseShift || covariate == kSensorCrosstalk ||
-         covariate.rfind(kPoseCompliance, 0) == 0;
+         covariate == kLoadResponseDrift || covariate.rfind(kPoseCompliance, 0) == 0;
 }
 
 /// Residual structure against covariates ("where it fails").
@@ -257,6 +258,36 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
     record(kBaseShift,
            "the arm shifting as a whole under the load's force, fixed in the base frame (base "
            "plate or floor compliance, not in the library)",
+           z);
+  }
+  // The response to the load changing in scale over a session (the joints softening as their
+  // reducers warm up, a force sensor's gain drifting): one column, the model's deflection under
+  // the row's load (its prediction less that without load, so that drift terms cancel) times
+  // the reading's time from the session's mean time.
+  {
+    std::vector<double> sum(1, 0.0), count(1, 0.0);
+    for (int i = 0; i < nu; ++i) {
+      const size_t s = static_cast<size_t>(a.ctx[i].session);
+      if (s >= sum.size()) sum.resize(s + 1, 0.0), count.resize(s + 1, 0.0);
+      sum[s] += a.ctx[i].time;
+      count[s] += 1;
+    }
+    MatrixXd z = MatrixXd::Zero(a.n, 1);
+    for (int i = 0; i < nu; ++i) {
+      const auto& m = a.used.rows[i];
+      if (m.force.squaredNorm() == 0.0 && m.moment.squaredNorm() == 0.0) continue;
+      const auto& c = a.ctx[i];
+      const size_t s = static_cast<size_t>(c.session);
+      Measurement unloaded = m;
+      unloaded.force.setZero();
+      unloaded.moment.setZero();
+      const Eigen::Vector3d deflection = a.model->predict(a.theta, m, c).head<3>() -
+                                         a.model->predict(a.theta, unloaded, c).head<3>();
+      z.block<3, 1>(3 * i, 0) = a.w(i) * (c.time - sum[s] / count[s]) * deflection;
+    }
+    record(kLoadResponseDrift,
+           "the response to the load changing in scale over the session (joints warming up, "
+           "a force sensor's gain drifting; not in the library)",
            z);
   }
   // Cross-talk of a force sensor on the flange: its reading off by a symmetric matrix with a
