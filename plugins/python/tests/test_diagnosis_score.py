@@ -124,7 +124,7 @@ def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_p
     assert p.returncode == 0, p.stderr
     index = json.loads((out / "index.json").read_text())
     assert sorted(e["type"] for e in index) == sorted(
-        ["base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth"])
+        ["base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth", "warmup"])
 
     robot = stiff.Robot("rokae")
     base = stiff.Dataset.read(suite / "base" / "none_00" / "calib.csv", robot)

@@ -955,6 +955,21 @@ TEST(DiagnoseHonesty, SensorCrosstalkIsNotClaimed) {
   EXPECT_EQ(claims_outside_library("sensor crosstalk, no statement", crosstalk, false, 6), 0);
 }
 
+/// Per joint, the motion of the measured point when that joint turns by one radian (base
+/// frame, 3 x n) and the load torque J(L)^T W of the row (n): what an effect outside the library
+/// made of joint deflections needs.
+std::pair<Eigen::Matrix3Xd, Eigen::VectorXd> joint_motion_and_torque(const RobotModel& robot,
+                                                                     const Measurement& m) {
+  const ChainState chain = robot.chain(m.q);
+  const Matrix6X<double> jm =
+      robot.jacobian_at(chain, robot.point_position(chain, robot.measured_point));
+  const Matrix6X<double> jl =
+      robot.jacobian_at(chain, robot.point_position(chain, robot.load_point));
+  Eigen::Matrix<double, 6, 1> w;
+  w << m.force, m.moment;
+  return {jm.topRows<3>(), jl.transpose() * w};
+}
+
 // A joint whose compliance varies with another joint's angle, the form the library does not
 // have (the development data's outside type is joint 2 with q3): the wrist's joint 5 with q4
 // and the forearm's joint 3 with q2, the compliance c_j + a c_j cos(q_k + 0.5) with a = 2.5
@@ -969,15 +984,8 @@ TEST(DiagnoseHonesty, AJointCompliancePoseDependentIsNotClaimed) {
   for (const auto& [j, k, a] : {std::tuple{4, 3, 2.5}, std::tuple{2, 1, 0.5}}) {
     auto vary = [&, j = j, k = k, a = a](Dataset& data) {
       for (auto& m : data.rows) {
-        const ChainState chain = robot.chain(m.q);
-        const Matrix6X<double> jm =
-            robot.jacobian_at(chain, robot.point_position(chain, robot.measured_point));
-        const Matrix6X<double> jl =
-            robot.jacobian_at(chain, robot.point_position(chain, robot.load_point));
-        Eigen::Matrix<double, 6, 1> w;
-        w << m.force, m.moment;
-        const double tau = jl.col(j).dot(w);
-        m.displacement += jm.block<3, 1>(0, j) * (a * c(j) * std::cos(m.q(k) + 0.5) * tau);
+        const auto [motion, tau] = joint_motion_and_torque(robot, m);
+        m.displacement += motion.col(j) * (a * c(j) * std::cos(m.q(k) + 0.5) * tau(j));
       }
     };
     const std::string what = "joint " + std::to_string(j + 1) + " by q" + std::to_string(k + 1);
@@ -999,15 +1007,8 @@ TEST(DiagnoseHonesty, ALoadResponseThatDriftsIsNotClaimed) {
     const double n = static_cast<double>(data.rows.size());
     for (size_t i = 0; i < data.rows.size(); ++i) {
       auto& m = data.rows[i];
-      const ChainState chain = robot.chain(m.q);
-      const Matrix6X<double> jm =
-          robot.jacobian_at(chain, robot.point_position(chain, robot.measured_point));
-      const Matrix6X<double> jl =
-          robot.jacobian_at(chain, robot.point_position(chain, robot.load_point));
-      Eigen::Matrix<double, 6, 1> w;
-      w << m.force, m.moment;
-      const Eigen::VectorXd dtheta = c.cwiseProduct(jl.transpose() * w);
-      m.displacement += 0.25 * (static_cast<double>(i) / n) * (jm.topRows<3>() * dtheta);
+      const auto [motion, tau] = joint_motion_and_torque(robot, m);
+      m.displacement += 0.25 * (static_cast<double>(i) / n) * (motion * c.cwiseProduct(tau));
     }
   };
   EXPECT_EQ(claims_outside_library("load response drifting", warm), 0);
