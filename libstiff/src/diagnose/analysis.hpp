@@ -202,8 +202,21 @@ std::optional<CovariateTest> strong_trend(const Context& cx,
                                           const Level& L,
                                           bool outside_only = false);
 
-/// Is `covariate` the signature of a mechanism outside the library (the base tilting or
-/// shifting, a force sensor's cross-talk) rather than a generic covariate?
+/// The signature of a mechanism outside the library as a group of weighted columns (3n x k,
+/// the used rows of an analysis) for the trend tests of "where it fails".
+struct OutsideTrend {
+  std::string name, description;
+  MatrixXd z;
+  /// Tested beyond each candidate in turn (the least significant counts): a group flexible
+  /// enough to take up what one of the library's laws leaves.
+  bool beyond_candidates = false;
+};
+
+/// The groups of every mechanism outside the library at analysis `a` (outside.cpp).
+std::vector<OutsideTrend> outside_trends(const Context& cx, const Analysis& a);
+
+/// Is `covariate` the signature of a mechanism outside the library (outside_trends) rather
+/// than a generic covariate?
 bool is_outside_library(const std::string& covariate);
 
 /// The covariates and axes the residual follows, in one sentence (for `unexplained`).

@@ -8,20 +8,6 @@
 
 namespace stiff::diagnose_detail {
 
-namespace {
-// The trend groups of mechanisms outside the library.
-constexpr const char* kBaseTilt = "base_tilt";
-constexpr const char* kBaseShift = "base_shift";
-constexpr const char* kSensorCrosstalk = "sensor_crosstalk";
-constexpr const char* kLoadResponseDrift = "load_response_drift";
-const std::string kPoseCompliance = "pose_compliance_";  // + the joint's number
-}  // namespace
-
-bool is_outside_library(const std::string& covariate) {
-  return covariate == kBaseTilt || covariate == kBaseShift || covariate == kSensorCrosstalk ||
-         covariate == kLoadResponseDrift || covariate.rfind(kPoseCompliance, 0) == 0;
-}
-
 /// Residual structure against covariates ("where it fails").
 void where(const Context& cx, const Level& L, Diagnosis& d) {
   const Analysis& a = L.a;
@@ -188,139 +174,10 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
       ct->correlation[k] = sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : 0.0;
     }
   }
-  // The arm turning as a whole about the axes of its mounting plane (base x and y) under the
-  // load's moment there (a compliant pedestal, floor, wall or mounting plate): theta = (c_x M_x,
-  // c_y M_y, 0), the base moment M = L x F + m, and the displacement theta x (P + h e_z) about a
-  // pivot h below the base frame (four columns: c_x, c_y and their products with h). No effect of
-  // the library has this form; the joints, the links and a force-frame error take part of it up,
-  // and what they leave shows here.
-  {
-    MatrixXd z = MatrixXd::Zero(a.n, 4);
-    for (int i = 0; i < nu; ++i) {
-      const auto& m = a.used.rows[i];
-      const auto& c = a.ctx[i];
-      const Eigen::Vector3d p = robot.point_position(c.chain, robot.measured_point);
-      const Eigen::Vector3d l = robot.point_position(c.chain, robot.load_point);
-      const Eigen::Vector3d mb = l.cross(m.force) + m.moment;
-      const Eigen::Vector3d ex = Eigen::Vector3d::UnitX(), ey = Eigen::Vector3d::UnitY();
-      const Eigen::Vector3d ez = Eigen::Vector3d::UnitZ();
-      const Eigen::Vector3d cols[4] = {mb.x() * ex.cross(p), mb.y() * ey.cross(p),
-                                       mb.x() * ex.cross(ez), mb.y() * ey.cross(ez)};
-      for (int k = 0; k < 4; ++k) z.block<3, 1>(3 * i, k) = a.w(i) * cols[k];
-    }
-    record(kBaseTilt,
-           "the arm turning as a whole about the base x and y axes (its mounting plane) under "
-           "the load's moment there (pedestal or floor compliance, not in the library)",
-           z);
-  }
-  // A joint whose compliance varies with the arm's angles (a reducer's stiffness over its
-  // output turn, a shoulder stiffer as the forearm folds): per joint j its deflection under the
-  // load, J_j(P) tau_j, times the first harmonics cos q_k, sin q_k of each angle that moves the
-  // arm (the mean compliance is the joint model's). Ten columns take up much of what the
-  // library's pose-dependent laws (nonlinear joint, compensator, backlash) leave, so the group
-  // counts only beyond each candidate; and not with a law decided from the data (backlash):
-  // its preload follows the gravity torque, a function of the same angles, so a preload shape
-  // off the truth leaves exactly this pattern at its joints.
-  if (!has_confidence_sets(*a.model)) {
-    const int angles = std::max(1, dof - 1);
-    for (int j = 0; j < dof; ++j) {
-      MatrixXd z = MatrixXd::Zero(a.n, 2 * angles);
-      for (int i = 0; i < nu; ++i) {
-        const auto& m = a.used.rows[i];
-        const auto& c = a.ctx[i];
-        const Matrix6X<double> jm =
-            robot.jacobian_at(c.chain, robot.point_position(c.chain, robot.measured_point));
-        const Eigen::Vector3d defl = jm.block<3, 1>(0, j) * tl[j][i];
-        for (int k = 0; k < angles; ++k) {
-          z.block<3, 1>(3 * i, 2 * k) = a.w(i) * std::cos(m.q(k)) * defl;
-          z.block<3, 1>(3 * i, 2 * k + 1) = a.w(i) * std::sin(m.q(k)) * defl;
-        }
-      }
-      record_score(kPoseCompliance + std::to_string(j + 1),
-                   "the compliance of joint " + std::to_string(j + 1) +
-                       " varying with the arm's angles (not in the library)",
-                   beyond_candidates(z));
-    }
-  }
-  // The arm shifting as a whole under the load's force (a compliant base plate or floor):
-  // d = C_b F with C_b symmetric in the base frame (six columns). A series compliance at the
-  // tool turns with the flange; this does not.
-  {
-    MatrixXd z = MatrixXd::Zero(a.n, 6);
-    for (int i = 0; i < nu; ++i) {
-      const Eigen::Vector3d& f = a.used.rows[i].force;
-      const int pairs[6][2] = {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {0, 2}, {1, 2}};
-      for (int k = 0; k < 6; ++k) {
-        z(3 * i + pairs[k][0], k) += a.w(i) * f(pairs[k][1]);
-        if (pairs[k][0] != pairs[k][1]) z(3 * i + pairs[k][1], k) += a.w(i) * f(pairs[k][0]);
-      }
-    }
-    record(kBaseShift,
-           "the arm shifting as a whole under the load's force, fixed in the base frame (base "
-           "plate or floor compliance, not in the library)",
-           z);
-  }
-  // The response to the load changing in scale over a session (the joints softening as their
-  // reducers warm up, a force sensor's gain drifting): one column, the model's deflection under
-  // the row's load (its prediction less that without load, so that drift terms cancel) times
-  // the reading's time from the session's mean time.
-  {
-    std::vector<double> sum(1, 0.0), count(1, 0.0);
-    for (int i = 0; i < nu; ++i) {
-      const size_t s = static_cast<size_t>(a.ctx[i].session);
-      if (s >= sum.size()) sum.resize(s + 1, 0.0), count.resize(s + 1, 0.0);
-      sum[s] += a.ctx[i].time;
-      count[s] += 1;
-    }
-    MatrixXd z = MatrixXd::Zero(a.n, 1);
-    for (int i = 0; i < nu; ++i) {
-      const auto& m = a.used.rows[i];
-      if (m.force.squaredNorm() == 0.0 && m.moment.squaredNorm() == 0.0) continue;
-      const auto& c = a.ctx[i];
-      const size_t s = static_cast<size_t>(c.session);
-      Measurement unloaded = m;
-      unloaded.force.setZero();
-      unloaded.moment.setZero();
-      const Eigen::Vector3d deflection = a.model->predict(a.theta, m, c).head<3>() -
-                                         a.model->predict(a.theta, unloaded, c).head<3>();
-      z.block<3, 1>(3 * i, 0) = a.w(i) * (c.time - sum[s] / count[s]) * deflection;
-    }
-    record(kLoadResponseDrift,
-           "the response to the load changing in scale over the session (joints warming up, "
-           "a force sensor's gain drifting; not in the library)",
-           z);
-  }
-  // Cross-talk of a force sensor on the flange: its reading off by a symmetric matrix with a
-  // zero diagonal in the sensor frame (the off-diagonal part of its calibration matrix; the
-  // diagonal gains and the rotation are force_frame's). The displacement it leaves is the
-  // model's own response to the force error, G(q) R E_k R^T F, with G the model's
-  // displacement per unit force at the row: the response is taken from the fitted model by a
-  // small step of the force, so the columns are those of whatever the arm's compliance is.
-  {
-    constexpr double step = 1e-4;  // relative: a backlash decision flips only at its threshold
-    MatrixXd z = MatrixXd::Zero(a.n, 3);
-    for (int i = 0; i < nu; ++i) {
-      const auto& m = a.used.rows[i];
-      if (m.force.squaredNorm() == 0.0) continue;  // an unloaded (absolute) row: no cross-talk
-      const auto& c = a.ctx[i];
-      const Eigen::Matrix3d rot = c.chain.flange.topLeftCorner<3, 3>();
-      const Eigen::Vector3d fs = rot.transpose() * m.force;
-      const Eigen::Vector3d d0 = a.model->predict(a.theta, m, c).head<3>();
-      const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
-      for (int k = 0; k < 3; ++k) {
-        Eigen::Vector3d df = Eigen::Vector3d::Zero();
-        df(pairs[k][0]) = fs(pairs[k][1]);
-        df(pairs[k][1]) = fs(pairs[k][0]);
-        Measurement mk = m;
-        mk.force += step * (rot * df);
-        z.block<3, 1>(3 * i, k) = a.w(i) / step * (a.model->predict(a.theta, mk, c).head<3>() - d0);
-      }
-    }
-    record(kSensorCrosstalk,
-           "the model's response to a force error symmetric between the sensor's axes (force "
-           "sensor cross-talk, not in the library)",
-           z);
-  }
+  // The signatures of mechanisms outside the library (outside.cpp).
+  for (const OutsideTrend& o : outside_trends(cx, a))
+    record_score(o.name, o.description,
+                 o.beyond_candidates ? beyond_candidates(o.z) : group_score(o.z));
   const auto adj = stats::holm_adjust(lps);
   for (size_t t = 0; t < tests.size(); ++t) {
     tests[t].p_adjusted = adj[t];
