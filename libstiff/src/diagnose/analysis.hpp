@@ -202,6 +202,16 @@ std::optional<CovariateTest> strong_trend(const Context& cx,
                                           const Level& L,
                                           bool outside_only = false);
 
+/// The joint torques J(L)^T W of the measured wrench at the load point [N*m].
+inline VectorXd load_torques(const RobotModel& robot,
+                             const Measurement& m,
+                             const MeasurementContext& c) {
+  Eigen::Matrix<double, 6, 1> w;
+  w << m.force, m.moment;
+  return robot.jacobian_at(c.chain, robot.point_position(c.chain, robot.load_point)).transpose() *
+         w;
+}
+
 /// The signature of a mechanism outside the library as a group of weighted columns (3n x k,
 /// the used rows of an analysis) for the trend tests of "where it fails".
 struct OutsideTrend {

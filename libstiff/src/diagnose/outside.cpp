@@ -64,11 +64,7 @@ void pose_compliance(const Context& cx, const Analysis& a, Groups* out) {
     const auto& c = a.ctx[i];
     const Matrix6X<double> jm =
         robot.jacobian_at(c.chain, robot.point_position(c.chain, robot.measured_point));
-    const Matrix6X<double> jl =
-        robot.jacobian_at(c.chain, robot.point_position(c.chain, robot.load_point));
-    Eigen::Matrix<double, 6, 1> wr;
-    wr << m.force, m.moment;
-    const VectorXd tau = jl.transpose() * wr;
+    const VectorXd tau = load_torques(robot, m, c);
     for (int j = 0; j < dof; ++j) {
       const Eigen::Vector3d deflection = a.w(i) * tau(j) * jm.block<3, 1>(0, j);
       for (int k = 0; k < angles; ++k) {

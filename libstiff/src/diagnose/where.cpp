@@ -63,11 +63,7 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
   for (int i = 0; i < nu; ++i) {
     const auto& m = a.used.rows[i];
     const auto& c = a.ctx[i];
-    const Matrix6X<double> jl =
-        robot.jacobian_at(c.chain, robot.point_position(c.chain, robot.load_point));
-    Eigen::Matrix<double, 6, 1> wr;
-    wr << m.force, m.moment;
-    const VectorXd tau = jl.transpose() * wr;
+    const VectorXd tau = load_torques(robot, m, c);
     for (int j = 0; j < dof; ++j) {
       q[j].push_back(m.q(j));
       tl[j].push_back(tau(j));
@@ -125,8 +121,11 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
   // The group's test with each candidate's directions taken out as well, the least significant
   // (none when a candidate spans the group): a trend one candidate explains is that
   // candidate's evidence, which the candidates' own tests weigh.
+  // Only a group significant on its own is asked further: the least significant p can only be
+  // larger, and a p above alpha is not significant after Holm whatever its value.
   auto beyond_candidates = [&](const MatrixXd& z) {
     GroupScore weakest = group_score(z);
+    if (!(std::exp(weakest.log_p) < cx.opt->alpha)) return weakest;
     for (const MatrixXd& b : L.bases) {
       if (weakest.df == 0) break;
       if (b.cols() == 0) continue;
