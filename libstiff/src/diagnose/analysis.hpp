@@ -229,6 +229,9 @@ std::vector<OutsideTrend> outside_trends(const Context& cx, const Analysis& a);
 /// than a generic covariate?
 bool is_outside_library(const std::string& covariate);
 
+/// A trend test in words: what the residual follows, with its partial F and adjusted p.
+std::string trend_text(const CovariateTest& c);
+
 /// The covariates and axes the residual follows, in one sentence (for `unexplained`).
 std::string signature_of(const Diagnosis& d);
 

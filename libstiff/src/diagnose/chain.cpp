@@ -47,9 +47,8 @@ bool Chain::at_floor(const Level& L, std::string* why, bool* weak) const {
         if (c.significant) return true;
       const std::optional<CovariateTest> t = strong_trend(*cx, L);
       if (!t) return true;
-      *why = "it reaches the stated noise floor, but its residual still follows " + t->description +
-             " (partial F = " + num(t->statistic, 3) + ", p_adj = " + num(t->p_adjusted, 2) +
-             "): structure remains that no candidate explains";
+      *why = "it reaches the stated noise floor, but its residual still follows " + trend_text(*t) +
+             ": structure remains that no candidate explains";
       *weak = false;
       return false;
     }
@@ -77,9 +76,8 @@ bool Chain::at_floor(const Level& L, std::string* why, bool* weak) const {
   for (const auto& c : d.covariates)
     if (c.significant) {
       if (at)
-        *why = "its residual still follows " + c.description +
-               " (partial F = " + num(c.statistic, 3) + ", p_adj = " + num(c.p_adjusted, 2) +
-               "): structure remains that no candidate explains";
+        *why = "its residual still follows " + trend_text(c) +
+               ": structure remains that no candidate explains";
       *weak = *weak && marginal(c.p_adjusted);
       at = false;
     }
@@ -255,10 +253,8 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
     const std::optional<CovariateTest> t = strong_trend(*cx, levels[i + 1], true);
     if (!t) return true;
     *why = "after adding " + added +
-           ", the residual reaches the stated noise floor but still "
-           "follows " +
-           t->description + " (partial F = " + num(t->statistic, 3) +
-           ", p_adj = " + num(t->p_adjusted, 2) + "): structure remains that no candidate explains";
+           ", the residual reaches the stated noise floor but still follows " + trend_text(*t) +
+           ": structure remains that no candidate explains";
     *weak = false;
     return false;
   };
@@ -346,9 +342,8 @@ std::string Chain::decide(size_t i, std::string* why) {
     }
     // A strong trend left against a covariate is structure whatever the noise level says.
     if (const std::optional<CovariateTest> t = strong_trend(*cx, L)) {
-      *why = "no candidate effect is significant, but the residual follows " + t->description +
-             " (partial F = " + num(t->statistic, 3) + ", p_adj = " + num(t->p_adjusted, 2) +
-             "): the missing effect is probably not in the candidate list" + extra;
+      *why = "no candidate effect is significant, but the residual follows " + trend_text(*t) +
+             ": the missing effect is probably not in the candidate list" + extra;
       return std::string("unexplained");
     }
     *why = known

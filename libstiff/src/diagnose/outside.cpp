@@ -13,18 +13,12 @@ namespace {
 
 using Groups = std::vector<OutsideTrend>;
 
-constexpr const char* kBaseTilt = "base_tilt";
-constexpr const char* kPoseCompliance = "pose_compliance_";  // followed by the joint's number
-constexpr const char* kBaseShift = "base_shift";
-constexpr const char* kLoadResponseDrift = "load_response_drift";
-constexpr const char* kSensorCrosstalk = "sensor_crosstalk";
-
 /// The arm turning as a whole about the axes of its mounting plane (base x and y) under the
 /// load's moment there (a compliant pedestal, floor, wall or mounting plate): theta = (c_x M_x,
 /// c_y M_y, 0), the base moment M = L x F + m, and the displacement theta x (P + h e_z) about a
 /// pivot h below the base frame (four columns: c_x, c_y and their products with h). The
 /// joints, the links and a force-frame error take part of it up; what they leave shows here.
-void base_tilt(const Context& cx, const Analysis& a, Groups* out) {
+void base_tilt(const Context& cx, const Analysis& a, const std::string& name, Groups* out) {
   const RobotModel& robot = *cx.robot;
   MatrixXd z = MatrixXd::Zero(a.n, 4);
   const Eigen::Vector3d ex = Eigen::Vector3d::UnitX(), ey = Eigen::Vector3d::UnitY();
@@ -40,7 +34,7 @@ void base_tilt(const Context& cx, const Analysis& a, Groups* out) {
     for (int k = 0; k < 4; ++k) z.block<3, 1>(3 * i, k) = a.w(i) * cols[k];
   }
   out->push_back(
-      {kBaseTilt,
+      {name,
        "the arm turning as a whole about the base x and y axes (its mounting plane) "
        "under the load's moment there (pedestal or floor compliance, not in the library)",
        std::move(z), false});
@@ -54,7 +48,7 @@ void base_tilt(const Context& cx, const Analysis& a, Groups* out) {
 /// each candidate; and not with a law decided from the data (backlash): its preload follows the
 /// gravity torque, a function of the same angles, so a preload shape off the truth leaves
 /// exactly this pattern at its joints.
-void pose_compliance(const Context& cx, const Analysis& a, Groups* out) {
+void pose_compliance(const Context& cx, const Analysis& a, const std::string& name, Groups* out) {
   if (has_confidence_sets(*a.model)) return;
   const RobotModel& robot = *cx.robot;
   const int dof = robot.dof(), angles = std::max(1, dof - 1);
@@ -74,7 +68,7 @@ void pose_compliance(const Context& cx, const Analysis& a, Groups* out) {
     }
   }
   for (int j = 0; j < dof; ++j)
-    out->push_back({kPoseCompliance + std::to_string(j + 1),
+    out->push_back({name + std::to_string(j + 1),
                     "the compliance of joint " + std::to_string(j + 1) +
                         " varying with the arm's angles (not in the library)",
                     std::move(z[j]), true});
@@ -83,7 +77,7 @@ void pose_compliance(const Context& cx, const Analysis& a, Groups* out) {
 /// The arm shifting as a whole under the load's force (a compliant base plate or floor):
 /// d = C_b F with C_b symmetric in the base frame (six columns). A series compliance at the
 /// tool turns with the flange; this does not.
-void base_shift(const Context&, const Analysis& a, Groups* out) {
+void base_shift(const Context&, const Analysis& a, const std::string& name, Groups* out) {
   MatrixXd z = MatrixXd::Zero(a.n, 6);
   const int pairs[6][2] = {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {0, 2}, {1, 2}};
   for (size_t i = 0; i < a.used.rows.size(); ++i) {
@@ -93,7 +87,7 @@ void base_shift(const Context&, const Analysis& a, Groups* out) {
       if (pairs[k][0] != pairs[k][1]) z(3 * i + pairs[k][1], k) += a.w(i) * f(pairs[k][0]);
     }
   }
-  out->push_back({kBaseShift,
+  out->push_back({name,
                   "the arm shifting as a whole under the load's force, fixed in the base frame "
                   "(base plate or floor compliance, not in the library)",
                   std::move(z), false});
@@ -103,7 +97,7 @@ void base_shift(const Context&, const Analysis& a, Groups* out) {
 /// reducers warm up, a force sensor's gain drifting): one column, the model's deflection under
 /// the row's load (its prediction less that without load, so that drift terms cancel) times
 /// the reading's time from its session's mean time.
-void load_response_drift(const Context&, const Analysis& a, Groups* out) {
+void load_response_drift(const Context&, const Analysis& a, const std::string& name, Groups* out) {
   std::vector<double> sum, count;
   for (const auto& c : a.ctx) {
     const size_t s = static_cast<size_t>(c.session);
@@ -124,7 +118,7 @@ void load_response_drift(const Context&, const Analysis& a, Groups* out) {
                                        a.model->predict(a.theta, unloaded, c).head<3>();
     z.block<3, 1>(3 * i, 0) = a.w(i) * (c.time - sum[s] / count[s]) * deflection;
   }
-  out->push_back({kLoadResponseDrift,
+  out->push_back({name,
                   "the response to the load changing in scale over the session (joints warming "
                   "up, a force sensor's gain drifting; not in the library)",
                   std::move(z), false});
@@ -136,7 +130,7 @@ void load_response_drift(const Context&, const Analysis& a, Groups* out) {
 /// response to the force error, G(q) R E_k R^T F, with G the model's displacement per unit
 /// force at the row: taken from the fitted model by a small step of the force, so the columns
 /// are those of whatever the arm's compliance is.
-void sensor_crosstalk(const Context&, const Analysis& a, Groups* out) {
+void sensor_crosstalk(const Context&, const Analysis& a, const std::string& name, Groups* out) {
   constexpr double step = 1e-4;  // relative: a backlash decision flips only at its threshold
   const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
   MatrixXd z = MatrixXd::Zero(a.n, 3);
@@ -156,30 +150,35 @@ void sensor_crosstalk(const Context&, const Analysis& a, Groups* out) {
       z.block<3, 1>(3 * i, k) = a.w(i) / step * (a.model->predict(a.theta, mk, c).head<3>() - d0);
     }
   }
-  out->push_back({kSensorCrosstalk,
+  out->push_back({name,
                   "the model's response to a force error symmetric between the sensor's axes "
                   "(force sensor cross-talk, not in the library)",
                   std::move(z), false});
 }
 
-using Mechanism = void (*)(const Context&, const Analysis&, Groups*);
-constexpr Mechanism kMechanisms[] = {base_tilt, pose_compliance, base_shift, load_response_drift,
-                                     sensor_crosstalk};
-
-constexpr const char* kNames[] = {kBaseTilt, kPoseCompliance, kBaseShift, kLoadResponseDrift,
-                                  kSensorCrosstalk};
+/// A mechanism: the name its groups take (a trailing '_' is followed by the joint's number)
+/// and the function that makes them.
+struct Mechanism {
+  const char* name;
+  void (*groups)(const Context&, const Analysis&, const std::string& name, Groups*);
+};
+const Mechanism kMechanisms[] = {{"base_tilt", base_tilt},
+                                 {"pose_compliance_", pose_compliance},
+                                 {"base_shift", base_shift},
+                                 {"load_response_drift", load_response_drift},
+                                 {"sensor_crosstalk", sensor_crosstalk}};
 
 }  // namespace
 
 std::vector<OutsideTrend> outside_trends(const Context& cx, const Analysis& a) {
   Groups out;
-  for (const Mechanism m : kMechanisms) m(cx, a, &out);
+  for (const Mechanism& m : kMechanisms) m.groups(cx, a, m.name, &out);
   return out;
 }
 
 bool is_outside_library(const std::string& covariate) {
-  return std::any_of(std::begin(kNames), std::end(kNames), [&](const char* name) {
-    const std::string n = name;
+  return std::any_of(std::begin(kMechanisms), std::end(kMechanisms), [&](const Mechanism& m) {
+    const std::string n = m.name;
     return n.back() == '_' ? covariate.rfind(n, 0) == 0 : covariate == n;
   });
 }

@@ -198,6 +198,11 @@ std::optional<CovariateTest> strong_trend(const Context& cx, const Level& L, boo
   return std::nullopt;
 }
 
+std::string trend_text(const CovariateTest& c) {
+  return c.description + " (partial F = " + num(c.statistic, 3) +
+         ", p_adj = " + num(c.p_adjusted, 2) + ")";
+}
+
 std::string signature_of(const Diagnosis& d) {
   std::vector<std::string> parts;
   for (const auto& c : d.covariates)
