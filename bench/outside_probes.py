@@ -89,6 +89,79 @@ def displacement_columns(header, path):
     return out
 
 
+def controls(data_dir, sets, seeds, robot):
+    """Each control (type `none`) of the directory's index in the comma-separated `sets` and
+    the `seeds` text: (set, seed, folder, its CSV files by name as read_csv gives them, the
+    same as stiff Datasets in SI units whatever the file's, its truth.json)."""
+    import stiff
+
+    with open(os.path.join(data_dir, "index.json")) as f:
+        index = json.load(f)
+    sets, seeds = sets.split(","), parse_seeds(seeds)
+    for e in index:
+        s, name = e["path"].split("/")
+        seed = int(name.rsplit("_", 1)[1])
+        if e["type"] != "none" or s not in sets or seed not in seeds:
+            continue
+        src = os.path.join(data_dir, e["path"])
+        files = {fn: read_csv(os.path.join(src, fn)) for fn in ("calib.csv", "valid.csv")}
+        data = {fn: stiff.Dataset.read(os.path.join(src, fn), robot) for fn in files}
+        with open(os.path.join(src, "truth.json")) as f:
+            truth = json.load(f)
+        yield s, seed, src, files, data, truth
+
+
+def probe_arguments(doc, kinds, size, size_help):
+    """The command line both probe scripts take."""
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
+    ap.add_argument("--data", required=True, help="scenario directory with index.json")
+    ap.add_argument("--out", required=True, help="directory to write (replaced)")
+    ap.add_argument("--sets", default="base,sigma", help="sets whose controls are used")
+    ap.add_argument("--seeds", default="0-9")
+    ap.add_argument("--kinds", default=",".join(kinds))
+    ap.add_argument("--size", type=float, default=size, help=size_help)
+    ap.add_argument("--robot", default="rokae")
+    return ap
+
+
+def prepare(out, kinds, known, names, who):
+    """False, with a message naming it, when a kind is not known; else the output directory
+    emptied (nothing is removed before every kind is known)."""
+    for k in kinds:
+        if not known(k):
+            print(f"{who}: unknown kind {k!r} (known: {', '.join(names)})", file=sys.stderr)
+            return False
+    if os.path.exists(out):
+        shutil.rmtree(out)
+    return True
+
+
+def write_index(out, entries, who):
+    with open(os.path.join(out, "index.json"), "w") as f:
+        json.dump(entries, f, indent=1)
+    print(f"{who}: {len(entries)} scenarios in {out}")
+
+
+def write_scenario(src, dst, files, add, forces=None):
+    """Copy the CSV files of `src` (read_csv's triples, by name) to `dst` with the displacements
+    moved by add[name] (N x 3, metres; any unit of the file) and, when given, the force columns
+    replaced by forces[name] (N x 3, newtons, written to 0.01 N as the development data are)."""
+    os.makedirs(dst)
+    for fn, (comments, header, rows) in files.items():
+        cols = displacement_columns(header, os.path.join(src, fn))
+        fcols = [header.index(h) for h in ("fx_N", "fy_N", "fz_N")] if forces else []
+        with open(os.path.join(dst, fn), "w") as f:
+            f.writelines(comments)
+            f.write(",".join(header) + "\n")
+            for i, (r, d) in enumerate(zip(rows, add[fn])):
+                r = list(r)
+                for k, (c, unit) in enumerate(cols):
+                    r[c] = repr(float(float(r[c]) + unit * d[k]))
+                for k, c in enumerate(fcols):
+                    r[c] = f"{forces[fn][i, k]:.2f}"
+                f.write(",".join(r) + "\n")
+
+
 def rotation(rng):
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     return q * np.sign(np.linalg.det(q))
@@ -155,44 +228,18 @@ def make_effect(kind, rng, robot, compliance):
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--data", required=True, help="scenario directory with index.json")
-    ap.add_argument("--out", required=True, help="directory to write (replaced)")
-    ap.add_argument("--sets", default="base,sigma", help="sets whose controls are used")
-    ap.add_argument("--seeds", default="0-9")
-    ap.add_argument("--kinds", default=",".join(KINDS))
-    ap.add_argument("--size", type=float, default=55.0, help="effect RMS per axis [um]")
-    ap.add_argument("--robot", default="rokae")
+    ap = probe_arguments(__doc__, KINDS, 55.0, "effect RMS per axis [um]")
     a = ap.parse_args()
     import stiff
 
     robot = stiff.Robot(a.robot)
-    with open(os.path.join(a.data, "index.json")) as f:
-        index = json.load(f)
-    seeds, sets, kinds = parse_seeds(a.seeds), a.sets.split(","), a.kinds.split(",")
-    for k in kinds:
-        if k not in KINDS and not angle_pair(k):
-            print(f"outside_probes: unknown kind {k!r} (known: {', '.join(KINDS)})",
-                  file=sys.stderr)
-            return 2
-    if os.path.exists(a.out):
-        shutil.rmtree(a.out)
+    kinds = a.kinds.split(",")
+    if not prepare(a.out, kinds, lambda k: k in KINDS or angle_pair(k), KINDS, "outside_probes"):
+        return 2
     out_index = []
-    for e in index:
-        s, name = e["path"].split("/")
-        seed = int(name.rsplit("_", 1)[1])
-        if e["type"] != "none" or s not in sets or seed not in seeds:
-            continue
-        src = os.path.join(a.data, e["path"])
-        files = {fn: read_csv(os.path.join(src, fn)) for fn in ("calib.csv", "valid.csv")}
-        arrays = {}
-        for fn in files:
-            data = stiff.Dataset.read(os.path.join(src, fn), robot)  # SI, whatever the units
-            arrays[fn] = (data.q, data.force, len(data))
-        compliance = 1.0 / np.asarray(
-            stiff.identify(robot, stiff.Dataset.read(os.path.join(src, "calib.csv"))).stiffness)
-        with open(os.path.join(src, "truth.json")) as f:
-            truth0 = json.load(f)
+    for s, seed, src, files, data, truth0 in controls(a.data, a.sets, a.seeds, robot):
+        arrays = {fn: (d.q, d.force, len(d)) for fn, d in data.items()}
+        compliance = 1.0 / np.asarray(stiff.identify(robot, data["calib.csv"]).stiffness)
         for kind in kinds:
             rng = np.random.default_rng(
                 [seed, KINDS.index(kind)] if kind in KINDS else [seed] + [ord(c) for c in kind])
@@ -211,17 +258,7 @@ def main() -> int:
             elif kind == "warmup":
                 params["compliance_gain_over_session"] = scale
             dst = os.path.join(a.out, s, f"{kind}_{seed:02d}")
-            os.makedirs(dst)
-            for fn, (comments, header, rows) in files.items():
-                cols = displacement_columns(header, os.path.join(src, fn))
-                with open(os.path.join(dst, fn), "w") as f:
-                    f.writelines(comments)
-                    f.write(",".join(header) + "\n")
-                    for r, d in zip(rows, add[fn] * scale):
-                        r = list(r)
-                        for k, (c, unit) in enumerate(cols):
-                            r[c] = repr(float(float(r[c]) + unit * d[k]))
-                        f.write(",".join(r) + "\n")
+            write_scenario(src, dst, files, {fn: add[fn] * scale for fn in files})
             what = DESCRIPTION.get(kind) or (
                 f"outside the library: joint {kind[1]}'s compliance varies with joint "
                 f"{kind[3]}'s angle")
@@ -234,9 +271,7 @@ def main() -> int:
                 json.dump(truth, f, indent=1)
             out_index.append({"path": f"{s}/{kind}_{seed:02d}", "type": kind,
                               "expected": {"verdict": "unexplained"}})
-    with open(os.path.join(a.out, "index.json"), "w") as f:
-        json.dump(out_index, f, indent=1)
-    print(f"outside_probes: {len(out_index)} scenarios in {a.out}")
+    write_index(a.out, out_index, "outside_probes")
     return 0
 
 

@@ -109,6 +109,17 @@ def test_harness_skips_without_data(root, tmp_path):
     assert p.returncode == 0 and "skipped" in p.stdout
 
 
+def scored(root, probes, noise, types, tmp_path):
+    """The harness's outcomes on seed 0 of a probe directory's base set."""
+    scores = tmp_path / "scores.json"
+    p = subprocess.run([sys.executable, str(root / "bench" / "diagnosis_score.py"), "--data",
+                        str(probes), "--sets", "base", "--seeds", "0", "--noise", noise,
+                        "--types", types, "--jobs", "1", "--json", str(scores)],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    return json.loads(scores.read_text())
+
+
 def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_path):
     """bench/outside_probes.py on the control: each probe's displacements are the control's
     plus its effect (checked here against the effect's parameters in truth.json, computed
@@ -143,21 +154,82 @@ def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_p
             pos = robot.tool_pose(base.q)[:, :3, 3]
             expect = pos * len(base) * truth["effect_parameters"]["strain_per_row"]
         assert np.allclose(added, expect, rtol=0, atol=1e-12)
-    scores = tmp_path / "scores.json"
-    p = subprocess.run([sys.executable, str(root / "bench" / "diagnosis_score.py"), "--data",
-                        str(out), "--sets", "base", "--seeds", "0", "--noise", "both",
-                        "--types", "base_shift,crosstalk", "--jobs", "1", "--json",
-                        str(scores)], capture_output=True, text=True, timeout=600)
-    assert p.returncode == 0, p.stderr
-    rows = json.loads(scores.read_text())
+    rows = scored(root, out, "both", "base_shift,crosstalk", tmp_path)
     assert len(rows) == 4
     for r in rows:
         assert r["outcome"] == "right", r
 
 
-def test_outside_probes_refuse_an_unknown_kind(root, suite, tmp_path):
-    p = subprocess.run([sys.executable, str(root / "bench" / "outside_probes.py"), "--data",
-                        str(suite), "--out", str(tmp_path / "x"), "--kinds", "pedestal"],
+def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
+    """bench/form_probes.py on the control: its own gravity torques (modified DH read from the
+    robot file) agree with stiff's Jacobian, each probe leaves the requested amount after the
+    joint compliances, the flange sensor's forces and the tracker's rotation are what
+    truth.json says, and the diagnosis names the class of a kinked reducer about the gravity
+    preload and of a drift read in reversed order (docs/diagnosis.md, section 6)."""
+    np = pytest.importorskip("numpy")
+    import stiff
+
+    spec = importlib.util.spec_from_file_location("form_probes",
+                                                  root / "bench" / "form_probes.py")
+    sys.path.insert(0, str(root / "bench"))
+    try:
+        fp = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(fp)
+    finally:
+        sys.path.remove(str(root / "bench"))
+    robot = stiff.Robot("rokae")
+    dh, masses, coms = fp.read_dh_robot(root / "examples" / "robots" / "rokae.yaml")
+    q = np.random.default_rng(3).uniform(-1.5, 1.5, (5, robot.dof))
+    unit_tool = [0.0] * robot.dof + [2.0]
+    tau = fp.gravity_torques(dh, q, unit_tool, [np.zeros(3)] * (robot.dof + 1))
+    jv = robot.jacobian(q)[:, :3, :]
+    assert np.allclose(tau, np.einsum("nij,i->nj", jv, 2.0 * fp.GRAVITY), atol=1e-12)
+
+    out = tmp_path / "forms"
+    kinds = "kinkg23,drift_reversed,force_flange,tracker,coupling24"
+    p = subprocess.run([sys.executable, str(root / "bench" / "form_probes.py"), "--data",
+                        str(suite), "--out", str(out), "--sets", "base", "--seeds", "0",
+                        "--kinds", kinds], capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    base = stiff.Dataset.read(suite / "base" / "none_00" / "calib.csv", robot)
+    cols = fp.joint_columns(robot, base.q, base.force)
+    for kind in kinds.split(","):
+        folder = out / "base" / f"{kind}_00"
+        probe = stiff.Dataset.read(folder / "calib.csv", robot)
+        truth = json.loads((folder / "truth.json").read_text())
+        assert truth["expected"]["effects"] == [fp.KINDS[kind]]
+        added = (probe.displacement - base.displacement).reshape(-1)
+        if kind == "force_flange":
+            assert np.array_equal(probe.displacement, base.displacement)
+            par = truth["effect_parameters"]
+            a = fp.rodrigues(np.array(par["rotation_rad"])) @ np.diag(1 + np.array(par["gains"]))
+            rot = robot.tool_pose(base.q)[:, :3, :3]
+            expect = np.einsum("nij,jk,nlk,nl->ni", rot, a, rot, base.force)
+            assert np.allclose(probe.force, expect, atol=0.0051)  # written to 0.01 N
+            continue
+        assert np.array_equal(probe.force, base.force)
+        if kind == "tracker":
+            angle = np.deg2rad(truth["effect_parameters"]["angle_deg"])
+            r = fp.rodrigues(np.array(truth["effect_parameters"]["axis"]) * angle)
+            assert np.allclose(probe.displacement, base.displacement @ r.T, rtol=0, atol=1e-10)
+            continue
+        # What the joint compliances leave of it: the requested 40 um per axis (a coupling
+        # less when that would take a compliance matrix that is not positive definite).
+        left = fp.rms_left(cols, added)
+        if truth["effect_parameters"].get("rho", 0.0) < 0.8 - 1e-9:
+            assert left == pytest.approx(40e-6, rel=1e-6)
+        else:
+            assert left < 40e-6
+    rows = scored(root, out, "given", "kinkg23,drift_reversed", tmp_path)
+    assert len(rows) == 2
+    for r in rows:
+        assert r["outcome"] == "right" and r["ratio"] < 1.25, r
+
+
+@pytest.mark.parametrize("script", ["outside_probes.py", "form_probes.py"])
+def test_probes_refuse_an_unknown_kind(root, suite, tmp_path, script):
+    p = subprocess.run([sys.executable, str(root / "bench" / script), "--data", str(suite),
+                        "--out", str(tmp_path / "x"), "--kinds", "pedestal"],
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and "unknown kind 'pedestal'" in p.stderr
     assert not (tmp_path / "x").exists()

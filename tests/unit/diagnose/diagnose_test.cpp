@@ -1032,7 +1032,9 @@ TEST(DiagnoseHonesty, BaseShiftIsNotClaimed) {
 
 // The nonlinear reducer in the forms the library's example does not use: hardening about the
 // unloaded state (the compliance of joints 2 and 3 falls by half of c per 100 N*m of load
-// torque) and softening about the gravity preload (a stiff zone, e = -0.4 c). Found as
+// torque), softening about the gravity preload (a stiff zone, e = -0.4 c), hardening with the
+// cube of the total torque (h = -0.5 c) and a bilinear curve, 30 % softer on one side of the
+// torque reversal than on the other (r = +-0.3 c). Found as
 // `nonlinear_joint` (or in its group), the fit keeps the terms that carry the truth, and the
 // validation error after it sits within 1.25x the floor (as the hidden-effect sweep asks).
 TEST(DiagnoseNonlinearJoint, LoadCentredHardeningAndSofteningAreFound) {
@@ -1043,7 +1045,9 @@ TEST(DiagnoseNonlinearJoint, LoadCentredHardeningAndSofteningAreFound) {
   };
   const std::vector<Form> forms = {
       {"load-centred hardening", {{"s2", -0.5 * c(1)}, {"s3", -0.5 * c(2)}}},
-      {"softening about the preload", {{"e2", -0.4 * c(1)}, {"e3", -0.4 * c(2)}}}};
+      {"softening about the preload", {{"e2", -0.4 * c(1)}, {"e3", -0.4 * c(2)}}},
+      {"hardening with the total torque", {{"h2", -0.5 * c(1)}, {"h3", -0.5 * c(2)}}},
+      {"a kink at the torque reversal", {{"r2", 0.3 * c(1)}, {"r3", -0.3 * c(2)}}}};
   for (const auto& form : forms)
     for (uint64_t seed = 1; seed <= 2; ++seed) {
       const Diagnosis d = run(scenario_of(joint_and("nonlinear_joint", form.values), seed, 1));

@@ -15,10 +15,18 @@ namespace {
 ///             + s_j tau_F |tau_F| / T0                   symmetric change of stiffness with
 ///               the load torque (s < 0 hardening, s > 0 softening), about the unloaded state;
 ///             + a_j tau_F^2 / T0                         asymmetric curve (stiffer in one
-///               direction of the load than in the other).
+///               direction of the load than in the other);
+///             + h_j [(tau_g + tau_F)^3 - tau_g^3] / T0^2  hardening (h < 0) or softening
+///               with the cube of the total torque, the smooth symmetric law about zero torque
+///               (a Duffing spring), about the gravity preload;
+///             + r_j [|tau_g + tau_F| - |tau_g|]          bilinear curve with its kink at the
+///               torque reversal: compliance c_j + r_j for positive total torque, c_j - r_j for
+///               negative (a reducer stiffer in one direction), about the gravity preload.
 /// T0 = 100 N*m makes s and a the change of compliance at 100 N*m [rad/(N*m)]. s and a are the
 /// second-order Taylor terms of any smooth curve about the unloaded state (odd and even part),
-/// e the saturating soft zone that a Taylor series of low order cannot follow. s and a belong
+/// e the saturating soft zone that a Taylor series of low order cannot follow. h and r are laws
+/// of the total torque, so the preload moves the compliance the load sees: h by 3 h tau_g^2,
+/// r by its sign; the load-centred terms cannot follow that across poses. s and a belong
 /// to the arm joints (all but the last three of a 6-axis arm): a load at the flange moves the
 /// wrist torques by a few N*m only, where a second-order term is noise, and the wrist's soft
 /// zone (2 N*m knee) already covers its reducers. The terms overlap (each other and the linear
@@ -44,26 +52,37 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
           -1e-2, 1e-2, 1e-5, 0.0, 0.0)));
     }
     arm_ = n > 3 ? n - 3 : n;
-    for (int j = 0; j < arm_; ++j) {
-      const std::string jn = std::to_string(j + 1);
-      params_.push_back(optional(effects::parameter(
-          "s" + jn, "rad/(N*m)",
-          "change of the compliance of joint " + jn +
-              " at 100 N*m of load torque, symmetric (< 0 hardening, > 0 softening)",
-          -1e-2, 1e-2, 1e-6, 0.0, 0.0)));
-    }
-    // Only the arm joints carry the asymmetric term (see above): a parameter without a regressor
-    // would count as a degree of freedom in the F tests and cost them power.
-    for (int j = 0; j < arm_; ++j) {
-      const std::string jn = std::to_string(j + 1);
-      params_.push_back(
-          optional(effects::parameter("a" + jn, "rad/(N*m)",
-                                      "asymmetry of the compliance of joint " + jn +
-                                          " at 100 N*m (positive load torque softer when > 0)",
-                                      -1e-2, 1e-2, 1e-6, 0.0, 0.0)));
-    }
+    // Only the arm joints carry the second-order terms and the laws of the total torque (see
+    // above): a parameter without a regressor would count as a degree of freedom in the F tests
+    // and cost them power. Each term: its letter and what it is, after "joint j".
+    const std::pair<const char*, const char*> arm_terms[] = {
+        {"s", "'s compliance change at 100 N*m of load torque, symmetric (< 0 hardening)"},
+        {"a", "'s compliance asymmetry at 100 N*m (positive load torque softer when > 0)"},
+        {"h", "'s cubic compliance change with the total torque at 100 N*m (< 0 hardening)"},
+        {"r", ": half the difference of its compliances for positive and negative total torque"}};
+    for (const auto& [letter, what] : arm_terms)
+      for (int j = 0; j < arm_; ++j) {
+        const std::string jn = std::to_string(j + 1);
+        params_.push_back(optional(effects::parameter(
+            letter + jn, "rad/(N*m)", "joint " + jn + what, -1e-2, 1e-2, 1e-6, 0.0, 0.0)));
+      }
   }
   const std::string& name() const override { return name_; }
+  /// The two families a reducer's law comes in: a function of the load torque about the
+  /// unloaded state (s, a) and a function of the total torque, preload included (e, h, r).
+  std::vector<std::vector<int>> sub_forms() const override {
+    const int n = static_cast<int>(knee_.size());
+    std::vector<int> load, total;
+    for (int j = 0; j < n; ++j) total.push_back(j);
+    for (int j = 0; j < arm_; ++j) {
+      load.push_back(n + j);
+      load.push_back(n + arm_ + j);
+      total.push_back(n + 2 * arm_ + j);
+      total.push_back(n + 3 * arm_ + j);
+    }
+    std::vector<int> zone(total.begin(), total.begin() + n);
+    return {load, zone, total};
+  }
   bool example_parameters(const Eigen::VectorXd& c, double* p) const override {
     for (int j = 0; j < 5 && j < c.size(); ++j)
       set_parameter(p, "e" + std::to_string(j + 1), 0.5 * c(j));
@@ -74,8 +93,10 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
   }
   std::string description() const override {
     return "nonlinear reducer: dtheta_j += e_j [phi(tau_g+tau_F) - phi(tau_g)] + s_j "
-           "tau_F|tau_F|/T0 + a_j tau_F^2/T0 (arm joints), phi = T1 tanh(tau/T1), T0 = 100 N*m: "
-           "soft zone about zero torque, symmetric and asymmetric hardening or softening; "
+           "tau_F|tau_F|/T0 + a_j tau_F^2/T0 + h_j [(tau_g+tau_F)^3 - tau_g^3]/T0^2 + r_j "
+           "[|tau_g+tau_F| - |tau_g|] (arm joints), phi = T1 tanh(tau/T1), T0 = 100 N*m: soft "
+           "zone about zero torque, symmetric and asymmetric hardening or softening about the "
+           "unloaded state and about the preload, a kinked curve; "
            "a fit keeps the terms the data support";
   }
   std::string reference() const override {
@@ -99,7 +120,12 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
       const T loaded = T(t1) * tanh((T(tg(j)) + t) / T(t1));
       const T preload = T(t1 * std::tanh(tg(j) / t1));
       s.dtheta(j) += p[j] * (loaded - preload);
-      if (j < arm_) s.dtheta(j) += (p[n + j] * abs(t) + p[n + arm_ + j] * t) * t / T(kT0);
+      if (j >= arm_) continue;
+      s.dtheta(j) += (p[n + j] * abs(t) + p[n + arm_ + j] * t) * t / T(kT0);
+      const T total = T(tg(j)) + t;
+      const double g = tg(j);  // cubed by hand: std::pow would need a newer libm in the FMU
+      s.dtheta(j) += p[n + 2 * arm_ + j] * (total * total * total - T(g * g * g)) / T(kT0 * kT0);
+      s.dtheta(j) += p[n + 3 * arm_ + j] * (abs(total) - T(std::abs(tg(j))));
     }
   }
 

@@ -1,0 +1,360 @@
+"""Make scenarios of the library's effect classes in functional forms the development data do
+not have, from a scenario directory's controls.
+
+The development scenarios hold one form per class (coupling of joints 2 and 3, hardening of
+joints 2 and 3, a force-frame error fixed in the base frame, drift with an unloaded pass before
+the loaded one, ...). A diagnosis is judged on other forms of the same classes. This script adds
+such forms to the displacements (or the force readings) of the control scenarios (type `none`)
+of a directory laid out as bench/diagnosis_score.py reads it, so that noise and base compliance
+stay the independent simulator's, and writes a directory the scoring harness reads (expected
+verdict: `missing_effect` naming the class):
+
+  coupling<j><k>   compliance coupling of joints j and k (coupling45: a coupled wrist gear
+                   train; coupling13, coupling24: joints that are not neighbours, as in a
+                   tendon-driven arm): d += c (J_j tau_k + J_k tau_j)
+  cubic23          joints 2 and 3 hardening or softening with the cube of the load torque,
+                   dtheta_j += -/+ w_j tau_j^3 / T^2 (no preload)            -> nonlinear_joint
+  kink3            joint 3 stiffer in one direction than in the other, dtheta_3 += c max(tau_3, 0)
+                   (a kinked, asymmetric torque-torsion curve)              -> nonlinear_joint
+  force_flange     a force sensor on the flange turned by 3-8 deg about a random axis with
+                   per-axis gains off by 2-5 %: the file states A F, the arm felt F (the
+                   development data's frame error is fixed in the base frame) -> force_frame
+  tracker          the measured displacements rotated about a random axis   -> tracker_frame
+  drift_settle     the tracker settling exponentially (time constant 0.5-1.5 sessions), the
+                   unloaded pass first                                       -> drift
+  drift_loaded_first   the same settling, the loaded pass first
+  drift_reversed   a warm-up with a quadratic part, the loaded pass in reverse order
+  drift_interleaved    each pose's two readings one after the other, a settling drift
+
+Usage:
+  .venv/bin/python bench/form_probes.py --data DIR --out /tmp/forms --seeds 0-9
+  .venv/bin/python bench/diagnosis_score.py --data /tmp/forms --sets base,sigma --noise given
+
+Size: the part of the effect that five joint compliances cannot take up is set to `--size` um
+RMS per axis on the calibration rows (default 40, about 1.3 times the development data's noise;
+the development data's classes leave 5-20 % of the signal, 15-60 um), except force_flange,
+whose angles and gains are drawn, and a coupling that would need |c_jk| above 0.8 sqrt(c_j c_k)
+of the control's fitted compliances (not positive definite), which is held there (smaller). `true_class_refit_valid_um` is the joint compliances and the
+generating form (its shape fixed, its amplitudes free) refitted on calib.csv by least squares,
+scored on valid.csv: what a right model can reach, the drift's law restarted in the validation
+session. Needs the `stiff` Python package and numpy.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import sys
+
+import numpy as np
+
+from outside_probes import (controls, prepare, probe_arguments, rotation, write_index,
+                            write_scenario)
+
+KINDS = {
+    "coupling45": "coupling", "coupling35": "coupling", "coupling13": "coupling",
+    "coupling24": "coupling", "cubic23": "nonlinear_joint", "kink3": "nonlinear_joint",
+    "force_flange": "force_frame", "tracker": "tracker_frame", "drift_settle": "drift",
+    "drift_loaded_first": "drift", "drift_reversed": "drift", "drift_interleaved": "drift",
+    "kinkg23": "nonlinear_joint", "cubicg23": "nonlinear_joint", "softzone23": "nonlinear_joint",
+    "backlash3": "backlash", "backlash25": "backlash",
+}
+# Kinds whose law acts on the total torque, gravity preload included (the masses drawn 30 % off
+# the robot file's, as a user's file is).
+PRELOADED = ("kinkg23", "cubicg23", "softzone23", "backlash3", "backlash25")
+DESCRIPTION = {
+    "cubic23": "joints 2 and 3 hardening or softening with the cube of the load torque",
+    "kink3": "joint 3 stiffer in one load direction (a kinked torque-torsion curve)",
+    "force_flange": "force-sensor frame error on the flange: rotation and per-axis gains",
+    "tracker": "laser-tracker frame misregistration about a random axis",
+    "drift_settle": "tracker settling exponentially, the unloaded pass first",
+    "drift_loaded_first": "tracker settling exponentially, the loaded pass first",
+    "drift_reversed": "warm-up with a quadratic part, the loaded pass in reverse order",
+    "drift_interleaved": "settling drift, the two readings of each pose one after the other",
+    "kinkg23": "joints 2 and 3 stiffer in one direction of the total torque (a kink at the "
+               "torque reversal, gravity preload; masses off the robot file's)",
+    "cubicg23": "joints 2 and 3 hardening or softening with the cube of the total torque "
+                "(gravity preload; masses off the robot file's)",
+    "softzone23": "joints 2 and 3 with a soft zone about zero total torque, knee 5-30 N*m "
+                  "(gravity preload; masses off the robot file's)",
+    "backlash3": "lost motion of joint 3 under gravity preload (masses off the robot file's)",
+    "backlash25": "lost motion of joints 2 and 5 under gravity preload (masses off the robot "
+                  "file's)",
+}
+T_REF = 100.0  # N*m, the torque that scales the cubic law
+GRAVITY = np.array([0.0, 0.0, -9.81])
+
+
+def read_dh_robot(path):
+    """(modified DH rows (alpha, a, d) [rad, m], masses [kg] and centres of mass [m] of links
+    1..n, then the tool's) from a robot file whose joints are one-line flow mappings in mm and
+    deg, as examples/robots/rokae.yaml is (this script's own reading, independent of stiff's)."""
+    rows, masses, coms = [], [], []
+    tool = (0.0, np.zeros(3))
+    with open(path) as f:
+        text = f.read()
+    if "convention: modified_dh" not in text or "{length: mm, angle: deg}" not in text:
+        raise SystemExit(f"form_probes: {path}: needs modified DH in mm and deg")
+    for line in text.splitlines():
+        m = re.match(r"\s*(- |tool: )(\{.*\})\s*(#.*)?$", line)
+        if not m:
+            continue
+        entry = json.loads(re.sub(r"(\w+):", r'"\1":', m.group(2)))
+        com = np.array(entry.get("com", [0, 0, 0]), float) * 1e-3
+        if m.group(1) == "tool: ":
+            tool = (float(entry.get("mass", 0)), com)
+            continue
+        rows.append((np.deg2rad(entry["alpha"]), entry["a"] * 1e-3, entry["d"] * 1e-3))
+        masses.append(float(entry.get("mass", 0)))
+        coms.append(com)
+    return rows, masses + [tool[0]], coms + [tool[1]]
+
+
+def gravity_torques(dh, q, masses, coms):
+    """(N, n): the torque the links' and the tool's weight put on each joint (the same sign as
+    J^T F), from the modified DH chain T = RotX(alpha) TransX(a) RotZ(q) TransZ(d)."""
+    n_rows, n = q.shape
+    out = np.zeros((n_rows, n))
+    for r in range(n_rows):
+        t = np.eye(4)
+        origins, axes, weights = [], [], []
+        for j, (alpha, a, d) in enumerate(dh):
+            ca, sa, cq, sq = np.cos(alpha), np.sin(alpha), np.cos(q[r, j]), np.sin(q[r, j])
+            step = np.array([[cq, -sq, 0, a], [sq * ca, cq * ca, -sa, -sa * d],
+                             [sq * sa, cq * sa, ca, ca * d], [0, 0, 0, 1]])
+            t = t @ step
+            origins.append(t[:3, 3].copy())
+            axes.append(t[:3, 2].copy())
+            weights.append((t[:3, :3] @ coms[j] + t[:3, 3], masses[j]))
+        weights.append((t[:3, :3] @ coms[n] + t[:3, 3], masses[n]))  # the tool on the flange
+        for j in range(n):
+            for i in range(j, n + 1):
+                p, m = weights[i]
+                out[r, j] += np.cross(axes[j], p - origins[j]) @ (m * GRAVITY)
+    return out
+
+
+def skew(v):
+    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+
+
+def rodrigues(axis_angle):
+    a = np.linalg.norm(axis_angle)
+    k = skew(axis_angle / a) if a > 0 else np.zeros((3, 3))
+    return np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * k @ k
+
+
+def load_torques(robot, q, f):
+    jv = robot.jacobian(q)[:, :3, :]
+    return jv, np.einsum("nij,ni->nj", jv, f)
+
+
+def joint_columns(robot, q, f):
+    """(3N, n): each joint's deflection per unit compliance under the row's force."""
+    jv, tau = load_torques(robot, q, f)
+    return (jv * tau[:, None, :]).reshape(-1, jv.shape[2])
+
+
+def drift_course(kind, rng):
+    """(the drift's course per row of a session of n rows as a function of n, its direction,
+    params)."""
+    amp = rotation(rng)[:, 0]  # direction; the size sets the scale
+    tau = rng.uniform(0.5, 1.5)  # settling time in sessions
+
+    def settle(t, n):
+        return 1.0 - np.exp(-t / (tau * n))
+
+    def warm(t, n):
+        return t / n + 0.5 * (t / n) ** 2
+
+    def course(n):
+        i = np.arange(n, dtype=float)
+        if kind == "drift_settle":
+            s = settle(n + i, 2 * n) - settle(i, 2 * n)
+        elif kind == "drift_loaded_first":
+            s = settle(i, 2 * n) - settle(n + i, 2 * n)
+        elif kind == "drift_reversed":
+            s = warm(2 * n - 1 - i, 2 * n) - warm(i, 2 * n)
+        else:  # interleaved
+            s = settle(2 * i + 1, 2 * n) - settle(2 * i, 2 * n)
+        return s
+
+    return course, amp, {"direction": amp.tolist(), "time_constant_sessions": tau}
+
+
+def make_probe(kind, rng, robot, arrays, dh_robot):
+    """Per file: (displacement added [m] at unit scale, forces written or None, extra columns of
+    the generating form for the reachable refit (3N x m) at unit scale), and the parameters.
+    The caller scales the added displacement; forces and rotations are final."""
+    m = re.fullmatch(r"coupling([1-9])([1-9])", kind)
+    out, params = {}, {}
+    if m:
+        j, k = int(m.group(1)) - 1, int(m.group(2)) - 1
+        for fn, (q, f, n) in arrays.items():
+            jv, tau = load_torques(robot, q, f)
+            d = jv[:, :, j] * tau[:, k, None] + jv[:, :, k] * tau[:, j, None]
+            out[fn] = (d, None, d.reshape(-1, 1))
+        params = {"joints": [j + 1, k + 1]}
+    elif kind == "cubic23":
+        w = rng.uniform(0.5, 1.0, 2) * rng.choice([-1.0, 1.0])
+        for fn, (q, f, n) in arrays.items():
+            jv, tau = load_torques(robot, q, f)
+            cols = [jv[:, :, j] * (tau[:, j] ** 3 / T_REF**2)[:, None] for j in (1, 2)]
+            out[fn] = (w[0] * cols[0] + w[1] * cols[1], None,
+                       np.stack([c.reshape(-1) for c in cols], axis=1))
+        params = {"weights_j2_j3": w.tolist(), "T_Nm": T_REF,
+                  "law": "hardening" if w[0] < 0 else "softening"}
+    elif kind == "kink3":
+        sign = rng.choice([-1.0, 1.0])
+        for fn, (q, f, n) in arrays.items():
+            jv, tau = load_torques(robot, q, f)
+            d = jv[:, :, 2] * np.maximum(sign * tau[:, 2], 0.0)[:, None]
+            out[fn] = (d, None, d.reshape(-1, 1))
+        params = {"softer_direction": sign}
+    elif kind in PRELOADED:
+        joints = {"backlash3": (2,), "backlash25": (1, 4)}.get(kind, (1, 2))
+        w = rng.uniform(0.5, 1.0, len(joints))
+        knee = rng.uniform(5.0, 30.0)
+        sign = rng.choice([-1.0, 1.0])
+        laws = {
+            "kinkg23": np.abs,
+            "cubicg23": lambda t: sign * t**3 / T_REF**2,
+            "softzone23": lambda t: knee * np.tanh(t / knee),
+            "backlash3": lambda t: 0.5 * np.sign(t),
+            "backlash25": lambda t: 0.5 * np.sign(t),
+        }
+        law = laws[kind]
+        masses = [m * rng.uniform(0.7, 1.3) for m in dh_robot[1]]
+        coms = [c * rng.uniform(0.7, 1.3, 3) for c in dh_robot[2]]
+        for fn, (q, f, n) in arrays.items():
+            jv, tau = load_torques(robot, q, f)
+            tau_g = gravity_torques(dh_robot[0], q, masses, coms)
+            cols = [jv[:, :, j] * (law(tau_g[:, j] + tau[:, j]) - law(tau_g[:, j]))[:, None]
+                    for j in joints]
+            out[fn] = (sum(wk * c for wk, c in zip(w, cols)), None,
+                       np.stack([c.reshape(-1) for c in cols], axis=1))
+        params = {"joints": [j + 1 for j in joints], "weights": w.tolist(),
+                  "masses_kg": masses, "coms_m": [c.tolist() for c in coms]}
+        if kind == "cubicg23":
+            params["law"] = "softening" if sign > 0 else "hardening"
+        if kind == "softzone23":
+            params["knee_Nm"] = knee
+    elif kind == "force_flange":
+        axis = rotation(rng)[:, 0] * np.deg2rad(rng.uniform(3, 8))
+        gains = rng.uniform(0.02, 0.05, 3) * rng.choice([-1.0, 1.0], 3)
+        a = rodrigues(axis) @ np.diag(1 + gains)
+        for fn, (q, f, n) in arrays.items():
+            rot = robot.tool_pose(q)[:, :3, :3]
+            written = np.einsum("nij,jk,nlk,nl->ni", rot, a, rot, f)
+            out[fn] = (np.zeros_like(f), written, np.zeros((3 * n, 0)))
+        params = {"rotation_rad": axis.tolist(), "gains": gains.tolist()}
+    elif kind == "tracker":
+        axis = rotation(rng)[:, 0]
+        params = {"axis": axis.tolist()}
+        out = {fn: (None, None, None) for fn in arrays}  # rotation: done by the caller
+    elif kind.startswith("drift_"):
+        course, amp, params = drift_course(kind, rng)
+        for fn, (q, f, n) in arrays.items():
+            s = course(n)
+            out[fn] = (s[:, None] * amp[None, :], None, np.kron(s[:, None], np.eye(3)))
+    else:
+        raise ValueError(kind)
+    return out, params
+
+
+def rms_left(cols, y):
+    """RMS per component of y after least squares on cols."""
+    x, *_ = np.linalg.lstsq(cols, y, rcond=None)
+    return float(np.sqrt(np.mean((y - cols @ x) ** 2)))
+
+
+def reachable(cols_c, y_c, cols_v, y_v):
+    x, *_ = np.linalg.lstsq(cols_c, y_c, rcond=None)
+    return float(np.sqrt(np.mean((y_v - cols_v @ x) ** 2)))
+
+
+def main() -> int:
+    ap = probe_arguments(__doc__, KINDS, 40.0,
+                         "RMS per axis the joint compliances leave of the effect [um]")
+    ap.add_argument("--robot-file", default=os.path.join(
+        os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "robots",
+        "rokae.yaml"), help="the same robot's file, for the gravity preload (modified DH)")
+    a = ap.parse_args()
+    import stiff
+
+    robot = stiff.Robot(a.robot)
+    dh_robot = read_dh_robot(a.robot_file)
+    kinds = a.kinds.split(",")
+    if not prepare(a.out, kinds, lambda k: k in KINDS or re.fullmatch(r"coupling[1-9][1-9]", k),
+                   KINDS, "form_probes"):
+        return 2
+    out_index = []
+    for s, seed, src, files, data, truth0 in controls(a.data, a.sets, a.seeds, robot):
+        arrays = {fn: (d.q, d.force, len(d)) for fn, d in data.items()}
+        meas = {fn: d.displacement.reshape(-1) for fn, d in data.items()}
+        joint = {fn: joint_columns(robot, *arrays[fn][:2]) for fn in files}
+        compliance = 1.0 / np.asarray(stiff.identify(robot, data["calib.csv"]).stiffness)
+        for kind in kinds:
+            rng = np.random.default_rng([seed] + [ord(c) for c in kind])
+            probe, params = make_probe(kind, rng, robot, arrays, dh_robot)
+            forces = None
+            if kind == "tracker":
+                # The rotation's first-order shape a x d sets the angle for the size.
+                axis = np.array(params["axis"])
+                shape = (meas["calib.csv"].reshape(-1, 3) @ skew(axis).T).reshape(-1)
+                angle = a.size * 1e-6 / rms_left(joint["calib.csv"], shape)
+                rot = rodrigues(axis * angle)
+                add = {fn: meas[fn].reshape(-1, 3) @ (rot - np.eye(3)).T for fn in files}
+                cols = {fn: (joint[fn].T.reshape(-1, len(arrays[fn][1]), 3) @ rot.T)
+                        .reshape(joint[fn].shape[1], -1).T for fn in files}
+                params["angle_deg"] = float(np.rad2deg(angle))
+            elif kind == "force_flange":
+                add = {fn: probe[fn][0] for fn in files}
+                forces = {fn: probe[fn][1] for fn in files}
+                cols = joint  # the arm felt the true force: the columns are the true ones
+            else:
+                left = rms_left(joint["calib.csv"], probe["calib.csv"][0].reshape(-1))
+                if left < 1e-12:
+                    print(f"form_probes: {kind} is invisible to this robot's measured point "
+                          "(the joint compliances take it up whole)", file=sys.stderr)
+                    return 2
+                scale = a.size * 1e-6 / left
+                if kind.startswith("coupling"):
+                    # A physical compliance matrix is positive definite: |c_jk| < sqrt(c_j c_k)
+                    # (the control's fitted compliances); rho at most 0.8, the effect smaller.
+                    j, k = params["joints"]
+                    cap = 0.8 * np.sqrt(compliance[j - 1] * compliance[k - 1])
+                    params["rho"] = min(scale, cap) / np.sqrt(compliance[j - 1] * compliance[k - 1])
+                    scale = min(scale, cap)
+                add = {fn: probe[fn][0] * scale for fn in files}
+                cols = {fn: np.hstack([joint[fn], probe[fn][2]]) for fn in files}
+                params["scale"] = scale
+            y = {fn: meas[fn] + add[fn].reshape(-1) for fn in files}
+            if forces is not None:
+                # What five compliances reach on the written forces (the base model).
+                wc = {fn: joint_columns(robot, arrays[fn][0], forces[fn]) for fn in files}
+                base = reachable(wc["calib.csv"], y["calib.csv"], wc["valid.csv"], y["valid.csv"])
+            else:
+                base = reachable(joint["calib.csv"], y["calib.csv"], joint["valid.csv"],
+                                 y["valid.csv"])
+            refit = reachable(cols["calib.csv"], y["calib.csv"], cols["valid.csv"], y["valid.csv"])
+            dst = os.path.join(a.out, s, f"{kind}_{seed:02d}")
+            write_scenario(src, dst, files, add, forces)
+            effect = KINDS.get(kind, "coupling")
+            what = DESCRIPTION.get(kind) or f"compliance coupling of joints {kind[8]} and {kind[9]}"
+            truth = dict(truth0, type=kind, description=what,
+                         expected={"verdict": "missing_effect", "effects": [effect]},
+                         effect_parameters=params,
+                         base_model_valid_um={"axis_um": 1e6 * base},
+                         true_class_refit_valid_um={"axis_um": 1e6 * refit},
+                         effect_rms_calib_um=float(1e6 * np.sqrt(np.mean(add["calib.csv"] ** 2))))
+            with open(os.path.join(dst, "truth.json"), "w") as f:
+                json.dump(truth, f, indent=1)
+            out_index.append({"path": f"{s}/{kind}_{seed:02d}", "type": kind,
+                              "expected": truth["expected"]})
+    write_index(a.out, out_index, "form_probes")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
