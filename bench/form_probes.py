@@ -26,6 +26,8 @@ verdict: `missing_effect` naming the class):
   drift_reversed   a warm-up with a quadratic part, the loaded pass in reverse order
   drift_interleaved    each pose's two readings one after the other, a settling drift
 
+  k1+k2            two of the above at once (expected: both named), e.g. coupling24+drift_settle
+
 Usage:
   .venv/bin/python bench/form_probes.py --data DIR --out /tmp/forms --seeds 0-9
   .venv/bin/python bench/diagnosis_score.py --data /tmp/forms --sets base,sigma --noise given
@@ -262,6 +264,49 @@ def make_probe(kind, rng, robot, arrays, dh_robot):
     return out, params
 
 
+def add_form(kind, rng, robot, arrays, dh_robot, joint, compliance, size, state):
+    """Adds one form to state (per file: y the displacements, flat; cols the regressors of the
+    generating model, the joint compliances' first; forces the written forces or None); returns
+    its parameters, None when it cannot be made visible."""
+    probe, params = make_probe(kind, rng, robot, arrays, dh_robot)
+    files = list(arrays)
+    y, cols = state["y"], state["cols"]
+    if kind == "tracker":
+        # The rotation's first-order shape a x d sets the angle for the size.
+        axis = np.array(params["axis"])
+        shape = (y["calib.csv"].reshape(-1, 3) @ skew(axis).T).reshape(-1)
+        angle = size * 1e-6 / rms_left(joint["calib.csv"], shape)
+        rot = rodrigues(axis * angle)
+        for fn in files:
+            n = len(arrays[fn][1])
+            y[fn] = (y[fn].reshape(-1, 3) @ rot.T).reshape(-1)
+            cols[fn] = (cols[fn].T.reshape(-1, n, 3) @ rot.T).reshape(cols[fn].shape[1], -1).T
+        params["angle_deg"] = float(np.rad2deg(angle))
+        return params
+    if kind == "force_flange":
+        # The arm felt the true force: the regressors stay the true ones.
+        state["forces"] = {fn: probe[fn][1] for fn in files}
+        return params
+    left = rms_left(joint["calib.csv"], probe["calib.csv"][0].reshape(-1))
+    if left < 1e-12:
+        print(f"form_probes: {kind} is invisible to this robot's measured point (the joint "
+              "compliances take it up whole)", file=sys.stderr)
+        return None
+    scale = size * 1e-6 / left
+    if kind.startswith("coupling"):
+        # A physical compliance matrix is positive definite: |c_jk| < sqrt(c_j c_k) (the
+        # control's fitted compliances); rho at most 0.8, the effect smaller.
+        j, k = params["joints"]
+        cap = 0.8 * np.sqrt(compliance[j - 1] * compliance[k - 1])
+        params["rho"] = min(scale, cap) / np.sqrt(compliance[j - 1] * compliance[k - 1])
+        scale = min(scale, cap)
+    for fn in files:
+        y[fn] = y[fn] + probe[fn][0].reshape(-1) * scale
+        cols[fn] = np.hstack([cols[fn], probe[fn][2]])
+    params["scale"] = scale
+    return params
+
+
 def rms_left(cols, y):
     """RMS per component of y after least squares on cols."""
     x, *_ = np.linalg.lstsq(cols, y, rcond=None)
@@ -285,8 +330,12 @@ def main() -> int:
     robot = stiff.Robot(a.robot)
     dh_robot = read_dh_robot(a.robot_file)
     kinds = a.kinds.split(",")
-    if not prepare(a.out, kinds, lambda k: k in KINDS or re.fullmatch(r"coupling[1-9][1-9]", k),
-                   KINDS, "form_probes"):
+    def known(kind):
+        parts = kind.split("+")
+        return len(parts) <= 2 and len(set(parts)) == len(parts) and all(
+            k in KINDS or re.fullmatch(r"coupling[1-9][1-9]", k) for k in parts)
+
+    if not prepare(a.out, kinds, known, KINDS, "form_probes"):
         return 2
     out_index = []
     for s, seed, src, files, data, truth0 in controls(a.data, a.sets, a.seeds, robot):
@@ -295,41 +344,22 @@ def main() -> int:
         joint = {fn: joint_columns(robot, *arrays[fn][:2]) for fn in files}
         compliance = 1.0 / np.asarray(stiff.identify(robot, data["calib.csv"]).stiffness)
         for kind in kinds:
-            rng = np.random.default_rng([seed] + [ord(c) for c in kind])
-            probe, params = make_probe(kind, rng, robot, arrays, dh_robot)
-            forces = None
-            if kind == "tracker":
-                # The rotation's first-order shape a x d sets the angle for the size.
-                axis = np.array(params["axis"])
-                shape = (meas["calib.csv"].reshape(-1, 3) @ skew(axis).T).reshape(-1)
-                angle = a.size * 1e-6 / rms_left(joint["calib.csv"], shape)
-                rot = rodrigues(axis * angle)
-                add = {fn: meas[fn].reshape(-1, 3) @ (rot - np.eye(3)).T for fn in files}
-                cols = {fn: (joint[fn].T.reshape(-1, len(arrays[fn][1]), 3) @ rot.T)
-                        .reshape(joint[fn].shape[1], -1).T for fn in files}
-                params["angle_deg"] = float(np.rad2deg(angle))
-            elif kind == "force_flange":
-                add = {fn: probe[fn][0] for fn in files}
-                forces = {fn: probe[fn][1] for fn in files}
-                cols = joint  # the arm felt the true force: the columns are the true ones
-            else:
-                left = rms_left(joint["calib.csv"], probe["calib.csv"][0].reshape(-1))
-                if left < 1e-12:
-                    print(f"form_probes: {kind} is invisible to this robot's measured point "
-                          "(the joint compliances take it up whole)", file=sys.stderr)
+            # A pair "k1+k2" adds both forms (the tracker's rotation last: it turns what the
+            # tracker reads, the other effect included), each drawn as it is alone.
+            parts = sorted(kind.split("+"), key=lambda k: k == "tracker")
+            state = {"y": dict(meas), "cols": dict(joint), "forces": None}
+            params = {}
+            for part in parts:
+                rng = np.random.default_rng([seed] + [ord(c) for c in part])
+                p = add_form(part, rng, robot, arrays, dh_robot, joint, compliance, a.size,
+                             state)
+                if p is None:
                     return 2
-                scale = a.size * 1e-6 / left
-                if kind.startswith("coupling"):
-                    # A physical compliance matrix is positive definite: |c_jk| < sqrt(c_j c_k)
-                    # (the control's fitted compliances); rho at most 0.8, the effect smaller.
-                    j, k = params["joints"]
-                    cap = 0.8 * np.sqrt(compliance[j - 1] * compliance[k - 1])
-                    params["rho"] = min(scale, cap) / np.sqrt(compliance[j - 1] * compliance[k - 1])
-                    scale = min(scale, cap)
-                add = {fn: probe[fn][0] * scale for fn in files}
-                cols = {fn: np.hstack([joint[fn], probe[fn][2]]) for fn in files}
-                params["scale"] = scale
-            y = {fn: meas[fn] + add[fn].reshape(-1) for fn in files}
+                params[part] = p
+            if len(parts) == 1:
+                params = params[kind]
+            y, cols, forces = state["y"], state["cols"], state["forces"]
+            add = {fn: (y[fn] - meas[fn]).reshape(-1, 3) for fn in files}
             if forces is not None:
                 # What five compliances reach on the written forces (the base model).
                 wc = {fn: joint_columns(robot, arrays[fn][0], forces[fn]) for fn in files}
@@ -340,10 +370,12 @@ def main() -> int:
             refit = reachable(cols["calib.csv"], y["calib.csv"], cols["valid.csv"], y["valid.csv"])
             dst = os.path.join(a.out, s, f"{kind}_{seed:02d}")
             write_scenario(src, dst, files, add, forces)
-            effect = KINDS.get(kind, "coupling")
-            what = DESCRIPTION.get(kind) or f"compliance coupling of joints {kind[8]} and {kind[9]}"
+            effects = [KINDS.get(k, "coupling") for k in kind.split("+")]
+            what = " and ".join(DESCRIPTION.get(k) or
+                                f"compliance coupling of joints {k[8]} and {k[9]}"
+                                for k in kind.split("+"))
             truth = dict(truth0, type=kind, description=what,
-                         expected={"verdict": "missing_effect", "effects": [effect]},
+                         expected={"verdict": "missing_effect", "effects": effects},
                          effect_parameters=params,
                          base_model_valid_um={"axis_um": 1e6 * base},
                          true_class_refit_valid_um={"axis_um": 1e6 * refit},

@@ -164,8 +164,9 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     """bench/form_probes.py on the control: its own gravity torques (modified DH read from the
     robot file) agree with stiff's Jacobian, each probe leaves the requested amount after the
     joint compliances, the flange sensor's forces and the tracker's rotation are what
-    truth.json says, and the diagnosis names the class of a kinked reducer about the gravity
-    preload and of a drift read in reversed order (docs/diagnosis.md, section 6)."""
+    truth.json says, a pair is the sum of its two forms, and the diagnosis names the class of a
+    kinked reducer about the gravity preload and of a drift read in reversed order
+    (docs/diagnosis.md, section 6)."""
     np = pytest.importorskip("numpy")
     import stiff
 
@@ -186,7 +187,7 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     assert np.allclose(tau, np.einsum("nij,i->nj", jv, 2.0 * fp.GRAVITY), atol=1e-12)
 
     out = tmp_path / "forms"
-    kinds = "kinkg23,drift_reversed,force_flange,tracker,coupling24"
+    kinds = "kinkg23,drift_reversed,force_flange,tracker,coupling24,kinkg23+drift_reversed"
     p = subprocess.run([sys.executable, str(root / "bench" / "form_probes.py"), "--data",
                         str(suite), "--out", str(out), "--sets", "base", "--seeds", "0",
                         "--kinds", kinds], capture_output=True, text=True, timeout=600)
@@ -195,6 +196,16 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     cols = fp.joint_columns(robot, base.q, base.force)
     for kind in kinds.split(","):
         folder = out / "base" / f"{kind}_00"
+        if "+" in kind:
+            # Two forms at once: each drawn as it is alone, the displacements their sum.
+            pair = stiff.Dataset.read(folder / "calib.csv", robot).displacement
+            parts = [stiff.Dataset.read(out / "base" / f"{k}_00" / "calib.csv",
+                                        robot).displacement - base.displacement
+                     for k in kind.split("+")]
+            assert np.allclose(pair, base.displacement + sum(parts), rtol=0, atol=1e-12)
+            truth = json.loads((folder / "truth.json").read_text())
+            assert truth["expected"]["effects"] == [fp.KINDS[k] for k in kind.split("+")]
+            continue
         probe = stiff.Dataset.read(folder / "calib.csv", robot)
         truth = json.loads((folder / "truth.json").read_text())
         assert truth["expected"]["effects"] == [fp.KINDS[kind]]
