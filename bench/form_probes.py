@@ -25,7 +25,16 @@ verdict: `missing_effect` naming the class):
   drift_loaded_first   the same settling, the loaded pass first
   drift_reversed   a warm-up with a quadratic part, the loaded pass in reverse order
   drift_interleaved    each pose's two readings one after the other, a settling drift
-
+  link_upper, link_fore  a spring inside the upper arm or the forearm at a random point along
+                   it, bending and twisting about the link frame's axes (the library's
+                   springs sit at the link's root)                          -> link
+  compensator_lever    joint 2's compensator spring acting through a lever: its tangent
+                   stiffness from the geometry (up to half the joint's), not a few harmonics
+                   of q2                                                     -> gravity_compensator
+  kinkg23, cubicg23, softzone23   joints 2 and 3 with a kink at the torque reversal, a cubic
+                   law or a soft zone (knee 5-30 N*m) of the total torque, gravity preload
+                   included                                                 -> nonlinear_joint
+  backlash3, backlash25   lost motion of joint 3, or of joints 2 and 5     -> backlash
   k1+k2            two of the above at once (expected: both named), e.g. coupling24+drift_settle
 
 Usage:
@@ -36,8 +45,10 @@ Size: the part of the effect that five joint compliances cannot take up is set t
 RMS per axis on the calibration rows (default 40, about 1.3 times the development data's noise;
 the development data's classes leave 5-20 % of the signal, 15-60 um), except force_flange,
 whose angles and gains are drawn, and a coupling that would need |c_jk| above 0.8 sqrt(c_j c_k)
-of the control's fitted compliances (not positive definite), which is held there (smaller). `true_class_refit_valid_um` is the joint compliances and the
-generating form (its shape fixed, its amplitudes free) refitted on calib.csv by least squares,
+of the control's fitted compliances (not positive definite), which is held there (smaller).
+The laws of the total torque use gravity torques of this script's own modified-DH chain with
+every link's mass and centre of mass drawn 30 % off the robot file's, as a user's file is.
+`true_class_refit_valid_um` is the joint compliances and the generating form (its shape fixed, its amplitudes free) refitted on calib.csv by least squares,
 scored on valid.csv: what a right model can reach, the drift's law restarted in the validation
 session. Needs the `stiff` Python package and numpy.
 """
@@ -59,7 +70,8 @@ KINDS = {
     "force_flange": "force_frame", "tracker": "tracker_frame", "drift_settle": "drift",
     "drift_loaded_first": "drift", "drift_reversed": "drift", "drift_interleaved": "drift",
     "kinkg23": "nonlinear_joint", "cubicg23": "nonlinear_joint", "softzone23": "nonlinear_joint",
-    "backlash3": "backlash", "backlash25": "backlash",
+    "backlash3": "backlash", "backlash25": "backlash", "link_upper": "link",
+    "link_fore": "link", "compensator_lever": "gravity_compensator",
 }
 # Kinds whose law acts on the total torque, gravity preload included (the masses drawn 30 % off
 # the robot file's, as a user's file is).
@@ -82,6 +94,12 @@ DESCRIPTION = {
     "backlash3": "lost motion of joint 3 under gravity preload (masses off the robot file's)",
     "backlash25": "lost motion of joints 2 and 5 under gravity preload (masses off the robot "
                   "file's)",
+    "link_upper": "a spring inside the upper arm at a random point along it, its bending, "
+                  "torsion and shear compliances a random symmetric matrix in the link's frame",
+    "link_fore": "a spring inside the forearm at a random point along it, its compliances a "
+                 "random symmetric matrix in the link's frame",
+    "compensator_lever": "a compensator spring on joint 2 acting through a lever (its tangent "
+                         "stiffness from the spring's geometry, not a few harmonics of q2)",
 }
 T_REF = 100.0  # N*m, the torque that scales the cubic law
 GRAVITY = np.array([0.0, 0.0, -9.81])
@@ -112,27 +130,46 @@ def read_dh_robot(path):
     return rows, masses + [tool[0]], coms + [tool[1]]
 
 
+def chain_frames(dh, q_row):
+    """The frames 1..n of the modified DH chain T = RotX(alpha) TransX(a) RotZ(q) TransZ(d)
+    (4 x 4, base frame) at one row's joint angles; frame n is the flange."""
+    t, out = np.eye(4), []
+    for j, (alpha, a, d) in enumerate(dh):
+        ca, sa, cq, sq = np.cos(alpha), np.sin(alpha), np.cos(q_row[j]), np.sin(q_row[j])
+        t = t @ np.array([[cq, -sq, 0, a], [sq * ca, cq * ca, -sa, -sa * d],
+                          [sq * sa, cq * sa, ca, ca * d], [0, 0, 0, 1]])
+        out.append(t)
+    return out
+
+
 def gravity_torques(dh, q, masses, coms):
     """(N, n): the torque the links' and the tool's weight put on each joint (the same sign as
-    J^T F), from the modified DH chain T = RotX(alpha) TransX(a) RotZ(q) TransZ(d)."""
+    J^T F)."""
     n_rows, n = q.shape
     out = np.zeros((n_rows, n))
     for r in range(n_rows):
-        t = np.eye(4)
-        origins, axes, weights = [], [], []
-        for j, (alpha, a, d) in enumerate(dh):
-            ca, sa, cq, sq = np.cos(alpha), np.sin(alpha), np.cos(q[r, j]), np.sin(q[r, j])
-            step = np.array([[cq, -sq, 0, a], [sq * ca, cq * ca, -sa, -sa * d],
-                             [sq * sa, cq * sa, ca, ca * d], [0, 0, 0, 1]])
-            t = t @ step
-            origins.append(t[:3, 3].copy())
-            axes.append(t[:3, 2].copy())
-            weights.append((t[:3, :3] @ coms[j] + t[:3, 3], masses[j]))
-        weights.append((t[:3, :3] @ coms[n] + t[:3, 3], masses[n]))  # the tool on the flange
+        frames = chain_frames(dh, q[r])
+        weights = [(t[:3, :3] @ c + t[:3, 3], m)
+                   for t, c, m in zip(frames + [frames[-1]], coms, masses)]  # the tool last
         for j in range(n):
-            for i in range(j, n + 1):
-                p, m = weights[i]
-                out[r, j] += np.cross(axes[j], p - origins[j]) @ (m * GRAVITY)
+            for p, m in weights[j:]:
+                out[r, j] += np.cross(frames[j][:3, 2], p - frames[j][:3, 3]) @ (m * GRAVITY)
+    return out
+
+
+def link_spring(dh, q, f, link, along, c_rot, c_tr):
+    """(N, 3): the measured point's (the flange origin's) displacement from a spring inside
+    link `link` (0-based frame index), at the fraction `along` of the way to the next joint's
+    origin: the rest of the arm turns by c_rot (M at the spring) and shifts by c_tr F, both
+    3 x 3 in the link's own frame."""
+    out = np.zeros((len(q), 3))
+    for r in range(len(q)):
+        frames = chain_frames(dh, q[r])
+        rot = frames[link][:3, :3]
+        o = (1 - along) * frames[link][:3, 3] + along * frames[link + 1][:3, 3]
+        lever = frames[-1][:3, 3] - o
+        turn = rot @ c_rot @ rot.T @ np.cross(lever, f[r])
+        out[r] = rot @ c_tr @ rot.T @ f[r] + np.cross(turn, lever)
     return out
 
 
@@ -241,6 +278,40 @@ def make_probe(kind, rng, robot, arrays, dh_robot):
             params["law"] = "softening" if sign > 0 else "hardening"
         if kind == "softzone23":
             params["knee_Nm"] = knee
+    elif kind in ("link_upper", "link_fore"):
+        link = {"link_upper": 1, "link_fore": 2}[kind]
+        along = rng.uniform(0.2, 0.8)
+        # A casting bends and twists about the principal axes of its section (the link
+        # frame's); its shear and stretch (1e8 N/m and stiffer) are below a micrometre at these
+        # loads, so the spring turns and does not shift.
+        c_rot = np.diag(rng.uniform(0.3, 1.0, 3)) * 1e-5  # rad/(N*m)
+        c_tr = np.zeros((3, 3))
+        for fn, (q, f, n) in arrays.items():
+            d = link_spring(dh_robot[0], q, f, link, along, c_rot, c_tr)
+            out[fn] = (d, None, d.reshape(-1, 1))
+        params = {"link_frame": link + 1, "along": along, "C_rot": c_rot.tolist(),
+                  "C_tr": c_tr.tolist()}
+    elif kind == "compensator_lever":
+        # A spring from a base point L from the axis to a point r out on the arm, at the angle
+        # psi = q2 + phi: torque k r L sin(psi) (1 - l0 / l), l the spring's length; its
+        # tangent stiffness in parallel with the joint's, up to half of it.
+        big, small, l0 = 0.25, rng.uniform(0.06, 0.12), 0.1
+        phi = rng.uniform(-np.pi, np.pi)
+
+        def spring_stiffness(psi, h=1e-6):
+            def torque(x):
+                length = np.sqrt(small**2 + big**2 - 2 * small * big * np.cos(x))
+                return small * big * np.sin(x) * (1 - l0 / length)
+            return (torque(psi + h) - torque(psi - h)) / (2 * h)
+
+        grid = spring_stiffness(np.linspace(-np.pi, np.pi, 721))
+        kappa = 0.5 / np.abs(grid).max()
+        for fn, (q, f, n) in arrays.items():
+            jv, tau = load_torques(robot, q, f)
+            g = 1.0 / (1.0 + kappa * spring_stiffness(q[:, 1] + phi))
+            d = jv[:, :, 1] * (tau[:, 1] * g)[:, None]
+            out[fn] = (d, None, d.reshape(-1, 1))
+        params = {"lever_m": small, "anchor_m": big, "free_length_m": l0, "phase_rad": phi}
     elif kind == "force_flange":
         axis = rotation(rng)[:, 0] * np.deg2rad(rng.uniform(3, 8))
         gains = rng.uniform(0.02, 0.05, 3) * rng.choice([-1.0, 1.0], 3)

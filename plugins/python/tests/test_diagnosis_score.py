@@ -185,9 +185,16 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     tau = fp.gravity_torques(dh, q, unit_tool, [np.zeros(3)] * (robot.dof + 1))
     jv = robot.jacobian(q)[:, :3, :]
     assert np.allclose(tau, np.einsum("nij,i->nj", jv, 2.0 * fp.GRAVITY), atol=1e-12)
+    # A link spring at joint 2's origin turning about joint 2's axis is joint 2's compliance.
+    f = np.random.default_rng(4).normal(size=(5, 3)) * 30.0
+    about_z = np.diag([0.0, 0.0, 1e-5])
+    spring = fp.link_spring(dh, q, f, 1, 0.0, about_z, np.zeros((3, 3)))
+    tau_f = np.einsum("nij,ni->nj", jv, f)
+    assert np.allclose(spring, jv[:, :, 1] * tau_f[:, 1, None] * 1e-5, rtol=0, atol=1e-15)
 
     out = tmp_path / "forms"
-    kinds = "kinkg23,drift_reversed,force_flange,tracker,coupling24,kinkg23+drift_reversed"
+    kinds = ("kinkg23,drift_reversed,force_flange,tracker,coupling24,link_fore,"
+             "compensator_lever,kinkg23+drift_reversed")
     p = subprocess.run([sys.executable, str(root / "bench" / "form_probes.py"), "--data",
                         str(suite), "--out", str(out), "--sets", "base", "--seeds", "0",
                         "--kinds", kinds], capture_output=True, text=True, timeout=600)
