@@ -57,6 +57,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import sys
 
 import numpy as np
@@ -94,10 +95,10 @@ DESCRIPTION = {
     "backlash3": "lost motion of joint 3 under gravity preload (masses off the robot file's)",
     "backlash25": "lost motion of joints 2 and 5 under gravity preload (masses off the robot "
                   "file's)",
-    "link_upper": "a spring inside the upper arm at a random point along it, its bending, "
-                  "torsion and shear compliances a random symmetric matrix in the link's frame",
-    "link_fore": "a spring inside the forearm at a random point along it, its compliances a "
-                 "random symmetric matrix in the link's frame",
+    "link_upper": "a spring inside the upper arm at a random point along it, bending and "
+                  "twisting about the link frame's axes",
+    "link_fore": "a spring inside the forearm at a random point along it, bending and twisting "
+                 "about the link frame's axes",
     "compensator_lever": "a compensator spring on joint 2 acting through a lever (its tangent "
                          "stiffness from the spring's geometry, not a few harmonics of q2)",
 }
@@ -106,65 +107,84 @@ GRAVITY = np.array([0.0, 0.0, -9.81])
 
 
 def read_dh_robot(path):
-    """(modified DH rows (alpha, a, d) [rad, m], masses [kg] and centres of mass [m] of links
-    1..n, then the tool's) from a robot file whose joints are one-line flow mappings in mm and
-    deg, as examples/robots/rokae.yaml is (this script's own reading, independent of stiff's)."""
+    """(the DH chain: convention and rows (alpha, a, d, theta offset) [rad, m]; masses [kg] and
+    centres of mass [m] of links 1..n, then the tool's) from a robot file whose joints are
+    one-line flow mappings, as the YAML files of examples/robots are (this script's own reading,
+    independent of stiff's)."""
     rows, masses, coms = [], [], []
     tool = (0.0, np.zeros(3))
     with open(path) as f:
         text = f.read()
-    if "convention: modified_dh" not in text or "{length: mm, angle: deg}" not in text:
-        raise SystemExit(f"form_probes: {path}: needs modified DH in mm and deg")
+    conv = re.search(r"^convention:\s*(modified_dh|standard_dh)\s*$", text, re.M)
+    units = re.search(r"^units:\s*\{length:\s*(mm|m),\s*angle:\s*(deg|rad)\}", text, re.M)
+    if not conv or not units:
+        raise SystemExit(f"form_probes: {path}: needs a DH convention and units (a YAML robot)")
+    length = 1e-3 if units.group(1) == "mm" else 1.0
+    angle = np.pi / 180 if units.group(2) == "deg" else 1.0
     for line in text.splitlines():
         m = re.match(r"\s*(- |tool: )(\{.*\})\s*(#.*)?$", line)
         if not m:
             continue
         entry = json.loads(re.sub(r"(\w+):", r'"\1":', m.group(2)))
-        com = np.array(entry.get("com", [0, 0, 0]), float) * 1e-3
+        com = np.array(entry.get("com", [0, 0, 0]), float) * length
         if m.group(1) == "tool: ":
             tool = (float(entry.get("mass", 0)), com)
             continue
-        rows.append((np.deg2rad(entry["alpha"]), entry["a"] * 1e-3, entry["d"] * 1e-3))
+        rows.append((entry["alpha"] * angle, entry["a"] * length, entry["d"] * length,
+                     entry.get("theta_offset", 0.0) * angle))
         masses.append(float(entry.get("mass", 0)))
         coms.append(com)
-    return rows, masses + [tool[0]], coms + [tool[1]]
+    chain = {"standard": conv.group(1) == "standard_dh", "rows": rows}
+    return chain, masses + [tool[0]], coms + [tool[1]]
 
 
-def chain_frames(dh, q_row):
-    """The frames 1..n of the modified DH chain T = RotX(alpha) TransX(a) RotZ(q) TransZ(d)
-    (4 x 4, base frame) at one row's joint angles; frame n is the flange."""
-    t, out = np.eye(4), []
-    for j, (alpha, a, d) in enumerate(dh):
-        ca, sa, cq, sq = np.cos(alpha), np.sin(alpha), np.cos(q_row[j]), np.sin(q_row[j])
-        t = t @ np.array([[cq, -sq, 0, a], [sq * ca, cq * ca, -sa, -sa * d],
-                          [sq * sa, cq * sa, ca, ca * d], [0, 0, 0, 1]])
-        out.append(t)
-    return out
+def chain_frames(chain, q_row):
+    """(the frames 1..n, 4 x 4 in the base frame, frame n the flange; each joint's axis as
+    (origin, direction)) at one row's joint angles. Modified DH: T = RotX(alpha) TransX(a)
+    RotZ(q) TransZ(d), joint i turns about frame i's z. Standard DH: T = RotZ(q) TransZ(d)
+    TransX(a) RotX(alpha), joint i turns about frame i-1's z."""
+    t, frames, axes = np.eye(4), [], []
+    for j, (alpha, a, d, offset) in enumerate(chain["rows"]):
+        ca, sa = np.cos(alpha), np.sin(alpha)
+        cq, sq = np.cos(q_row[j] + offset), np.sin(q_row[j] + offset)
+        if chain["standard"]:
+            axes.append((t[:3, 3].copy(), t[:3, 2].copy()))
+            t = t @ np.array([[cq, -sq * ca, sq * sa, a * cq], [sq, cq * ca, -cq * sa, a * sq],
+                              [0, sa, ca, d], [0, 0, 0, 1]])
+        else:
+            t = t @ np.array([[cq, -sq, 0, a], [sq * ca, cq * ca, -sa, -sa * d],
+                              [sq * sa, cq * sa, ca, ca * d], [0, 0, 0, 1]])
+            axes.append((t[:3, 3].copy(), t[:3, 2].copy()))
+        frames.append(t)
+    return frames, axes
 
 
-def gravity_torques(dh, q, masses, coms):
+def gravity_torques(chain, q, masses, coms):
     """(N, n): the torque the links' and the tool's weight put on each joint (the same sign as
     J^T F)."""
     n_rows, n = q.shape
     out = np.zeros((n_rows, n))
     for r in range(n_rows):
-        frames = chain_frames(dh, q[r])
+        frames, axes = chain_frames(chain, q[r])
         weights = [(t[:3, :3] @ c + t[:3, 3], m)
                    for t, c, m in zip(frames + [frames[-1]], coms, masses)]  # the tool last
-        for j in range(n):
+        for j, (origin, axis) in enumerate(axes):
             for p, m in weights[j:]:
-                out[r, j] += np.cross(frames[j][:3, 2], p - frames[j][:3, 3]) @ (m * GRAVITY)
+                out[r, j] += np.cross(axis, p - origin) @ (m * GRAVITY)
     return out
 
 
-def link_spring(dh, q, f, link, along, c_rot, c_tr):
+def link_spring(chain, q, f, link, along, c_rot, c_tr):
     """(N, 3): the measured point's (the flange origin's) displacement from a spring inside
     link `link` (0-based frame index), at the fraction `along` of the way to the next joint's
     origin: the rest of the arm turns by c_rot (M at the spring) and shifts by c_tr F, both
     3 x 3 in the link's own frame."""
+    if chain["standard"]:
+        raise SystemExit("form_probes: link springs need a modified-DH robot (its frame i sits "
+                         "at link i's root)")
     out = np.zeros((len(q), 3))
     for r in range(len(q)):
-        frames = chain_frames(dh, q[r])
+        frames, _ = chain_frames(chain, q[r])
         rot = frames[link][:3, :3]
         o = (1 - along) * frames[link][:3, 3] + along * frames[link + 1][:3, 3]
         lever = frames[-1][:3, 3] - o
@@ -394,7 +414,7 @@ def main() -> int:
                          "RMS per axis the joint compliances leave of the effect [um]")
     ap.add_argument("--robot-file", default=os.path.join(
         os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "robots",
-        "rokae.yaml"), help="the same robot's file, for the gravity preload (modified DH)")
+        "rokae.yaml"), help="the same robot's YAML file (a DH chain), for the gravity preload and the links")
     a = ap.parse_args()
     import stiff
 
@@ -425,6 +445,7 @@ def main() -> int:
                 p = add_form(part, rng, robot, arrays, dh_robot, joint, compliance, a.size,
                              state)
                 if p is None:
+                    shutil.rmtree(a.out)  # nothing half written
                     return 2
                 params[part] = p
             if len(parts) == 1:

@@ -178,13 +178,14 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
         spec.loader.exec_module(fp)
     finally:
         sys.path.remove(str(root / "bench"))
-    robot = stiff.Robot("rokae")
-    dh, masses, coms = fp.read_dh_robot(root / "examples" / "robots" / "rokae.yaml")
-    q = np.random.default_rng(3).uniform(-1.5, 1.5, (5, robot.dof))
-    unit_tool = [0.0] * robot.dof + [2.0]
-    tau = fp.gravity_torques(dh, q, unit_tool, [np.zeros(3)] * (robot.dof + 1))
-    jv = robot.jacobian(q)[:, :3, :]
-    assert np.allclose(tau, np.einsum("nij,i->nj", jv, 2.0 * fp.GRAVITY), atol=1e-12)
+    for name in ("puma560", "rokae"):  # standard and modified DH, the latter's kept below
+        robot = stiff.Robot(name)
+        dh, masses, coms = fp.read_dh_robot(root / "examples" / "robots" / f"{name}.yaml")
+        q = np.random.default_rng(3).uniform(-1.5, 1.5, (5, robot.dof))
+        unit_tool = [0.0] * robot.dof + [2.0]
+        tau = fp.gravity_torques(dh, q, unit_tool, [np.zeros(3)] * (robot.dof + 1))
+        jv = robot.jacobian(q)[:, :3, :]
+        assert np.allclose(tau, np.einsum("nij,i->nj", jv, 2.0 * fp.GRAVITY), atol=1e-12)
     # A link spring at joint 2's origin turning about joint 2's axis is joint 2's compliance.
     f = np.random.default_rng(4).normal(size=(5, 3)) * 30.0
     about_z = np.diag([0.0, 0.0, 1e-5])
