@@ -68,8 +68,9 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
       }
   }
   const std::string& name() const override { return name_; }
-  /// The two families a reducer's law comes in: a function of the load torque about the
-  /// unloaded state (s, a) and a function of the total torque, preload included (e, h, r).
+  /// The families a reducer's law comes in, each scored on its own by the diagnosis: a
+  /// function of the load torque about the unloaded state (s, a), the catalogue soft zone (e),
+  /// and every function of the total torque, preload included (e, h, r).
   std::vector<std::vector<int>> sub_forms() const override {
     const int n = static_cast<int>(knee_.size());
     std::vector<int> load, total;
@@ -125,7 +126,7 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
       const T total = T(tg(j)) + t;
       const double g = tg(j);  // cubed by hand: std::pow would need a newer libm in the FMU
       s.dtheta(j) += p[n + 2 * arm_ + j] * (total * total * total - T(g * g * g)) / T(kT0 * kT0);
-      s.dtheta(j) += p[n + 3 * arm_ + j] * (abs(total) - T(std::abs(tg(j))));
+      s.dtheta(j) += p[n + 3 * arm_ + j] * (abs(total) - T(std::abs(g)));
     }
   }
 
