@@ -184,6 +184,23 @@ TEST(FitCompatibility, AFitWithoutLaterOptionalTermsStillApplies) {
   EXPECT_THROW(predict_dataset(robot, broken, data), InvalidArgument);
 }
 
+// A nonlinear_joint fit written before the laws of the total torque (h, r) still applies and
+// predicts as the same fit with them at 0.
+TEST(FitCompatibility, ANonlinearJointFitWithoutTheTotalTorqueLawsStillApplies) {
+  const RobotModel robot = test::rokae();
+  const Truth truth = test::effect_truth("nonlinear_joint", robot);
+  const Dataset data = simulated(truth, 3);
+  FitResult full = identify(robot, data, truth.effects);
+  const FitResult old = as_older_fit(&full, [](const FitParameter& p) {
+    return p.effect == "nonlinear_joint" && (p.name[0] == 'h' || p.name[0] == 'r');
+  });
+  ASSERT_EQ(old.parameters.size() + 6, full.parameters.size());
+  const FitResult back = fit_from_json(fit_to_json(old), "old_fit.json");
+  const Eigen::MatrixXd a = predict_dataset(robot, back, data);
+  const Eigen::MatrixXd b = predict_dataset(robot, full, data);
+  EXPECT_LT((a - b).cwiseAbs().maxCoeff(), 1e-15);
+}
+
 // A backlash fit written before the masses' spread (v11..v66) was reported still applies: the
 // spread enters at 0, the decided jumps of that version's prediction.
 TEST(FitCompatibility, ABacklashFitWithoutTheSpreadPredictsTheDecidedJumps) {
