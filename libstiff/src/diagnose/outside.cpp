@@ -93,11 +93,8 @@ void base_shift(const Context&, const Analysis& a, const std::string& name, Grou
                   std::move(z), false});
 }
 
-/// The response to the load changing in scale over a session (the joints softening as their
-/// reducers warm up, a force sensor's gain drifting): one column, the model's deflection under
-/// the row's load (its prediction less that without load, so that drift terms cancel) times
-/// the reading's time from its session's mean time.
-void load_response_drift(const Context&, const Analysis& a, const std::string& name, Groups* out) {
+/// Each session's mean reading time (the rows' times are from the session's first reading).
+std::vector<double> session_mean_times(const Analysis& a) {
   std::vector<double> sum, count;
   for (const auto& c : a.ctx) {
     const size_t s = static_cast<size_t>(c.session);
@@ -105,6 +102,16 @@ void load_response_drift(const Context&, const Analysis& a, const std::string& n
     sum[s] += c.time;
     count[s] += 1;
   }
+  for (size_t s = 0; s < sum.size(); ++s) sum[s] /= std::max(count[s], 1.0);
+  return sum;
+}
+
+/// The response to the load changing in scale over a session (the joints softening as their
+/// reducers warm up, a force sensor's gain drifting): one column, the model's deflection under
+/// the row's load (its prediction less that without load, so that drift terms cancel) times
+/// the reading's time from its session's mean time.
+void load_response_drift(const Context&, const Analysis& a, const std::string& name, Groups* out) {
+  const std::vector<double> mean = session_mean_times(a);
   MatrixXd z = MatrixXd::Zero(a.n, 1);
   for (size_t i = 0; i < a.used.rows.size(); ++i) {
     const auto& m = a.used.rows[i];
@@ -116,7 +123,7 @@ void load_response_drift(const Context&, const Analysis& a, const std::string& n
     unloaded.moment.setZero();
     const Eigen::Vector3d deflection = a.model->predict(a.theta, m, c).head<3>() -
                                        a.model->predict(a.theta, unloaded, c).head<3>();
-    z.block<3, 1>(3 * i, 0) = a.w(i) * (c.time - sum[s] / count[s]) * deflection;
+    z.block<3, 1>(3 * i, 0) = a.w(i) * (c.time - mean[s]) * deflection;
   }
   out->push_back({name,
                   "the response to the load changing in scale over the session (joints warming "
@@ -156,6 +163,29 @@ void sensor_crosstalk(const Context&, const Analysis& a, const std::string& name
                   std::move(z), false});
 }
 
+/// Thermal growth of the arm between its readings (links lengthening as they warm, a
+/// temperature change of the base): the measured point moves by a strain times its position
+/// from the base frame, eps P, the same eps for the rows of a session read in one order, and
+/// growing or shrinking over it. Two columns per session: P and P times the reading's time from
+/// the session's mean. The library's drift is a translation and its thermal effect needs a
+/// temperature column and absolute positions.
+void thermal_growth(const Context& cx, const Analysis& a, const std::string& name, Groups* out) {
+  const RobotModel& robot = *cx.robot;
+  const std::vector<double> mean = session_mean_times(a);
+  MatrixXd z = MatrixXd::Zero(a.n, 2 * static_cast<Eigen::Index>(mean.size()));
+  for (size_t i = 0; i < a.used.rows.size(); ++i) {
+    const auto& c = a.ctx[i];
+    const size_t s = static_cast<size_t>(c.session);
+    const Eigen::Vector3d p = robot.point_position(c.chain, robot.measured_point);
+    z.block<3, 1>(3 * i, 2 * s) = a.w(i) * p;
+    z.block<3, 1>(3 * i, 2 * s + 1) = a.w(i) * (c.time - mean[s]) * p;
+  }
+  out->push_back({name,
+                  "the measured point moving in proportion to its position from the base "
+                  "(thermal growth of the arm between the readings, not in the library)",
+                  std::move(z), false});
+}
+
 /// A mechanism: the name its groups take (a trailing '_' is followed by the joint's number)
 /// and the function that makes them.
 struct Mechanism {
@@ -166,7 +196,8 @@ const Mechanism kMechanisms[] = {{"base_tilt", base_tilt},
                                  {"pose_compliance_", pose_compliance},
                                  {"base_shift", base_shift},
                                  {"load_response_drift", load_response_drift},
-                                 {"sensor_crosstalk", sensor_crosstalk}};
+                                 {"sensor_crosstalk", sensor_crosstalk},
+                                 {"thermal_growth", thermal_growth}};
 
 }  // namespace
 

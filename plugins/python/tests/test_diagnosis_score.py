@@ -245,6 +245,39 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
         assert r["outcome"] == "right" and r["ratio"] < 1.25, r
 
 
+def test_thermal_growth_of_another_arm_is_not_claimed(root, tmp_path):
+    """The PUMA 560's links growing between the two readings (d = eps P, bench/outside_probes.py
+    `growth`), no noise statement: `complementary`, whose one column follows the position on
+    this arm, was claimed until the thermal_growth trend test (docs/diagnosis.md, sections 2
+    and 6); now the residual's trend with the position refutes it."""
+    data = tmp_path / "controls"
+    folder = data / "puma" / "none_01"
+    folder.mkdir(parents=True)
+    for csv, count, seed in (("calib.csv", 60, 101), ("valid.csv", 40, 201)):
+        assert main(["simulate", "--robot", "puma560", "--count", str(count), "--seed", str(seed),
+                     "--stiffness", "60000,40000,30000,8000,6000,4000", "--tracker-sigma-um",
+                     "10", "--tracker-ppm", "5", "--force-relative", "0.01",
+                     "--force-absolute-n", "0.3", "-o", str(folder / csv)]) == 0
+    (folder / "truth.json").write_text(json.dumps({"type": "none",
+                                                   "expected": {"verdict": "adequate"}}))
+    (data / "index.json").write_text(json.dumps([{"path": "puma/none_01", "type": "none"}]))
+    out = tmp_path / "probes"
+    p = subprocess.run([sys.executable, str(root / "bench" / "outside_probes.py"), "--data",
+                        str(data), "--out", str(out), "--sets", "puma", "--seeds", "1",
+                        "--kinds", "growth", "--robot", "puma560"],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    scores = tmp_path / "scores.json"
+    p = subprocess.run([sys.executable, str(root / "bench" / "diagnosis_score.py"), "--data",
+                        str(out), "--sets", "puma", "--seeds", "1", "--noise", "hidden",
+                        "--jobs", "1", "--robot", str(root / "examples" / "robots" /
+                                                     "puma560.yaml"), "--json", str(scores)],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    rows = json.loads(scores.read_text())
+    assert len(rows) == 1 and rows[0]["outcome"] == "right", rows
+
+
 @pytest.mark.parametrize("script", ["outside_probes.py", "form_probes.py"])
 def test_probes_refuse_an_unknown_kind(root, suite, tmp_path, script):
     p = subprocess.run([sys.executable, str(root / "bench" / script), "--data", str(suite),
