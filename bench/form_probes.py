@@ -62,8 +62,8 @@ import sys
 
 import numpy as np
 
-from outside_probes import (controls, prepare, probe_arguments, rotation, write_index,
-                            write_scenario)
+from outside_probes import (controls, load_torques, prepare, probe_arguments, rotation,
+                            write_index, write_scenario)
 
 KINDS = {
     "coupling45": "coupling", "coupling35": "coupling", "coupling13": "coupling",
@@ -174,11 +174,11 @@ def gravity_torques(chain, q, masses, coms):
     return out
 
 
-def link_spring(chain, q, f, link, along, c_rot, c_tr):
+def link_spring(chain, q, f, link, along, c_rot):
     """(N, 3): the measured point's (the flange origin's) displacement from a spring inside
     link `link` (0-based frame index), at the fraction `along` of the way to the next joint's
-    origin: the rest of the arm turns by c_rot (M at the spring) and shifts by c_tr F, both
-    3 x 3 in the link's own frame."""
+    origin: the rest of the arm turns by c_rot (3 x 3 in the link's own frame) times the
+    moment about the spring."""
     if chain["standard"]:
         raise SystemExit("form_probes: link springs need a modified-DH robot (its frame i sits "
                          "at link i's root)")
@@ -189,7 +189,7 @@ def link_spring(chain, q, f, link, along, c_rot, c_tr):
         o = (1 - along) * frames[link][:3, 3] + along * frames[link + 1][:3, 3]
         lever = frames[-1][:3, 3] - o
         turn = rot @ c_rot @ rot.T @ np.cross(lever, f[r])
-        out[r] = rot @ c_tr @ rot.T @ f[r] + np.cross(turn, lever)
+        out[r] = np.cross(turn, lever)
     return out
 
 
@@ -201,11 +201,6 @@ def rodrigues(axis_angle):
     a = np.linalg.norm(axis_angle)
     k = skew(axis_angle / a) if a > 0 else np.zeros((3, 3))
     return np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * k @ k
-
-
-def load_torques(robot, q, f):
-    jv = robot.jacobian(q)[:, :3, :]
-    return jv, np.einsum("nij,ni->nj", jv, f)
 
 
 def joint_columns(robot, q, f):
@@ -305,12 +300,10 @@ def make_probe(kind, rng, robot, arrays, dh_robot):
         # frame's); its shear and stretch (1e8 N/m and stiffer) are below a micrometre at these
         # loads, so the spring turns and does not shift.
         c_rot = np.diag(rng.uniform(0.3, 1.0, 3)) * 1e-5  # rad/(N*m)
-        c_tr = np.zeros((3, 3))
         for fn, (q, f, n) in arrays.items():
-            d = link_spring(dh_robot[0], q, f, link, along, c_rot, c_tr)
+            d = link_spring(dh_robot[0], q, f, link, along, c_rot)
             out[fn] = (d, None, d.reshape(-1, 1))
-        params = {"link_frame": link + 1, "along": along, "C_rot": c_rot.tolist(),
-                  "C_tr": c_tr.tolist()}
+        params = {"link_frame": link + 1, "along": along, "C_rot": c_rot.tolist()}
     elif kind == "compensator_lever":
         # A spring from a base point L from the axis to a point r out on the arm, at the angle
         # psi = q2 + phi: torque k r L sin(psi) (1 - l0 / l), l the spring's length; its
@@ -398,15 +391,15 @@ def add_form(kind, rng, robot, arrays, dh_robot, joint, compliance, size, state)
     return params
 
 
-def rms_left(cols, y):
-    """RMS per component of y after least squares on cols."""
-    x, *_ = np.linalg.lstsq(cols, y, rcond=None)
-    return float(np.sqrt(np.mean((y - cols @ x) ** 2)))
-
-
 def reachable(cols_c, y_c, cols_v, y_v):
+    """RMS per component of y_v left by cols_v at the least-squares fit of cols_c to y_c."""
     x, *_ = np.linalg.lstsq(cols_c, y_c, rcond=None)
     return float(np.sqrt(np.mean((y_v - cols_v @ x) ** 2)))
+
+
+def rms_left(cols, y):
+    """RMS per component of y after least squares on cols."""
+    return reachable(cols, y, cols, y)
 
 
 def main() -> int:

@@ -162,6 +162,19 @@ def write_scenario(src, dst, files, add, forces=None):
                 f.write(",".join(r) + "\n")
 
 
+def load_torques(robot, q, f):
+    """(the linear Jacobians N x 3 x n at the measured point, the joint torques N x n of the
+    forces f applied there)."""
+    jv = robot.jacobian(q)[:, :3, :]
+    return jv, np.einsum("nij,ni->nj", jv, f)
+
+
+def joint_deflection(robot, q, f, compliance):
+    """(N, 3): the measured point's displacement under f through the joint compliances."""
+    jv, tau = load_torques(robot, q, f)
+    return np.einsum("nij,nj->ni", jv, tau * compliance)
+
+
 def rotation(rng):
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     return q * np.sign(np.linalg.det(q))
@@ -188,18 +201,16 @@ def make_effect(kind, rng, robot, compliance):
         phi = rng.uniform(0, 2 * np.pi)
 
         def angle_joint(q, f, n):
-            jv = robot.jacobian(q)[:, :3, :]
-            tau3 = np.einsum("ni,ni->n", jv[:, :, 2], f)
-            return jv[:, :, 2] * (np.cos(2 * q[:, 2] + phi) * tau3)[:, None]
+            jv, tau = load_torques(robot, q, f)
+            return jv[:, :, 2] * (np.cos(2 * q[:, 2] + phi) * tau[:, 2])[:, None]
         return angle_joint, {"phase_rad": phi}
     if angle_pair(kind):
         j, k = angle_pair(kind)
         phi = rng.uniform(0, 2 * np.pi)
 
         def joint_by_angle(q, f, n):
-            jv = robot.jacobian(q)[:, :3, :]
-            tau = np.einsum("ni,ni->n", jv[:, :, j], f)
-            return jv[:, :, j] * (np.cos(q[:, k] + phi) * tau)[:, None]
+            jv, tau = load_torques(robot, q, f)
+            return jv[:, :, j] * (np.cos(q[:, k] + phi) * tau[:, j])[:, None]
         return joint_by_angle, {"phase_rad": phi}
     if kind in ("crosstalk", "crosstalk_base"):
         x = symmetric_offdiagonal(rng, 0.08, 0.12)
@@ -211,16 +222,11 @@ def make_effect(kind, rng, robot, compliance):
                 df = np.einsum("nij,jk,nlk,nl->ni", rot, x, rot, f)
             else:
                 df = f @ x.T
-            jv = robot.jacobian(q)[:, :3, :]
-            tau = np.einsum("nij,ni->nj", jv, df) * compliance
-            return np.einsum("nij,nj->ni", jv, tau)
+            return joint_deflection(robot, q, df, compliance)
         return crosstalk, {"X": x.tolist(), "frame": "flange" if flange else "base"}
     if kind == "warmup":
         def warmup(q, f, n):
-            jv = robot.jacobian(q)[:, :3, :]
-            tau = np.einsum("nij,ni->nj", jv, f) * compliance
-            d = np.einsum("nij,nj->ni", jv, tau)
-            return d * (np.arange(n) / n)[:, None]
+            return joint_deflection(robot, q, f, compliance) * (np.arange(n) / n)[:, None]
         return warmup, {}
     if kind == "growth":
         return (lambda q, f, n: robot.tool_pose(q)[:, :3, 3] * n), {"per_row_of_session": True}

@@ -189,7 +189,7 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     # A link spring at joint 2's origin turning about joint 2's axis is joint 2's compliance.
     f = np.random.default_rng(4).normal(size=(5, 3)) * 30.0
     about_z = np.diag([0.0, 0.0, 1e-5])
-    spring = fp.link_spring(dh, q, f, 1, 0.0, about_z, np.zeros((3, 3)))
+    spring = fp.link_spring(dh, q, f, 1, 0.0, about_z)
     tau_f = np.einsum("nij,ni->nj", jv, f)
     assert np.allclose(spring, jv[:, :, 1] * tau_f[:, 1, None] * 1e-5, rtol=0, atol=1e-15)
 

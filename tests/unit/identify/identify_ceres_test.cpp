@@ -154,6 +154,18 @@ FitResult as_older_fit(FitResult* full, Later later) {
   return old;
 }
 
+// The older fit written and read back; it predicts `data` as `full` (its later terms at 0) does.
+FitResult read_back_predicts_alike(const RobotModel& robot,
+                                   const FitResult& old,
+                                   const FitResult& full,
+                                   const Dataset& data) {
+  FitResult back = fit_from_json(fit_to_json(old), "old_fit.json");
+  const Eigen::MatrixXd a = predict_dataset(robot, back, data);
+  const Eigen::MatrixXd b = predict_dataset(robot, full, data);
+  EXPECT_LT((a - b).cwiseAbs().maxCoeff(), 1e-15);
+  return back;
+}
+
 // A fit written before its effect gained optional terms (link's column and wrist springs) still
 // applies: the terms it lacks enter at their null value, held, and it predicts as the same fit
 // with them written at 0 does. A fit that lacks a term that is not optional is refused.
@@ -167,10 +179,7 @@ TEST(FitCompatibility, AFitWithoutLaterOptionalTermsStillApplies) {
            p.name != "c_link3_x";
   });
   ASSERT_EQ(old.parameters.size() + 3, full.parameters.size());
-  const FitResult back = fit_from_json(fit_to_json(old), "old_fit.json");
-  const Eigen::MatrixXd a = predict_dataset(robot, back, data);
-  const Eigen::MatrixXd b = predict_dataset(robot, full, data);
-  EXPECT_LT((a - b).cwiseAbs().maxCoeff(), 1e-15);
+  const FitResult back = read_back_predicts_alike(robot, old, full, data);
   const DeflectionModel model(robot, full.model);
   const FitResult conformed = fit_for_model(back, robot, model, "test");
   ASSERT_EQ(conformed.parameters.size(), full.parameters.size());
@@ -195,10 +204,7 @@ TEST(FitCompatibility, ANonlinearJointFitWithoutTheTotalTorqueLawsStillApplies) 
     return p.effect == "nonlinear_joint" && (p.name[0] == 'h' || p.name[0] == 'r');
   });
   ASSERT_EQ(old.parameters.size() + 6, full.parameters.size());
-  const FitResult back = fit_from_json(fit_to_json(old), "old_fit.json");
-  const Eigen::MatrixXd a = predict_dataset(robot, back, data);
-  const Eigen::MatrixXd b = predict_dataset(robot, full, data);
-  EXPECT_LT((a - b).cwiseAbs().maxCoeff(), 1e-15);
+  read_back_predicts_alike(robot, old, full, data);
 }
 
 // A backlash fit written before the masses' spread (v11..v66) was reported still applies: the
@@ -216,11 +222,7 @@ TEST(FitCompatibility, ABacklashFitWithoutTheSpreadPredictsTheDecidedJumps) {
   for (const auto& p : full.parameters) spread += is_spread(p) && p.value != 0.0;
   ASSERT_GT(spread, 0);  // the data left the masses a spread: the test can tell
   const FitResult old = as_older_fit(&full, is_spread);  // full's spread 0: the decided jumps
-  const FitResult back = fit_from_json(fit_to_json(old), "old_fit.json");
-  const Dataset fresh = simulated(truth, 6);
-  const Eigen::MatrixXd a = predict_dataset(file, back, fresh);
-  const Eigen::MatrixXd b = predict_dataset(file, full, fresh);
-  EXPECT_LT((a - b).cwiseAbs().maxCoeff(), 1e-15);
+  read_back_predicts_alike(file, old, full, simulated(truth, 6));
 }
 
 // 5 % gross tracker errors of 0.5 mm (50 sigma): Huber keeps the validation error at the
