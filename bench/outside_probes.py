@@ -20,6 +20,10 @@ reads (expected verdict: no confident claim):
                up): d += s (i / N) J C J^T F, row i of N, C the control's fitted compliances
   growth       thermal growth of the arm between the unloaded and the loaded pass: d += k P,
                k proportional to the session's length (the library's drift is a translation)
+  sensor_level a force sensor whose gain changes with the load's level (its non-linearity):
+               the force is read as F (1 + g), g = s (|F| - F0) / F0, s of either sign, F0
+               the calibration rows' mean |F|; the arm deflects by C F / (1 + g), about
+               C F (1 - g), with C the control's compliances
 
 Usage:
   .venv/bin/python bench/outside_probes.py --data DIR --out /tmp/probes --seeds 0-9
@@ -41,7 +45,8 @@ import sys
 
 import numpy as np
 
-KINDS = ("base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth", "warmup")
+KINDS = ("base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth", "warmup",
+         "sensor_level")
 DESCRIPTION = {
     "base_shift": "outside the library: the arm shifts as a whole under the force (base plate "
                   "compliance fixed in the base frame)",
@@ -50,6 +55,7 @@ DESCRIPTION = {
     "crosstalk_base": "outside the library: cross-axis sensitivity of a base-fixed force sensor",
     "growth": "outside the library: thermal growth of the arm scaling its position",
     "warmup": "outside the library: the joints' compliance growing over the session",
+    "sensor_level": "outside the library: a force sensor's gain changing with the load's level",
 }
 
 
@@ -230,6 +236,16 @@ def make_effect(kind, rng, robot, compliance):
         return warmup, {}
     if kind == "growth":
         return (lambda q, f, n: robot.tool_pose(q)[:, :3, 3] * n), {"per_row_of_session": True}
+    if kind == "sensor_level":
+        params = {"sign": float(rng.choice([-1.0, 1.0]))}  # a gain rising or falling
+
+        def sensor_level(q, f, n):
+            level = np.linalg.norm(f, axis=1)
+            # One reference for both files: the calibration's mean level (it comes first).
+            ref = params.setdefault("reference_level_N", float(level.mean()))
+            gain = params["sign"] * (level - ref) / ref
+            return -joint_deflection(robot, q, f * gain[:, None], compliance)
+        return sensor_level, params
     raise ValueError(kind)
 
 
@@ -263,6 +279,8 @@ def main() -> int:
                 params["strain_per_row"] = scale
             elif kind == "warmup":
                 params["compliance_gain_over_session"] = scale
+            elif kind == "sensor_level":
+                params["gain_per_relative_level"] = scale
             dst = os.path.join(a.out, s, f"{kind}_{seed:02d}")
             write_scenario(src, dst, files, {fn: add[fn] * scale for fn in files})
             what = DESCRIPTION.get(kind) or (

@@ -195,7 +195,8 @@ inline bool claims(const Level& L) { return !L.scores.empty() && L.scores[0].sig
 /// trend tests into `d`.
 void where(const Context& cx, const Level& L, Diagnosis& d);
 
-/// The trend of level L's residual at p_adj < alpha/10 (the strongest), or none: structure
+/// The trend of level L's residual at p_adj < alpha/10 that is structure (CovariateTest::
+/// structure; the strongest), or none: structure
 /// whatever the noise level, where a trend at alpha/10 <= p_adj < alpha is left to chance.
 /// `outside_only`: only the trends of mechanisms outside the library (is_outside_library).
 std::optional<CovariateTest> strong_trend(const Context& cx,

@@ -74,7 +74,7 @@ bool Chain::at_floor(const Level& L, std::string* why, bool* weak) const {
   Diagnosis d;
   where(*cx, L, d);
   for (const auto& c : d.covariates)
-    if (c.significant) {
+    if (c.structure) {
       if (at)
         *why = "its residual still follows " + trend_text(c) +
                ": structure remains that no candidate explains";

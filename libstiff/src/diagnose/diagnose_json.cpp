@@ -150,6 +150,8 @@ std::string diagnosis_to_json(const Diagnosis& d) {
                    {"p_value", c.p_value},
                    {"p_adjusted", c.p_adjusted},
                    {"significant", c.significant},
+                   {"share", c.share},
+                   {"structure", c.structure},
                    {"correlation", {c.correlation[0], c.correlation[1], c.correlation[2]}}});
   w["covariates"] = cov;
   w["outliers"] = json::array();

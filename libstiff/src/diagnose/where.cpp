@@ -8,6 +8,19 @@
 
 namespace stiff::diagnose_detail {
 
+namespace {
+/// A significant trend that takes up enough of the residual to be structure.
+bool is_structure(const CovariateTest& c) {
+  // A trend that takes up less than a tenth of the residual sum of squares moves the residual
+  // RMS by less than 5 %: with many rows such a trend is significant, yet no model predicts new
+  // poses noticeably better for it (a law of the library in a slightly other form, a chance
+  // pattern among the dozens of covariates tested). Effects that small are the candidates'
+  // F tests' to find, not evidence of a mechanism outside the list.
+  constexpr double kShare = 0.1;
+  return c.significant && c.share >= kShare;
+}
+}  // namespace
+
 /// Residual structure against covariates ("where it fails").
 void where(const Context& cx, const Level& L, Diagnosis& d) {
   const Analysis& a = L.a;
@@ -108,6 +121,7 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
     ct.df = g.df;
     ct.statistic = g.f;
     ct.p_value = std::exp(g.log_p);
+    ct.share = a.rss > 0 ? g.drss / a.rss : 0.0;
     tests.push_back(ct);
     lps.push_back(g.log_p);
     return &tests.back();
@@ -181,6 +195,7 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
   for (size_t t = 0; t < tests.size(); ++t) {
     tests[t].p_adjusted = adj[t];
     tests[t].significant = adj[t] < cx.opt->alpha;
+    tests[t].structure = is_structure(tests[t]);
   }
   std::stable_sort(tests.begin(), tests.end(), [](const CovariateTest& x, const CovariateTest& y) {
     return x.p_value < y.p_value;
@@ -192,7 +207,7 @@ std::optional<CovariateTest> strong_trend(const Context& cx, const Level& L, boo
   Diagnosis d;
   where(cx, L, d);
   for (const auto& c : d.covariates)  // sorted by p
-    if (c.significant && c.p_adjusted < cx.opt->alpha / 10 &&
+    if (c.structure && c.p_adjusted < cx.opt->alpha / 10 &&
         (!outside_only || is_outside_library(c.covariate)))
       return c;
   return std::nullopt;

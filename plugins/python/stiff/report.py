@@ -130,9 +130,13 @@ def _covariate_figure(d) -> str:
     cov = sorted(cov, key=lambda c: c["p_value"])[:20][::-1]
     fig, ax = plt.subplots(figsize=(8, 0.3 * len(cov) + 1.2))
     vals = [-math.log10(max(c["p_value"], 1e-300)) for c in cov]
+    # Red: structure (significant and a tenth of the residual or more); amber: significant but
+    # too small to be structure (docs/diagnosis.md, section 3, rule 1).
     ax.barh([c["covariate"] for c in cov], vals,
-            color=["#c0392b" if c["significant"] else "#9aa5b1" for c in cov])
-    ax.set_xlabel("-log10 p (residual vs covariate, partial F; red = significant after Holm)")
+            color=[("#c0392b" if c.get("structure", True) else "#e0a030") if c["significant"]
+                   else "#9aa5b1" for c in cov])
+    ax.set_xlabel("-log10 p (residual vs covariate, partial F; red = significant after Holm and "
+                  "a tenth of the residual or more, amber = significant, smaller)")
     ax.set_title("Where the model fails: residual structure")
     return _png(fig)
 

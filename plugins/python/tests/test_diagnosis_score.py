@@ -123,8 +123,10 @@ def scored(root, probes, noise, types, tmp_path):
 def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_path):
     """bench/outside_probes.py on the control: each probe's displacements are the control's
     plus its effect (checked here against the effect's parameters in truth.json, computed
-    independently with numpy), at the requested size; the diagnosis claims none of the two
-    effects its trend tests were made for (section 2 of docs/diagnosis.md)."""
+    independently with numpy), at the requested size; the diagnosis claims none of the three
+    effects its trend tests were made for (section 2 of docs/diagnosis.md). Without the
+    load_level_response test a force sensor's non-linearity was named a joint's, without a noise
+    statement."""
     np = pytest.importorskip("numpy")
     import stiff
 
@@ -135,11 +137,12 @@ def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_p
     assert p.returncode == 0, p.stderr
     index = json.loads((out / "index.json").read_text())
     assert sorted(e["type"] for e in index) == sorted(
-        ["base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth", "warmup"])
+        ["base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth", "warmup",
+         "sensor_level"])
 
     robot = stiff.Robot("rokae")
     base = stiff.Dataset.read(suite / "base" / "none_00" / "calib.csv", robot)
-    for kind in ("base_shift", "growth"):
+    for kind in ("base_shift", "growth", "sensor_level"):
         folder = out / "base" / f"{kind}_00"
         probe = stiff.Dataset.read(folder / "calib.csv", robot)
         assert np.array_equal(probe.q, base.q) and np.array_equal(probe.force, base.force)
@@ -150,12 +153,23 @@ def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_p
             cb = np.array(truth["effect_parameters"]["C_b_m_per_N"])
             assert np.allclose(cb, cb.T) and np.all(np.linalg.eigvalsh(cb) > 0)
             expect = base.force @ cb.T
-        else:
+        elif kind == "growth":
             pos = robot.tool_pose(base.q)[:, :3, 3]
             expect = pos * len(base) * truth["effect_parameters"]["strain_per_row"]
+        else:
+            # The joints' response to the force error -g F, g linear in the level about the
+            # calibration's mean level, with the compliances the joint model fits the control.
+            par = truth["effect_parameters"]
+            level = np.linalg.norm(base.force, axis=1)
+            assert par["reference_level_N"] == pytest.approx(level.mean(), rel=1e-12)
+            g = par["sign"] * par["gain_per_relative_level"] * (level / level.mean() - 1)
+            c = 1 / np.asarray(stiff.identify(robot, base).stiffness)
+            jv = robot.jacobian(base.q)[:, :3, :]
+            tau = np.einsum("nij,ni->nj", jv, -g[:, None] * base.force)
+            expect = np.einsum("nij,nj->ni", jv, tau * c)
         assert np.allclose(added, expect, rtol=0, atol=1e-12)
-    rows = scored(root, out, "both", "base_shift,crosstalk", tmp_path)
-    assert len(rows) == 4
+    rows = scored(root, out, "both", "base_shift,crosstalk,sensor_level", tmp_path)
+    assert len(rows) == 6
     for r in rows:
         assert r["outcome"] == "right", r
 

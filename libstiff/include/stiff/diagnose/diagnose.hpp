@@ -126,6 +126,8 @@ struct CovariateTest {
   int df = 0;
   double p_value = 1.0, p_adjusted = 1.0;
   bool significant = false;
+  double share = 0.0;      ///< the part of the residual sum of squares the group takes up
+  bool structure = false;  ///< significant and share large enough (docs/diagnosis.md, rule 1)
   double correlation[3] = {0, 0, 0};  ///< Pearson r of the residual x,y,z with the covariate
 };
 

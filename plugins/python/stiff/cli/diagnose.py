@@ -91,7 +91,8 @@ def print_text(d) -> None:
     sig = [c for c in w["covariates"] if c["significant"]][:4]
     if sig:
         print("  residual structure: " + ", ".join(
-            f"{c['covariate']} (F {c['statistic']:.3g}, p_adj {c['p_adjusted']:.2g})" for c in sig))
+            f"{c['covariate']} (F {c['statistic']:.3g}, p_adj {c['p_adjusted']:.2g}, "
+            f"{100 * c.get('share', 0):.0f} % of the residual)" for c in sig))
     print()
     rows = []
     for c in d["candidates"]:
