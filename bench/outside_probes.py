@@ -24,6 +24,11 @@ reads (expected verdict: no confident claim):
                the force is read as F (1 + g), g = s (|F| - F0) / F0, s of either sign, F0
                the calibration rows' mean |F|; the arm deflects by C F / (1 + g), about
                C F (1 - g), with C the control's compliances
+  sensor_offset  a zero offset of the force reading in the sensor (flange) frame: the force
+               is read as F + R b, so the arm deflects by C (F_read - R b), b of a random
+               direction (a sensor not tared, or its zero drifted)
+  sensor_offset_base  the same offset fixed in the base frame (a load cell's bias under a
+               fixture): F + b
 
 Usage:
   .venv/bin/python bench/outside_probes.py --data DIR --out /tmp/probes --seeds 0-9
@@ -46,7 +51,7 @@ import sys
 import numpy as np
 
 KINDS = ("base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth", "warmup",
-         "sensor_level")
+         "sensor_level", "sensor_offset", "sensor_offset_base")
 DESCRIPTION = {
     "base_shift": "outside the library: the arm shifts as a whole under the force (base plate "
                   "compliance fixed in the base frame)",
@@ -56,6 +61,9 @@ DESCRIPTION = {
     "growth": "outside the library: thermal growth of the arm scaling its position",
     "warmup": "outside the library: the joints' compliance growing over the session",
     "sensor_level": "outside the library: a force sensor's gain changing with the load's level",
+    "sensor_offset": "outside the library: a zero offset of a flange force sensor's reading",
+    "sensor_offset_base": "outside the library: a zero offset of the force reading fixed in the "
+                          "base frame",
 }
 
 
@@ -246,6 +254,18 @@ def make_effect(kind, rng, robot, compliance):
             gain = params["sign"] * (level - ref) / ref
             return -joint_deflection(robot, q, f * gain[:, None], compliance)
         return sensor_level, params
+    if kind in ("sensor_offset", "sensor_offset_base"):
+        b = rng.normal(size=3)
+        b /= np.linalg.norm(b)
+        flange = kind == "sensor_offset"
+
+        def offset(q, f, n):
+            if flange:
+                fb = np.einsum("nij,j->ni", robot.tool_pose(q)[:, :3, :3], b)
+            else:
+                fb = np.tile(b, (len(q), 1))
+            return -joint_deflection(robot, q, fb, compliance)
+        return offset, {"direction": b.tolist(), "frame": "flange" if flange else "base"}
     raise ValueError(kind)
 
 
@@ -281,6 +301,8 @@ def main() -> int:
                 params["compliance_gain_over_session"] = scale
             elif kind == "sensor_level":
                 params["gain_per_relative_level"] = scale
+            elif kind in ("sensor_offset", "sensor_offset_base"):
+                params["offset_N"] = scale
             dst = os.path.join(a.out, s, f"{kind}_{seed:02d}")
             write_scenario(src, dst, files, {fn: add[fn] * scale for fn in files})
             what = DESCRIPTION.get(kind) or (

@@ -124,9 +124,8 @@ def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_p
     """bench/outside_probes.py on the control: each probe's displacements are the control's
     plus its effect (checked here against the effect's parameters in truth.json, computed
     independently with numpy), at the requested size; the diagnosis claims none of the three
-    effects its trend tests were made for (section 2 of docs/diagnosis.md). Without the
-    load_level_response test a force sensor's non-linearity was named a joint's, without a noise
-    statement."""
+    effects its trend tests were made for (section 2 of docs/diagnosis.md), nor a zero offset of
+    the force reading on this control (section 6: a limit on other data)."""
     np = pytest.importorskip("numpy")
     import stiff
 
@@ -138,11 +137,19 @@ def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_p
     index = json.loads((out / "index.json").read_text())
     assert sorted(e["type"] for e in index) == sorted(
         ["base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth", "warmup",
-         "sensor_level"])
+         "sensor_level", "sensor_offset", "sensor_offset_base"])
 
     robot = stiff.Robot("rokae")
     base = stiff.Dataset.read(suite / "base" / "none_00" / "calib.csv", robot)
-    for kind in ("base_shift", "growth", "sensor_level"):
+    c = 1 / np.asarray(stiff.identify(robot, base).stiffness)
+    jv = robot.jacobian(base.q)[:, :3, :]
+
+    def joints(force):
+        """The joints' response to `force` (N x 3) with the compliances the joint model fits the
+        control."""
+        return np.einsum("nij,nj->ni", jv, np.einsum("nij,ni->nj", jv, force) * c)
+
+    for kind in ("base_shift", "growth", "sensor_level", "sensor_offset"):
         folder = out / "base" / f"{kind}_00"
         probe = stiff.Dataset.read(folder / "calib.csv", robot)
         assert np.array_equal(probe.q, base.q) and np.array_equal(probe.force, base.force)
@@ -156,20 +163,23 @@ def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_p
         elif kind == "growth":
             pos = robot.tool_pose(base.q)[:, :3, 3]
             expect = pos * len(base) * truth["effect_parameters"]["strain_per_row"]
-        else:
-            # The joints' response to the force error -g F, g linear in the level about the
-            # calibration's mean level, with the compliances the joint model fits the control.
+        elif kind == "sensor_level":
+            # The force error -g F, g linear in the level about the calibration's mean level.
             par = truth["effect_parameters"]
             level = np.linalg.norm(base.force, axis=1)
             assert par["reference_level_N"] == pytest.approx(level.mean(), rel=1e-12)
             g = par["sign"] * par["gain_per_relative_level"] * (level / level.mean() - 1)
-            c = 1 / np.asarray(stiff.identify(robot, base).stiffness)
-            jv = robot.jacobian(base.q)[:, :3, :]
-            tau = np.einsum("nij,ni->nj", jv, -g[:, None] * base.force)
-            expect = np.einsum("nij,nj->ni", jv, tau * c)
+            expect = joints(-g[:, None] * base.force)
+        else:
+            # The force error -R b, b constant in the flange frame.
+            par = truth["effect_parameters"]
+            b = par["offset_N"] * np.array(par["direction"])
+            assert np.linalg.norm(par["direction"]) == pytest.approx(1.0, rel=1e-12)
+            expect = joints(-robot.tool_pose(base.q)[:, :3, :3] @ b)
         assert np.allclose(added, expect, rtol=0, atol=1e-12)
-    rows = scored(root, out, "both", "base_shift,crosstalk,sensor_level", tmp_path)
-    assert len(rows) == 6
+    rows = scored(root, out, "both", "base_shift,crosstalk,sensor_level,sensor_offset",
+                  tmp_path)
+    assert len(rows) == 8
     for r in rows:
         assert r["outcome"] == "right", r
 
