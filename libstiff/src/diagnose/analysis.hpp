@@ -162,6 +162,13 @@ struct GroupScore {
 
 GroupScore score_group(const Analysis& a, const MatrixXd& z, const VectorXd& typical, double tol);
 
+/// `g` (from score_group) tested with the variance of the score u^T r estimated from each row's
+/// own residual (cluster-robust, a row's three components one cluster) instead of one residual
+/// variance for all rows: W = s^T V^-1 s, s = u^T r, V = c sum_i u_i^T r_i r_i^T u_i, c = G/(G-1)
+/// (N-1)/(N-K), W/df against F(df, G-1) (Cameron & Miller, J. Human Resources 50(2), 2015).
+/// Replaces g.f and g.log_p; df 0 when fewer than df + 2 rows.
+void robust_group(const Analysis& a, GroupScore* g);
+
 /// Everything known about the candidates at one model.
 struct Level {
   Analysis a;
@@ -221,6 +228,9 @@ struct OutsideTrend {
   /// Tested beyond each candidate in turn (the least significant counts): a group flexible
   /// enough to take up what one of the library's laws leaves.
   bool beyond_candidates = false;
+  /// Tested with a variance of the residual estimated per row (robust_group below): a group
+  /// whose columns are the directions in which the force reading's noise moves the point.
+  bool robust = false;
 };
 
 /// The groups of every mechanism outside the library at analysis `a` (outside.cpp).

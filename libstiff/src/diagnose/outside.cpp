@@ -164,36 +164,55 @@ void load_level_response(const Context&, const Analysis& a, const std::string& n
                   std::move(z), false});
 }
 
-/// Cross-talk of a force sensor on the flange: its reading off by a symmetric matrix with a zero
-/// diagonal in the sensor frame (the off-diagonal part of its calibration matrix; the diagonal
-/// gains and the rotation are force_frame's). The displacement it leaves is the model's own
-/// response to the force error, G(q) R E_k R^T F, with G the model's displacement per unit
-/// force at the row: taken from the fitted model by a small step of the force, so the columns
-/// are those of whatever the arm's compliance is.
-void sensor_crosstalk(const Context&, const Analysis& a, const std::string& name, Groups* out) {
-  constexpr double step = 1e-4;  // relative: a backlash decision flips only at its threshold
+/// Errors of the force reading that force_frame (its rotations and gains) does not have: the
+/// displacement they leave is the model's own response to the force error, G(q) dF, with G the
+/// model's displacement per unit force at the row, taken from the fitted model by small steps
+/// of the force along the base axes (relative 1e-4: a backlash decision flips only at its
+/// threshold), so that the columns are those of whatever the arm's compliance is. Two groups:
+///  - cross-talk of a sensor on the flange, its reading off by a symmetric matrix with a zero
+///    diagonal in the sensor frame (the off-diagonal part of its calibration matrix):
+///    dF = R E_k R^T F, three columns;
+///  - a zero offset of the reading (a sensor not tared, or its zero drifted with temperature;
+///    a load cell's bias under a fixture): dF = R e_k in the sensor frame and e_k in the base
+///    frame, six columns. The force reading's own noise moves the point along these very
+///    directions, by each row's compliance: the group is tested with each row's own residual
+///    variance (robust_group), where one variance for all rows reads a soft arm's force noise
+///    as an offset. Only rows with a written force have either.
+void force_reading(const Context&, const Analysis& a, const std::string& name, Groups* out) {
+  constexpr double step = 1e-4;
   const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
-  MatrixXd z = MatrixXd::Zero(a.n, 3);
+  MatrixXd crosstalk = MatrixXd::Zero(a.n, 3), offset = MatrixXd::Zero(a.n, 6);
   for (size_t i = 0; i < a.used.rows.size(); ++i) {
     const auto& m = a.used.rows[i];
-    if (m.force.squaredNorm() == 0.0) continue;  // an unloaded (absolute) row: no cross-talk
+    if (m.force.squaredNorm() == 0.0) continue;  // an unloaded (absolute) row: no reading
     const auto& c = a.ctx[i];
+    const Eigen::Vector3d d0 = a.model->predict(a.theta, m, c).head<3>();
+    const double h = step * m.force.norm();
+    Eigen::Matrix3d g;  // displacement per unit force along the base axes
+    for (int k = 0; k < 3; ++k) {
+      Measurement mk = m;
+      mk.force(k) += h;
+      g.col(k) = (a.model->predict(a.theta, mk, c).head<3>() - d0) / h;
+    }
     const Eigen::Matrix3d rot = c.chain.flange.topLeftCorner<3, 3>();
     const Eigen::Vector3d fs = rot.transpose() * m.force;
-    const Eigen::Vector3d d0 = a.model->predict(a.theta, m, c).head<3>();
     for (int k = 0; k < 3; ++k) {
       Eigen::Vector3d df = Eigen::Vector3d::Zero();
       df(pairs[k][0]) = fs(pairs[k][1]);
       df(pairs[k][1]) = fs(pairs[k][0]);
-      Measurement mk = m;
-      mk.force += step * (rot * df);
-      z.block<3, 1>(3 * i, k) = a.w(i) / step * (a.model->predict(a.theta, mk, c).head<3>() - d0);
+      crosstalk.block<3, 1>(3 * i, k) = a.w(i) * g * (rot * df);
+      offset.block<3, 1>(3 * i, k) = a.w(i) * g * rot.col(k);
+      offset.block<3, 1>(3 * i, 3 + k) = a.w(i) * g.col(k);
     }
   }
-  out->push_back({name,
+  out->push_back({name + "crosstalk",
                   "the model's response to a force error symmetric between the sensor's axes "
                   "(force sensor cross-talk, not in the library)",
-                  std::move(z), false});
+                  std::move(crosstalk), false});
+  out->push_back({name + "offset",
+                  "the model's response to a constant force error in the sensor or the base "
+                  "frame (a force reading's zero offset, not in the library)",
+                  std::move(offset), false, true});
 }
 
 /// Thermal growth of the arm between its readings (links lengthening as they warm, a
@@ -219,8 +238,8 @@ void thermal_growth(const Context& cx, const Analysis& a, const std::string& nam
                   std::move(z), false});
 }
 
-/// A mechanism: the name its groups take (a trailing '_' is followed by the joint's number)
-/// and the function that makes them.
+/// A mechanism: the name its groups take (a trailing '_' is followed by what tells its groups
+/// apart: a joint's number, a kind of error) and the function that makes them.
 struct Mechanism {
   const char* name;
   void (*groups)(const Context&, const Analysis&, const std::string& name, Groups*);
@@ -230,7 +249,7 @@ const Mechanism kMechanisms[] = {{"base_tilt", base_tilt},
                                  {"base_shift", base_shift},
                                  {"load_response_drift", load_response_drift},
                                  {"load_level_response", load_level_response},
-                                 {"sensor_crosstalk", sensor_crosstalk},
+                                 {"sensor_", force_reading},
                                  {"thermal_growth", thermal_growth}};
 
 }  // namespace

@@ -1,6 +1,7 @@
 // Scores of the candidate effects at one model: group score / partial-F tests on the
 // regressors each candidate adds, ambiguity groups and the experiment that separates them
 // (docs/diagnosis.md, section 3).
+#include <Eigen/Cholesky>
 #include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
@@ -78,6 +79,29 @@ GroupScore score_group(const Analysis& a, const MatrixXd& z, const VectorXd& typ
   g.fitted = g.u * proj;
   if (!partial_f(a, g.df, &g)) g.df = 0;
   return g;
+}
+
+void robust_group(const Analysis& a, GroupScore* g) {
+  const int df = g->df, rows = a.n / 3;
+  if (df == 0) return;
+  if (rows < df + 2 || a.n <= a.p) {
+    g->df = 0;
+    return;
+  }
+  const VectorXd s = g->u.transpose() * a.r;
+  MatrixXd v = MatrixXd::Zero(df, df);
+  for (int i = 0; i < rows; ++i) {
+    const VectorXd si = g->u.middleRows(3 * i, 3).transpose() * a.r.segment(3 * i, 3);
+    v += si * si.transpose();
+  }
+  v *= (rows / (rows - 1.0)) * ((a.n - 1.0) / (a.n - a.p));
+  const Eigen::LDLT<MatrixXd> ldlt(v);
+  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) {
+    g->df = 0;
+    return;
+  }
+  g->f = s.dot(ldlt.solve(s)) / df;
+  g->log_p = stats::log_f_sf(g->f, df, rows - 1);
 }
 
 std::string experiment_for(const Context& cx, const std::vector<std::string>& group) {

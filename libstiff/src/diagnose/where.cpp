@@ -188,9 +188,11 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
     }
   }
   // The signatures of mechanisms outside the library (outside.cpp).
-  for (const OutsideTrend& o : outside_trends(cx, a))
-    record_score(o.name, o.description,
-                 o.beyond_candidates ? beyond_candidates(o.z) : group_score(o.z));
+  for (const OutsideTrend& o : outside_trends(cx, a)) {
+    GroupScore g = o.beyond_candidates ? beyond_candidates(o.z) : group_score(o.z);
+    if (o.robust) robust_group(a, &g);
+    record_score(o.name, o.description, g);
+  }
   const auto adj = stats::holm_adjust(lps);
   for (size_t t = 0; t < tests.size(); ++t) {
     tests[t].p_adjusted = adj[t];

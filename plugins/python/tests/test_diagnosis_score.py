@@ -123,9 +123,8 @@ def scored(root, probes, noise, types, tmp_path):
 def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_path):
     """bench/outside_probes.py on the control: each probe's displacements are the control's
     plus its effect (checked here against the effect's parameters in truth.json, computed
-    independently with numpy), at the requested size; the diagnosis claims none of the three
-    effects its trend tests were made for (section 2 of docs/diagnosis.md), nor a zero offset of
-    the force reading on this control (section 6: a limit on other data)."""
+    independently with numpy), at the requested size; the diagnosis claims none of the four
+    effects its trend tests were made for (section 2 of docs/diagnosis.md)."""
     np = pytest.importorskip("numpy")
     import stiff
 
