@@ -155,6 +155,7 @@ Analysis analyse(const Context& cx,
 struct GroupScore {
   int columns = 0, df = 0;
   double drss = 0, f = 0, log_p = 0, surviving = 0;
+  bool robust = false;            ///< f and log_p are robust_group's
   MatrixXd u;                     ///< basis of the projected group
   std::vector<int> null_columns;  ///< columns with no (surviving) effect
   VectorXd fitted;                ///< projection of r on the group (weighted)
@@ -166,7 +167,7 @@ GroupScore score_group(const Analysis& a, const MatrixXd& z, const VectorXd& typ
 /// own residual (cluster-robust, a row's three components one cluster) instead of one residual
 /// variance for all rows: W = s^T V^-1 s, s = u^T r, V = c sum_i u_i^T r_i r_i^T u_i, c = G/(G-1)
 /// (N-1)/(N-K), W/df against F(df, G-1) (Cameron & Miller, J. Human Resources 50(2), 2015).
-/// Replaces g.f and g.log_p; df 0 when fewer than df + 2 rows.
+/// Replaces g.f and g.log_p (g.robust); df 0 when fewer than df + 2 rows.
 void robust_group(const Analysis& a, GroupScore* g);
 
 /// Everything known about the candidates at one model.

@@ -144,7 +144,7 @@ std::string diagnosis_to_json(const Diagnosis& d) {
   for (const auto& c : d.covariates)
     cov.push_back({{"covariate", c.covariate},
                    {"description", c.description},
-                   {"test", "partial_F"},
+                   {"test", c.test},
                    {"statistic", c.statistic},
                    {"df", c.df},
                    {"p_value", c.p_value},

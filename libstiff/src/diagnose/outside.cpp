@@ -106,62 +106,48 @@ std::vector<double> session_mean_times(const Analysis& a) {
   return sum;
 }
 
-bool loaded(const Measurement& m) {
-  return m.force.squaredNorm() > 0.0 || m.moment.squaredNorm() > 0.0;
-}
-
-/// The model's deflection of used row i under its load: its prediction less that without load,
-/// so that drift terms cancel.
-Eigen::Vector3d load_deflection(const Analysis& a, size_t i) {
-  const auto& m = a.used.rows[i];
-  Measurement unloaded = m;
-  unloaded.force.setZero();
-  unloaded.moment.setZero();
-  return a.model->predict(a.theta, m, a.ctx[i]).head<3>() -
-         a.model->predict(a.theta, unloaded, a.ctx[i]).head<3>();
-}
-
-/// The response to the load changing in scale over a session (the joints softening as their
-/// reducers warm up, a force sensor's gain drifting): one column, the model's deflection under
-/// the row's load times the reading's time from its session's mean time.
-void load_response_drift(const Context&, const Analysis& a, const std::string& name, Groups* out) {
-  const std::vector<double> mean = session_mean_times(a);
-  MatrixXd z = MatrixXd::Zero(a.n, 1);
-  for (size_t i = 0; i < a.used.rows.size(); ++i) {
-    if (!loaded(a.used.rows[i])) continue;
-    const auto& c = a.ctx[i];
-    const size_t s = static_cast<size_t>(c.session);
-    z.block<3, 1>(3 * i, 0) = a.w(i) * (c.time - mean[s]) * load_deflection(a, i);
-  }
-  out->push_back({name,
-                  "the response to the load changing in scale over the session (joints warming "
-                  "up, a force sensor's gain drifting; not in the library)",
-                  std::move(z), false});
-}
-
-/// The response not in proportion to the load: the whole arm's deflection scaled by a function
-/// of the load's level, the same for every joint (a force sensor whose gain changes with the
-/// level, its non-linearity; a fixture that settles further under a larger load). One column,
-/// the model's deflection under the row's load times the level's relative distance from the
-/// mean level of the loaded rows. A joint's compliance changing with its own torque is
-/// nonlinear_joint's; this is the part no joint's law has.
-void load_level_response(const Context&, const Analysis& a, const std::string& name, Groups* out) {
-  double mean = 0;
-  int count = 0;
+/// The response to the load not in proportion to it: the model's deflection under the row's
+/// load (its prediction less that without load, so that drift terms cancel), taken once per row,
+/// scaled by
+///  - the reading's time from its session's mean time: the response changing in scale over a
+///    session (the joints softening as their reducers warm up, a force sensor's gain drifting);
+///  - the load's level relative to the mean level of the rows with a force, |F|/F0 - 1: the
+///    whole arm's response scaled by the level alike at every joint (a force sensor whose gain
+///    changes with the level, its non-linearity; a fixture that settles further under a larger
+///    load). A joint's compliance changing with its own torque is nonlinear_joint's; this is the
+///    part no joint's law has.
+/// One column each.
+void load_response(const Context&, const Analysis& a, const std::string& name, Groups* out) {
+  const std::vector<double> mean_time = session_mean_times(a);
+  double mean_level = 0;
+  int forces = 0;
   for (const auto& m : a.used.rows)
-    if (m.force.squaredNorm() > 0.0) mean += m.force.norm(), ++count;
-  if (count == 0) return;
-  mean /= count;
-  MatrixXd z = MatrixXd::Zero(a.n, 1);
+    if (m.force.squaredNorm() > 0.0) mean_level += m.force.norm(), ++forces;
+  if (forces > 0) mean_level /= forces;
+  MatrixXd drift = MatrixXd::Zero(a.n, 1), level = MatrixXd::Zero(a.n, 1);
   for (size_t i = 0; i < a.used.rows.size(); ++i) {
     const auto& m = a.used.rows[i];
-    if (m.force.squaredNorm() == 0.0) continue;
-    z.block<3, 1>(3 * i, 0) = a.w(i) * (m.force.norm() / mean - 1.0) * load_deflection(a, i);
+    if (m.force.squaredNorm() == 0.0 && m.moment.squaredNorm() == 0.0) continue;
+    const auto& c = a.ctx[i];
+    Measurement unloaded = m;
+    unloaded.force.setZero();
+    unloaded.moment.setZero();
+    const Eigen::Vector3d deflection = a.model->predict(a.theta, m, c).head<3>() -
+                                       a.model->predict(a.theta, unloaded, c).head<3>();
+    drift.block<3, 1>(3 * i, 0) =
+        a.w(i) * (c.time - mean_time[static_cast<size_t>(c.session)]) * deflection;
+    if (m.force.squaredNorm() > 0.0)
+      level.block<3, 1>(3 * i, 0) = a.w(i) * (m.force.norm() / mean_level - 1.0) * deflection;
   }
-  out->push_back({name,
-                  "the response not in proportion to the load, scaled by the load's level alike "
-                  "at every joint (a force sensor's non-linearity; not in the library)",
-                  std::move(z), false});
+  out->push_back({name + "drift",
+                  "the response to the load changing in scale over the session (joints warming "
+                  "up, a force sensor's gain drifting; not in the library)",
+                  std::move(drift), false});
+  if (forces > 0)
+    out->push_back({name + "level",
+                    "the response not in proportion to the load, scaled by the load's level "
+                    "alike at every joint (a force sensor's non-linearity; not in the library)",
+                    std::move(level), false});
 }
 
 /// Errors of the force reading that force_frame (its rotations and gains) does not have: the
@@ -244,13 +230,9 @@ struct Mechanism {
   const char* name;
   void (*groups)(const Context&, const Analysis&, const std::string& name, Groups*);
 };
-const Mechanism kMechanisms[] = {{"base_tilt", base_tilt},
-                                 {"pose_compliance_", pose_compliance},
-                                 {"base_shift", base_shift},
-                                 {"load_response_drift", load_response_drift},
-                                 {"load_level_response", load_level_response},
-                                 {"sensor_", force_reading},
-                                 {"thermal_growth", thermal_growth}};
+const Mechanism kMechanisms[] = {{"base_tilt", base_tilt},   {"pose_compliance_", pose_compliance},
+                                 {"base_shift", base_shift}, {"load_response_", load_response},
+                                 {"sensor_", force_reading}, {"thermal_growth", thermal_growth}};
 
 }  // namespace
 

@@ -102,6 +102,7 @@ void robust_group(const Analysis& a, GroupScore* g) {
   }
   g->f = s.dot(ldlt.solve(s)) / df;
   g->log_p = stats::log_f_sf(g->f, df, rows - 1);
+  g->robust = true;
 }
 
 std::string experiment_for(const Context& cx, const std::vector<std::string>& group) {

@@ -119,6 +119,7 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
     ct.covariate = name;
     ct.description = desc;
     ct.df = g.df;
+    ct.test = g.robust ? "cluster_robust_F" : "partial_F";
     ct.statistic = g.f;
     ct.p_value = std::exp(g.log_p);
     ct.share = a.rss > 0 ? g.drss / a.rss : 0.0;

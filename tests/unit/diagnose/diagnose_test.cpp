@@ -1034,7 +1034,7 @@ TEST(DiagnoseHonesty, BaseShiftIsNotClaimed) {
 // F (1 + g), g = k (|F| / F0 - 1) about the data's mean level F0, so the arm's response is not
 // in proportion to the force written; alike at every joint, which no joint's law has. A
 // reducer law (nonlinear_joint) or a gap (backlash) takes part of it up on the calibration
-// poses; what they leave follows the response scaled by the level (the load_level_response
+// poses; what they leave follows the response scaled by the level (the load_response_level
 // trend test), so nothing is claimed (3 of these 20 runs were, without it: `adequate` or
 // nonlinear_joint, without a noise statement, at k = 0.4).
 TEST(DiagnoseHonesty, AForceSensorNonLinearityIsNotClaimed) {

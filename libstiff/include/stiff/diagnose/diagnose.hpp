@@ -122,7 +122,8 @@ struct CandidateScore {
 struct CovariateTest {
   std::string covariate;  ///< e.g. "q2", "tau_load_3", "tau_gravity_2", "load_level", "time"
   std::string description;
-  double statistic = 0.0;  ///< F
+  std::string test = "partial_F";  ///< or "cluster_robust_F" (docs/diagnosis.md, section 2)
+  double statistic = 0.0;          ///< F
   int df = 0;
   double p_value = 1.0, p_adjusted = 1.0;
   bool significant = false;
