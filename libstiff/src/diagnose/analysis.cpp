@@ -2,6 +2,7 @@
 // outlier rule that asks the candidates first (docs/diagnosis.md, sections 1-2).
 #include "diagnose/analysis.hpp"
 
+#include <Eigen/Cholesky>
 #include <Eigen/QR>
 #include <Eigen/SVD>
 #include <algorithm>
@@ -104,6 +105,49 @@ std::vector<double> prediction_leverages(const DeflectionModel& model,
     lev[r] = (j * pinv_factor).squaredNorm() / 3.0;
   }
   return lev;
+}
+
+/// The model's displacement per unit force along the base axes at a row [m/N], by central
+/// differences of 1e-4 of the reading: a step off the measured force is a load the data did not
+/// decide (a backlash jump's expectation there, not the jump the row showed), so both sides
+/// are. Zero for a row without a written force.
+Eigen::Matrix3d force_response(const DeflectionModel& model,
+                               const VectorXd& theta,
+                               const Measurement& m,
+                               const MeasurementContext& c) {
+  Eigen::Matrix3d g = Eigen::Matrix3d::Zero();
+  if (!(m.force.squaredNorm() > 0.0)) return g;
+  const double h = 1e-4 * m.force.norm();
+  for (int k = 0; k < 3; ++k) {
+    Measurement up = m, down = m;
+    up.force(k) += h;
+    down.force(k) -= h;
+    g.col(k) =
+        (model.predict(theta, up, c).head<3>() - model.predict(theta, down, c).head<3>()) / (2 * h);
+  }
+  return g;
+}
+
+/// The covariance of row `row`'s displacement [m^2]: sigma^2 I, or with a stated force error
+/// the tracker's sigma^2 I plus G S G^T, S the force error's variances along the base axes:
+/// that error moves the point by the arm's compliance, not alike in every direction.
+Eigen::Matrix3d row_covariance(const Noise& noise, Eigen::Index row, const Eigen::Matrix3d& g) {
+  if (noise.known && noise.force_sigma.rows() > row &&
+      noise.force_sigma.row(row).squaredNorm() > 0.0) {
+    const double t = noise.sigma_tracker(row);
+    return Eigen::Matrix3d::Identity() * (t * t) +
+           g * noise.force_sigma.row(row).cwiseAbs2().asDiagonal() * g.transpose();
+  }
+  return Eigen::Matrix3d::Identity() * (noise.sigma(row) * noise.sigma(row));
+}
+
+/// L with L L^T = cov (lower triangular).
+Eigen::Matrix3d cholesky_factor(const Eigen::Matrix3d& cov, Eigen::Index row) {
+  const Eigen::LLT<Eigen::Matrix3d> llt(cov);
+  if (llt.info() != Eigen::Success)
+    throw NumericalError("diagnose: the covariance of measurement " + std::to_string(row + 1) +
+                         " is not positive definite (its stated noise)");
+  return llt.matrixL();
 }
 
 }  // namespace
@@ -230,8 +274,15 @@ Analysis analyse(const Context& cx,
   a.identified.resize(a.fit.parameters.size());
   for (size_t k = 0; k < a.fit.parameters.size(); ++k)
     a.identified[k] = a.fit.parameters[k].identified;
-  a.w.resize(nu);
-  for (int i = 0; i < nu; ++i) a.w(i) = 1.0 / noise.sigma(a.used_rows[i]);
+  a.force_response.resize(nu);
+  a.W.resize(nu);
+  a.cov_factor.resize(nu);
+  for (int i = 0; i < nu; ++i) {
+    const Eigen::Index row = a.used_rows[i];
+    a.force_response[i] = force_response(*a.model, a.theta, a.used.rows[i], a.ctx[i]);
+    a.cov_factor[i] = cholesky_factor(row_covariance(noise, row, a.force_response[i]), row);
+    a.W[i] = a.cov_factor[i].triangularView<Eigen::Lower>().solve(Eigen::Matrix3d::Identity());
+  }
   // Weighted Jacobian of the identified parameters, and the weighted residual.
   const int pc = a.model->parameter_count();
   MatrixXd x(a.n, pc);
@@ -240,7 +291,7 @@ Analysis analyse(const Context& cx,
   const bool decided = has_confidence_sets(*a.model);
   for (int i = 0; i < nu; ++i) {
     const auto& m = a.used.rows[i];
-    x.middleRows(3 * i, 3) = a.model->displacement_jacobian(a.theta, m, a.ctx[i]) * a.w(i);
+    x.middleRows(3 * i, 3) = a.W[i] * a.model->displacement_jacobian(a.theta, m, a.ctx[i]);
     const Eigen::Vector3d e = m.observed() - a.pred_all.row(a.used_rows[i]).transpose();
     ss_m += e.squaredNorm();
     // A row whose prediction the data leave undecided (a backlash jump near its torque
@@ -249,7 +300,7 @@ Analysis analyse(const Context& cx,
     // not structure another effect should explain. The fit RMS stays the point prediction's.
     bool uncertain = false;
     a.r.segment<3>(3 * i) =
-        (decided ? closest_error(*a.model, a.theta, m, a.ctx[i], e, &uncertain) : e) * a.w(i);
+        a.W[i] * (decided ? closest_error(*a.model, a.theta, m, a.ctx[i], e, &uncertain) : e);
     a.quality.uncertain_rows += uncertain;
   }
   std::vector<int> cols;
@@ -349,8 +400,19 @@ Analysis analyse(const Context& cx,
     if (noise.known && q.dof > 0 && vdof > 0) {
       const double u2 = std::pow(1.0 + cx.opt->noise_uncertainty, 2);
       double vchi2 = 0;
-      for (size_t r = 0; r < closest.size(); ++r)
-        vchi2 += closest[r].squaredNorm() / (sr[r] * sr[r] * (1.0 + lev[r] + session_leverage));
+      // Each row's error over its covariance (row_covariance: the stated force error along
+      // the model's force response at that row), the prediction's variance as a multiple.
+      const Noise& vn = cx.vnoise->known ? *cx.vnoise : noise;
+      const auto vctx = a.model->contexts(scored);
+      for (size_t r = 0; r < closest.size(); ++r) {
+        const auto row = static_cast<Eigen::Index>(r);
+        Eigen::Matrix3d cov = Eigen::Matrix3d::Identity() * (sr[r] * sr[r]);
+        if (cx.vnoise->known)
+          cov = row_covariance(vn, row, force_response(*a.model, a.theta, scored.rows[r], vctx[r]));
+        const Eigen::Matrix3d l = cholesky_factor(cov, row);
+        vchi2 += l.triangularView<Eigen::Lower>().solve(closest[r]).squaredNorm() /
+                 (1.0 + lev[r] + session_leverage);
+      }
       q.validation_to_floor = std::sqrt(vchi2 / vdof);
       const double pooled = stats::chi2_sf((a.rss + vchi2) / u2, q.dof + vdof);
       q.floor_p = decided ? pooled

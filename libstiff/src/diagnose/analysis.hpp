@@ -104,7 +104,16 @@ struct Analysis {
   std::vector<MeasurementContext> ctx;  ///< of `used`
   VectorXd theta;
   std::vector<bool> identified;
-  VectorXd w;         ///< 1/sigma per used row
+  /// Per used row: W[i] = L_i^-1 and cov_factor[i] = L_i, L_i L_i^T the covariance of the
+  /// row's displacement [m^2]: sigma^2 I, or with a stated force error the tracker's sigma^2 I
+  /// plus G_i S_i G_i^T (G_i = force_response[i], S_i the force error's variances), since that
+  /// error moves the point along the directions of the arm's compliance. Weighted rows are W[i]
+  /// times metres; unit weights when the noise is unknown.
+  std::vector<Eigen::Matrix3d> W, cov_factor;
+  /// Per used row: the model's displacement per unit force along the base axes [m/N], by small
+  /// steps of the force (relative 1e-4: a backlash decision flips only at its threshold); zero
+  /// for a row without a written force.
+  std::vector<Eigen::Matrix3d> force_response;
   MatrixXd qx;        ///< orthonormal basis of the weighted Jacobian (3n x p)
   VectorXd r;         ///< weighted residual of the used rows (3n)
   MatrixXd pred_all;  ///< predicted d of every calibration row (N x 3)

@@ -35,12 +35,15 @@ bool force_error_sum_is_linear(const Dataset& data) {
 /// sums (the convention of force-sensor data sheets and of ISO 10360 / ASME B89.4.19 MPEs):
 /// per force component sigma_k = rel |F_k| + abs. `# force_error_sum: quadrature` states
 /// sqrt((rel F_k)^2 + abs^2) instead. A force error dF moves the measured point by about
-/// |d| |dF| / |F|, so per displacement axis sigma_F^2 = |d|^2 sum_k sigma_k^2 / (3 |F|^2).
+/// |d| |dF| / |F|, so per displacement axis sigma_F^2 = |d|^2 sum_k sigma_k^2 / (3 |F|^2): the
+/// row's scale for outliers and reports. The tests use the error's direction too: G dF, G the
+/// model's displacement per unit force (Analysis::wm).
 void add_force_noise(const Dataset& data, Noise& n) {
   const double rel = meta_number(data, "force_relative");
   const double abs_n = meta_number(data, "force_absolute_N");
   if (!(rel > 0 || abs_n > 0)) return;
   const bool linear = force_error_sum_is_linear(data);
+  n.force_sigma = Eigen::MatrixX3d::Zero(static_cast<Eigen::Index>(data.rows.size()), 3);
   double sum = 0;
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const auto& m = data.rows[r];
@@ -50,6 +53,7 @@ void add_force_noise(const Dataset& data, Noise& n) {
     for (int k = 0; k < 3; ++k) {
       const double a = rel * std::abs(m.force(k));
       const double sk = linear ? a + abs_n : std::hypot(a, abs_n);
+      n.force_sigma(static_cast<Eigen::Index>(r), k) = sk;
       s2 += sk * sk;
     }
     const double v = m.displacement.squaredNorm() * s2 / (3 * f * f);
@@ -131,6 +135,7 @@ Noise noise_of_tracker(const Dataset& data) {
 Noise noise_of(const Dataset& data) {
   Noise n = noise_of_tracker(data);
   n.tracker_m = n.floor_m;
+  n.sigma_tracker = n.sigma;
   if (n.known) add_force_noise(data, n);
   return n;
 }

@@ -12,6 +12,12 @@ namespace stiff::diagnose_detail {
 /// Noise level of the data: per-row sigma [m] and where it came from.
 struct Noise {
   Eigen::VectorXd sigma;  ///< per row [m]; 1 (unit weights) when unknown
+  /// Per row, the part of sigma that is not the force reading's [m] (the tracker's).
+  Eigen::VectorXd sigma_tracker;
+  /// Per row and base axis, the stated error of the force reading [N] (N x 3; no rows when the
+  /// data states none): the analysis carries it through the model's force response into each
+  /// row's 3 x 3 covariance (Analysis::wm).
+  Eigen::MatrixX3d force_sigma;
   bool known = false;
   double floor_m = 0.0;
   std::string source = "none";

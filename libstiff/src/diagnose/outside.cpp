@@ -31,7 +31,7 @@ void base_tilt(const Context& cx, const Analysis& a, const std::string& name, Gr
     const Eigen::Vector3d mb = l.cross(m.force) + m.moment;
     const Eigen::Vector3d cols[4] = {mb.x() * ex.cross(p), mb.y() * ey.cross(p),
                                      mb.x() * ex.cross(ez), mb.y() * ey.cross(ez)};
-    for (int k = 0; k < 4; ++k) z.block<3, 1>(3 * i, k) = a.w(i) * cols[k];
+    for (int k = 0; k < 4; ++k) z.block<3, 1>(3 * i, k) = a.W[i] * cols[k];
   }
   out->push_back(
       {name,
@@ -60,7 +60,7 @@ void pose_compliance(const Context& cx, const Analysis& a, const std::string& na
         robot.jacobian_at(c.chain, robot.point_position(c.chain, robot.measured_point));
     const VectorXd tau = load_torques(robot, m, c);
     for (int j = 0; j < dof; ++j) {
-      const Eigen::Vector3d deflection = a.w(i) * tau(j) * jm.block<3, 1>(0, j);
+      const Eigen::Vector3d deflection = a.W[i] * (tau(j) * jm.block<3, 1>(0, j));
       for (int k = 0; k < angles; ++k) {
         z[j].block<3, 1>(3 * i, 2 * k) = std::cos(m.q(k)) * deflection;
         z[j].block<3, 1>(3 * i, 2 * k + 1) = std::sin(m.q(k)) * deflection;
@@ -83,8 +83,10 @@ void base_shift(const Context&, const Analysis& a, const std::string& name, Grou
   for (size_t i = 0; i < a.used.rows.size(); ++i) {
     const Eigen::Vector3d& f = a.used.rows[i].force;
     for (int k = 0; k < 6; ++k) {
-      z(3 * i + pairs[k][0], k) += a.w(i) * f(pairs[k][1]);
-      if (pairs[k][0] != pairs[k][1]) z(3 * i + pairs[k][1], k) += a.w(i) * f(pairs[k][0]);
+      Eigen::Vector3d col = Eigen::Vector3d::Zero();
+      col(pairs[k][0]) += f(pairs[k][1]);
+      if (pairs[k][0] != pairs[k][1]) col(pairs[k][1]) += f(pairs[k][0]);
+      z.block<3, 1>(3 * i, k) = a.W[i] * col;
     }
   }
   out->push_back({name,
@@ -135,9 +137,9 @@ void load_response(const Context&, const Analysis& a, const std::string& name, G
     const Eigen::Vector3d deflection = a.model->predict(a.theta, m, c).head<3>() -
                                        a.model->predict(a.theta, unloaded, c).head<3>();
     drift.block<3, 1>(3 * i, 0) =
-        a.w(i) * (c.time - mean_time[static_cast<size_t>(c.session)]) * deflection;
+        (c.time - mean_time[static_cast<size_t>(c.session)]) * (a.W[i] * deflection);
     if (m.force.squaredNorm() > 0.0)
-      level.block<3, 1>(3 * i, 0) = a.w(i) * (m.force.norm() / mean_level - 1.0) * deflection;
+      level.block<3, 1>(3 * i, 0) = (m.force.norm() / mean_level - 1.0) * (a.W[i] * deflection);
   }
   out->push_back({name + "drift",
                   "the response to the load changing in scale over the session (joints warming "
@@ -152,9 +154,8 @@ void load_response(const Context&, const Analysis& a, const std::string& name, G
 
 /// Errors of the force reading that force_frame (its rotations and gains) does not have: the
 /// displacement they leave is the model's own response to the force error, G(q) dF, with G the
-/// model's displacement per unit force at the row, taken from the fitted model by small steps
-/// of the force along the base axes (relative 1e-4: a backlash decision flips only at its
-/// threshold), so that the columns are those of whatever the arm's compliance is. Two groups:
+/// model's displacement per unit force at the row (Analysis::force_response), so that the
+/// columns are those of whatever the arm's compliance is. Two groups:
 ///  - cross-talk of a sensor on the flange, its reading off by a symmetric matrix with a zero
 ///    diagonal in the sensor frame (the off-diagonal part of its calibration matrix):
 ///    dF = R E_k R^T F, three columns;
@@ -163,32 +164,25 @@ void load_response(const Context&, const Analysis& a, const std::string& name, G
 ///    frame, six columns. The force reading's own noise moves the point along these very
 ///    directions, by each row's compliance: the group is tested with each row's own residual
 ///    variance (robust_group), where one variance for all rows reads a soft arm's force noise
-///    as an offset. Only rows with a written force have either.
+///    as an offset when the data do not state it (stated, it is in each row's covariance).
+///    Only rows with a written force have either.
 void force_reading(const Context&, const Analysis& a, const std::string& name, Groups* out) {
-  constexpr double step = 1e-4;
   const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
   MatrixXd crosstalk = MatrixXd::Zero(a.n, 3), offset = MatrixXd::Zero(a.n, 6);
   for (size_t i = 0; i < a.used.rows.size(); ++i) {
     const auto& m = a.used.rows[i];
     if (m.force.squaredNorm() == 0.0) continue;  // an unloaded (absolute) row: no reading
     const auto& c = a.ctx[i];
-    const Eigen::Vector3d d0 = a.model->predict(a.theta, m, c).head<3>();
-    const double h = step * m.force.norm();
-    Eigen::Matrix3d g;  // displacement per unit force along the base axes
-    for (int k = 0; k < 3; ++k) {
-      Measurement mk = m;
-      mk.force(k) += h;
-      g.col(k) = (a.model->predict(a.theta, mk, c).head<3>() - d0) / h;
-    }
+    const Eigen::Matrix3d wg = a.W[i] * a.force_response[i];
     const Eigen::Matrix3d rot = c.chain.flange.topLeftCorner<3, 3>();
     const Eigen::Vector3d fs = rot.transpose() * m.force;
     for (int k = 0; k < 3; ++k) {
       Eigen::Vector3d df = Eigen::Vector3d::Zero();
       df(pairs[k][0]) = fs(pairs[k][1]);
       df(pairs[k][1]) = fs(pairs[k][0]);
-      crosstalk.block<3, 1>(3 * i, k) = a.w(i) * g * (rot * df);
-      offset.block<3, 1>(3 * i, k) = a.w(i) * g * rot.col(k);
-      offset.block<3, 1>(3 * i, 3 + k) = a.w(i) * g.col(k);
+      crosstalk.block<3, 1>(3 * i, k) = wg * (rot * df);
+      offset.block<3, 1>(3 * i, k) = wg * rot.col(k);
+      offset.block<3, 1>(3 * i, 3 + k) = wg.col(k);
     }
   }
   out->push_back({name + "crosstalk",
@@ -215,8 +209,8 @@ void thermal_growth(const Context& cx, const Analysis& a, const std::string& nam
     const auto& c = a.ctx[i];
     const size_t s = static_cast<size_t>(c.session);
     const Eigen::Vector3d p = robot.point_position(c.chain, robot.measured_point);
-    z.block<3, 1>(3 * i, 2 * s) = a.w(i) * p;
-    z.block<3, 1>(3 * i, 2 * s + 1) = a.w(i) * (c.time - mean[s]) * p;
+    z.block<3, 1>(3 * i, 2 * s) = a.W[i] * p;
+    z.block<3, 1>(3 * i, 2 * s + 1) = (c.time - mean[s]) * (a.W[i] * p);
   }
   out->push_back({name,
                   "the measured point moving in proportion to its position from the base "

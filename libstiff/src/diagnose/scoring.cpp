@@ -26,7 +26,7 @@ MatrixXd candidate_regressors(const Analysis& a, const DeflectionModel& mg, Vect
   MatrixXd z(a.n, pg);
   for (size_t i = 0; i < a.used.rows.size(); ++i)
     z.middleRows(3 * i, 3) =
-        mg.displacement_jacobian(theta, a.used.rows[i], ctx[i], pc).rightCols(pg) * a.w(i);
+        a.W[i] * mg.displacement_jacobian(theta, a.used.rows[i], ctx[i], pc).rightCols(pg);
   typical->resize(pg);
   for (int k = 0; k < pg; ++k) {
     const double t = std::abs(mg.spec(pc + k).typical);
@@ -260,9 +260,11 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
     if (i < 3) {
       // Added-variable plot data, in metres.
       const VectorXd& f = fitted[order[i]];
-      for (int k = 0; k < a.n; ++k) {
-        c.av_fitted_m.push_back(f(k) / a.w(k / 3));
-        c.av_residual_m.push_back(a.r(k) / a.w(k / 3));
+      for (int row = 0; row < a.n / 3; ++row) {
+        const Eigen::Vector3d fm = a.cov_factor[row] * f.segment<3>(3 * row);
+        const Eigen::Vector3d rm = a.cov_factor[row] * a.r.segment<3>(3 * row);
+        c.av_fitted_m.insert(c.av_fitted_m.end(), fm.data(), fm.data() + 3);
+        c.av_residual_m.insert(c.av_residual_m.end(), rm.data(), rm.data() + 3);
       }
     }
     L.scores.push_back(c);

@@ -50,13 +50,15 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
     return sx > sy;
   });
   for (int i = 0; i < std::min<int>(cx.opt->worst_poses, rows); ++i) d.worst.push_back(sorted[i]);
-  // Per-axis RMS and chi2 (used rows).
+  // Per-axis RMS and chi2 (used rows), of the residual in metres (em) over its variance.
   const int nu = static_cast<int>(a.used_rows.size());
+  std::vector<Eigen::Vector3d> em(nu);
+  for (int i = 0; i < nu; ++i) em[i] = a.cov_factor[i] * a.r.segment<3>(3 * i);
   for (int k = 0; k < 3; ++k) {
     double ss_w = 0, ss_m = 0;
     for (int i = 0; i < nu; ++i) {
-      ss_w += a.r(3 * i + k) * a.r(3 * i + k);
-      ss_m += std::pow(a.r(3 * i + k) / a.w(i), 2);
+      ss_w += em[i](k) * em[i](k) / a.cov_factor[i].row(k).squaredNorm();
+      ss_m += em[i](k) * em[i](k);
     }
     d.axis_rms_m[k] = std::sqrt(ss_m / nu);
     const double dof = nu * static_cast<double>(a.n - a.p) / a.n;
@@ -160,7 +162,7 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
     for (int i = 0; i < nu; ++i) {
       const double c = constant ? 1.0 : v[i] - mean;
       var += c * c;
-      for (int k = 0; k < 3; ++k) z(3 * i + k, k) = c * a.w(i);
+      z.block<3, 3>(3 * i, 0) = c * a.W[i];
     }
     if (!(var > 1e-24)) continue;
     CovariateTest* ct = record(names[t].first, names[t].second, z);
@@ -169,17 +171,18 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
       if (constant) {
         double s = 0, ss = 0;
         for (int i = 0; i < nu; ++i) {
-          s += a.r(3 * i + k);
-          ss += a.r(3 * i + k) * a.r(3 * i + k);
+          const double y = em[i](k) / a.cov_factor[i].row(k).norm();  // in its sigma
+          s += y;
+          ss += y * y;
         }
         ct->correlation[k] = ss > 0 ? s / std::sqrt(nu * ss) : 0.0;
         continue;
       }
       double sxy = 0, syy = 0, sxx = 0, ym = 0;
-      for (int i = 0; i < nu; ++i) ym += a.r(3 * i + k) / a.w(i);
+      for (int i = 0; i < nu; ++i) ym += em[i](k);
       ym /= nu;
       for (int i = 0; i < nu; ++i) {
-        const double y = a.r(3 * i + k) / a.w(i) - ym;
+        const double y = em[i](k) - ym;
         const double x = v[i] - mean;
         sxy += x * y;
         sxx += x * x;
