@@ -25,6 +25,9 @@ verdict: `missing_effect` naming the class):
   drift_loaded_first   the same settling, the loaded pass first
   drift_reversed   a warm-up with a quadratic part, the loaded pass in reverse order
   drift_interleaved    each pose's two readings one after the other, a settling drift
+  drift_timed      the tracker settling over the clock (time constant 10-30 min), readings at
+                   irregular times with a pause of 10-20 min in the loaded pass, the loaded
+                   reading's time written in a `t_s` column                  -> drift
   link_upper, link_fore  a spring inside the upper arm or the forearm at a random point along
                    it, bending and twisting about the link frame's axes (the library's
                    springs sit at the link's root)                          -> link
@@ -70,6 +73,7 @@ KINDS = {
     "coupling24": "coupling", "cubic23": "nonlinear_joint", "kink3": "nonlinear_joint",
     "force_flange": "force_frame", "tracker": "tracker_frame", "drift_settle": "drift",
     "drift_loaded_first": "drift", "drift_reversed": "drift", "drift_interleaved": "drift",
+    "drift_timed": "drift",
     "kinkg23": "nonlinear_joint", "cubicg23": "nonlinear_joint", "softzone23": "nonlinear_joint",
     "backlash3": "backlash", "backlash25": "backlash", "link_upper": "link",
     "link_fore": "link", "compensator_lever": "gravity_compensator",
@@ -86,6 +90,8 @@ DESCRIPTION = {
     "drift_loaded_first": "tracker settling exponentially, the loaded pass first",
     "drift_reversed": "warm-up with a quadratic part, the loaded pass in reverse order",
     "drift_interleaved": "settling drift, the two readings of each pose one after the other",
+    "drift_timed": "tracker settling over the clock, readings at irregular times with a pause, "
+                   "the loaded reading's time in a t_s column",
     "kinkg23": "joints 2 and 3 stiffer in one direction of the total torque (a kink at the "
                "torque reversal, gravity preload; masses off the robot file's)",
     "cubicg23": "joints 2 and 3 hardening or softening with the cube of the total torque "
@@ -338,6 +344,19 @@ def make_probe(kind, rng, robot, arrays, dh_robot):
         axis = rotation(rng)[:, 0]
         params = {"axis": axis.tolist()}
         out = {fn: (None, None, None) for fn in arrays}  # rotation: done by the caller
+    elif kind == "drift_timed":
+        amp = rotation(rng)[:, 0]
+        tau = rng.uniform(600.0, 1800.0)  # s
+        params = {"direction": amp.tolist(), "time_constant_s": tau}
+        for fn, (q, f, n) in arrays.items():
+            # An unloaded pass over the poses, then the loaded pass, 5 s + an exponential wait
+            # of mean 25 s between readings, and one pause of 10-20 min in the loaded pass.
+            dt = 5.0 + rng.exponential(25.0, 2 * n)
+            dt[n + rng.integers(n // 4, 3 * n // 4)] += rng.uniform(600.0, 1200.0)
+            t = np.cumsum(dt) - dt[0]
+            unloaded, loaded = t[:n], t[n:]
+            s_ = np.exp(-unloaded / tau) - np.exp(-loaded / tau)
+            out[fn] = (s_[:, None] * amp[None, :], None, np.kron(s_[:, None], np.eye(3)), loaded)
     elif kind.startswith("drift_"):
         course, amp, params = drift_course(kind, rng)
         for fn, (q, f, n) in arrays.items():
@@ -354,6 +373,9 @@ def add_form(kind, rng, robot, arrays, dh_robot, joint, compliance, size, state)
     its parameters, None when it cannot be made visible."""
     probe, params = make_probe(kind, rng, robot, arrays, dh_robot)
     files = list(arrays)
+    for fn in files:  # a form that writes the readings' times
+        if probe[fn] is not None and len(probe[fn]) > 3:
+            state["times"][fn] = probe[fn][3]
     y, cols = state["y"], state["cols"]
     if kind == "tracker":
         # The rotation's first-order shape a x d sets the angle for the size.
@@ -431,7 +453,7 @@ def main() -> int:
             # A pair "k1+k2" adds both forms (the tracker's rotation last: it turns what the
             # tracker reads, the other effect included), each drawn as it is alone.
             parts = sorted(kind.split("+"), key=lambda k: k == "tracker")
-            state = {"y": dict(meas), "cols": dict(joint), "forces": None}
+            state = {"y": dict(meas), "cols": dict(joint), "forces": None, "times": {}}
             params = {}
             for part in parts:
                 rng = np.random.default_rng([seed] + [ord(c) for c in part])
@@ -454,7 +476,7 @@ def main() -> int:
                                  y["valid.csv"])
             refit = reachable(cols["calib.csv"], y["calib.csv"], cols["valid.csv"], y["valid.csv"])
             dst = os.path.join(a.out, s, f"{kind}_{seed:02d}")
-            write_scenario(src, dst, files, add, forces)
+            write_scenario(src, dst, files, add, forces, state["times"] or None)
             effects = [KINDS.get(k, "coupling") for k in kind.split("+")]
             what = " and ".join(DESCRIPTION.get(k) or
                                 f"compliance coupling of joints {k[8]} and {k[9]}"

@@ -156,23 +156,26 @@ def write_index(out, entries, who):
     print(f"{who}: {len(entries)} scenarios in {out}")
 
 
-def write_scenario(src, dst, files, add, forces=None):
+def write_scenario(src, dst, files, add, forces=None, times=None):
     """Copy the CSV files of `src` (read_csv's triples, by name) to `dst` with the displacements
-    moved by add[name] (N x 3, metres; any unit of the file) and, when given, the force columns
-    replaced by forces[name] (N x 3, newtons, written to 0.01 N as the development data are)."""
+    moved by add[name] (N x 3, metres; any unit of the file), when given the force columns
+    replaced by forces[name] (N x 3, newtons, written to 0.01 N as the development data are) and
+    a `t_s` column of times[name] (N, seconds) appended."""
     os.makedirs(dst)
     for fn, (comments, header, rows) in files.items():
         cols = displacement_columns(header, os.path.join(src, fn))
         fcols = [header.index(h) for h in ("fx_N", "fy_N", "fz_N")] if forces else []
         with open(os.path.join(dst, fn), "w") as f:
             f.writelines(comments)
-            f.write(",".join(header) + "\n")
+            f.write(",".join(header + (["t_s"] if times else [])) + "\n")
             for i, (r, d) in enumerate(zip(rows, add[fn])):
                 r = list(r)
                 for k, (c, unit) in enumerate(cols):
                     r[c] = repr(float(float(r[c]) + unit * d[k]))
                 for k, c in enumerate(fcols):
                     r[c] = f"{forces[fn][i, k]:.2f}"
+                if times:
+                    r.append(f"{times[fn][i]:.1f}")
                 f.write(",".join(r) + "\n")
 
 

@@ -187,8 +187,9 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     """bench/form_probes.py on the control: its own gravity torques (modified DH read from the
     robot file) agree with stiff's Jacobian, each probe leaves the requested amount after the
     joint compliances, the flange sensor's forces and the tracker's rotation are what
-    truth.json says, a pair is the sum of its two forms, and the diagnosis names the class of a
-    kinked reducer about the gravity preload and of a drift read in reversed order
+    truth.json says, a pair is the sum of its two forms, a drift over the clock writes the
+    loaded readings' times, and the diagnosis names the class of a kinked reducer about the
+    gravity preload, of a drift read in reversed order and of one read at irregular times
     (docs/diagnosis.md, section 6)."""
     np = pytest.importorskip("numpy")
     import stiff
@@ -218,7 +219,7 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
 
     out = tmp_path / "forms"
     kinds = ("kinkg23,drift_reversed,force_flange,tracker,coupling24,link_fore,"
-             "compensator_lever,kinkg23+drift_reversed")
+             "compensator_lever,kinkg23+drift_reversed,drift_timed")
     p = subprocess.run([sys.executable, str(root / "bench" / "form_probes.py"), "--data",
                         str(suite), "--out", str(out), "--sets", "base", "--seeds", "0",
                         "--kinds", kinds], capture_output=True, text=True, timeout=600)
@@ -250,6 +251,21 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
             assert np.allclose(probe.force, expect, atol=0.0051)  # written to 0.01 N
             continue
         assert np.array_equal(probe.force, base.force)
+        if kind == "drift_timed":
+            # Along one direction, and the loaded readings' times written, rising, with the
+            # pause: one wait of 10 min or more (the others 5 s + a mean of 25 s).
+            direction = np.array(truth["effect_parameters"]["direction"])
+            moved = added.reshape(-1, 3)
+            assert np.allclose(np.cross(moved, direction), 0.0, atol=1e-15)
+            lines = [x for x in (folder / "calib.csv").read_text().splitlines()
+                     if not x.startswith("#")]
+            assert lines[0].split(",")[-1] == "t_s"
+            control = [x for x in (suite / "base" / "none_00" / "calib.csv").read_text()
+                       .splitlines() if not x.startswith("#")]
+            assert "t_s" not in control[0].split(",")
+            t = np.array([float(x.split(",")[-1]) for x in lines[1:]])
+            assert len(t) == len(moved) and np.all(np.diff(t) >= 5.0 - 0.05)
+            assert (np.diff(t) >= 600.0).sum() == 1
         if kind == "tracker":
             angle = np.deg2rad(truth["effect_parameters"]["angle_deg"])
             r = fp.rodrigues(np.array(truth["effect_parameters"]["axis"]) * angle)
@@ -262,8 +278,8 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
             assert left == pytest.approx(40e-6, rel=1e-6)
         else:
             assert left < 40e-6
-    rows = scored(root, out, "given", "kinkg23,drift_reversed", tmp_path)
-    assert len(rows) == 2
+    rows = scored(root, out, "given", "kinkg23,drift_reversed,drift_timed", tmp_path)
+    assert len(rows) == 3
     for r in rows:
         assert r["outcome"] == "right" and r["ratio"] < 1.25, r
 
