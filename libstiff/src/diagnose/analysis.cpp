@@ -402,13 +402,13 @@ Analysis analyse(const Context& cx,
       double vchi2 = 0;
       // Each row's error over its covariance (row_covariance: the stated force error along
       // the model's force response at that row), the prediction's variance as a multiple.
-      const Noise& vn = cx.vnoise->known ? *cx.vnoise : noise;
       const auto vctx = a.model->contexts(scored);
       for (size_t r = 0; r < closest.size(); ++r) {
         const auto row = static_cast<Eigen::Index>(r);
         Eigen::Matrix3d cov = Eigen::Matrix3d::Identity() * (sr[r] * sr[r]);
         if (cx.vnoise->known)
-          cov = row_covariance(vn, row, force_response(*a.model, a.theta, scored.rows[r], vctx[r]));
+          cov = row_covariance(*cx.vnoise, row,
+                               force_response(*a.model, a.theta, scored.rows[r], vctx[r]));
         const Eigen::Matrix3d l = cholesky_factor(cov, row);
         vchi2 += l.triangularView<Eigen::Lower>().solve(closest[r]).squaredNorm() /
                  (1.0 + lev[r] + session_leverage);
