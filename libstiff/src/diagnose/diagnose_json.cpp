@@ -72,6 +72,7 @@ std::string diagnosis_to_json(const Diagnosis& d) {
   j["alpha"] = d.alpha;
   j["noise_floor_m"] = d.noise_floor_m;
   j["noise_source"] = d.noise_source;
+  j["noise_force_error"] = d.noise_force_error;
   j["repeatability_m"] = d.repeatability_m > 0 ? json(d.repeatability_m) : json(nullptr);
   json fit = quality_json(d.fit);
   fit["omnibus_rejects"] = d.omnibus_rejects;

@@ -208,7 +208,9 @@ def diagnosis_report(d, title: str = "stiff diagnose") -> str:
         parts.append(f"<br>Next: <code>{_e(d['suggested_command'])}</code>")
     parts.append("</div>")
     cards = [("model", _e(d["model"])), ("fit RMS", _um(fit["rms_m"])),
-             ("noise floor", _um(d["noise_floor_m"]) + f"<div class='small'>{_e(d['noise_source'])}</div>")]
+             ("noise floor", _um(d["noise_floor_m"]) + "<div class='small'>" + _e(d["noise_source"])
+              + (", force error along the compliance" if d.get("noise_force_error") else "")
+              + "</div>")]
     if "validation" in d:
         cards.append(("validation RMS", _um(d["validation"]["rms_m"])
                       + f"<div class='small'>floor {_um(d['validation']['floor_m'])}</div>"))

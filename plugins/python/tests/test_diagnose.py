@@ -34,7 +34,10 @@ def test_cli_finds_hidden_effect_and_writes_json_and_report(data, capsys):
     assert rc == 0
     assert "verdict: missing_effect" in out
     assert "--model joint+force_frame" in out
+    # The simulated files state the force error: each row's covariance carries it.
+    assert "(sigma_d, with the force error along the arm's compliance)" in out.splitlines()[0]
     d = json.loads(js.read_text())
+    assert d["noise_force_error"] is True
     for key in ("verdict", "model", "fit", "validation", "noise_floor_m", "candidates", "steps", "where"):
         assert key in d
     assert d["verdict"] == "missing_effect"

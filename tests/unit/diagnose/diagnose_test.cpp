@@ -1413,6 +1413,7 @@ TEST(DiagnoseNoise, UnknownNoiseAndReplicates) {
   s.calib.metadata.clear();
   const Diagnosis d = run(s);
   EXPECT_EQ(d.noise_source, "none");
+  EXPECT_FALSE(d.noise_force_error);  // nothing stated: every row weighs alike
   EXPECT_EQ(d.verdict, "missing_effect");
   EXPECT_EQ(named(d), "point_offset");
   EXPECT_FALSE(d.warnings.empty());
@@ -1590,6 +1591,7 @@ TEST(DiagnoseNoise, AForceErrorMovesThePointAlongTheArmsCompliance) {
         simulate(robot, truth, test::design60(57000 + seed, 40), realistic_noise(9700 + seed));
     const Diagnosis d = run(s);
     print("soft arm", seed, d);
+    EXPECT_TRUE(d.noise_force_error);
     // 175 degrees of freedom: the whitened chi-square's relative spread is sqrt(2/175) ~ 0.11,
     // its square root's 0.05; 0.85-1.15 is three of those.
     EXPECT_NEAR(d.fit.residual_to_floor, 1.0, 0.15) << seed;

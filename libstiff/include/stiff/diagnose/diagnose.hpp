@@ -230,7 +230,10 @@ struct Diagnosis {
   std::vector<std::string> ambiguous_group;
   std::string unexplained_signature;  ///< what the structure looks like (unexplained)
   double noise_floor_m = 0.0;
-  std::string noise_source;      ///< "sigma_d", "metadata", "replicates" or "none"
+  std::string noise_source;  ///< "sigma_d", "metadata", "replicates" or "none"
+  /// The data state the force error: each row's covariance carries it along the arm's
+  /// compliance at the pose (docs/diagnosis.md, section 1).
+  bool noise_force_error = false;
   double repeatability_m = 0.0;  ///< the robot's stated repeatability (options); 0: none
   double alpha = 0.05;
   ModelQuality fit;  ///< the model as given

@@ -73,7 +73,9 @@ def print_text(d) -> None:
     floor = d["noise_floor_m"]
     print(f"model {d['model']} on {fit['measurements']} measurements "
           f"({fit['measurements'] - fit['used']} outliers excluded), noise floor {um(floor)} "
-          f"({d['noise_source']})")
+          f"({d['noise_source']}"
+          + (", with the force error along the arm's compliance" if d.get("noise_force_error")
+             else "") + ")")
     line = f"  fit RMS {um(fit['rms_m'])}"
     if floor > 0:
         line += (f", chi2 {fit['chi2']:.1f} for {fit['dof']} dof (p = {fit['chi2_p']:.2g}): "
