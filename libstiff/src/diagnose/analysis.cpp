@@ -132,8 +132,7 @@ Eigen::Matrix3d force_response(const DeflectionModel& model,
 /// the tracker's sigma^2 I plus G S G^T, S the force error's variances along the base axes:
 /// that error moves the point by the arm's compliance, not alike in every direction.
 Eigen::Matrix3d row_covariance(const Noise& noise, Eigen::Index row, const Eigen::Matrix3d& g) {
-  if (noise.known && noise.force_sigma.rows() > row &&
-      noise.force_sigma.row(row).squaredNorm() > 0.0) {
+  if (noise.force_error_stated() && noise.force_sigma.row(row).squaredNorm() > 0.0) {
     const double t = noise.sigma_tracker(row);
     return Eigen::Matrix3d::Identity() * (t * t) +
            g * noise.force_sigma.row(row).cwiseAbs2().asDiagonal() * g.transpose();
@@ -402,11 +401,12 @@ Analysis analyse(const Context& cx,
       double vchi2 = 0;
       // Each row's error over its covariance (row_covariance: the stated force error along
       // the model's force response at that row), the prediction's variance as a multiple.
-      const auto vctx = a.model->contexts(scored);
+      const bool directional = cx.vnoise->force_error_stated();
+      const auto vctx = directional ? a.model->contexts(scored) : std::vector<MeasurementContext>{};
       for (size_t r = 0; r < closest.size(); ++r) {
         const auto row = static_cast<Eigen::Index>(r);
         Eigen::Matrix3d cov = Eigen::Matrix3d::Identity() * (sr[r] * sr[r]);
-        if (cx.vnoise->known)
+        if (directional)
           cov = row_covariance(*cx.vnoise, row,
                                force_response(*a.model, a.theta, scored.rows[r], vctx[r]));
         const Eigen::Matrix3d l = cholesky_factor(cov, row);

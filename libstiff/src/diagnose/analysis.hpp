@@ -110,9 +110,9 @@ struct Analysis {
   /// error moves the point along the directions of the arm's compliance. Weighted rows are W[i]
   /// times metres; unit weights when the noise is unknown.
   std::vector<Eigen::Matrix3d> W, cov_factor;
-  /// Per used row: the model's displacement per unit force along the base axes [m/N], by small
-  /// steps of the force (relative 1e-4: a backlash decision flips only at its threshold); zero
-  /// for a row without a written force.
+  /// Per used row: the model's displacement per unit force along the base axes [m/N], by central
+  /// differences of 1e-4 of the reading; zero for a row without a written force. The covariance
+  /// above and the force-reading trend groups (outside.cpp) use it.
   std::vector<Eigen::Matrix3d> force_response;
   MatrixXd qx;        ///< orthonormal basis of the weighted Jacobian (3n x p)
   VectorXd r;         ///< weighted residual of the used rows (3n)

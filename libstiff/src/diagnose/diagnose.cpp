@@ -107,7 +107,7 @@ Diagnosis diagnose(const RobotModel& robot,
   d.alpha = options.alpha;
   d.noise_floor_m = noise.floor_m;
   d.noise_source = noise.source;
-  d.noise_force_error = noise.known && noise.force_sigma.rows() > 0;
+  d.noise_force_error = noise.force_error_stated();
   d.repeatability_m = options.repeatability_m;
   if (!noise.known)
     d.warnings.push_back(

@@ -37,7 +37,7 @@ bool force_error_sum_is_linear(const Dataset& data) {
 /// sqrt((rel F_k)^2 + abs^2) instead. A force error dF moves the measured point by about
 /// |d| |dF| / |F|, so per displacement axis sigma_F^2 = |d|^2 sum_k sigma_k^2 / (3 |F|^2): the
 /// row's scale for outliers and reports. The tests use the error's direction too: G dF, G the
-/// model's displacement per unit force (Analysis::wm).
+/// model's displacement per unit force (Analysis::W).
 void add_force_noise(const Dataset& data, Noise& n) {
   const double rel = meta_number(data, "force_relative");
   const double abs_n = meta_number(data, "force_absolute_N");
