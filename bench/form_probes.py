@@ -28,9 +28,15 @@ verdict: `missing_effect` naming the class):
   drift_timed      the tracker settling over the clock (time constant 10-30 min), readings at
                    irregular times with a pause of 10-20 min in the loaded pass, the loaded
                    reading's time written in a `t_s` column                  -> drift
-  link_upper, link_fore  a spring inside the upper arm or the forearm at a random point along
+  link_upper, link_fore, link_column, link_wrist   a spring inside the upper arm, the
+                   forearm, the column (link 1) or the wrist (link 4) at a random point along
                    it, bending and twisting about the link frame's axes (the library's
                    springs sit at the link's root)                          -> link
+  offset_meas      the measured point (SMR) alone off the robot file's along a random flange
+                   direction: it moves with the flange's turn, d += (J_w C J_v^T F) x R r
+  offset_load      the load point alone off the file's: the moment (R r) x F turns the arm,
+                   d += J_v C J_w^T ((R r) x F) (C the control's joint compliances; the size
+                   sets |r|, 6-11 cm at the default)                        -> point_offset
   compensator_lever    joint 2's compensator spring acting through a lever: its tangent
                    stiffness from the geometry (up to half the joint's), not a few harmonics
                    of q2                                                     -> gravity_compensator
@@ -76,7 +82,9 @@ KINDS = {
     "drift_timed": "drift",
     "kinkg23": "nonlinear_joint", "cubicg23": "nonlinear_joint", "softzone23": "nonlinear_joint",
     "backlash3": "backlash", "backlash25": "backlash", "link_upper": "link",
-    "link_fore": "link", "compensator_lever": "gravity_compensator",
+    "link_fore": "link", "link_column": "link", "link_wrist": "link",
+    "compensator_lever": "gravity_compensator", "offset_meas": "point_offset",
+    "offset_load": "point_offset",
 }
 # Kinds whose law acts on the total torque, gravity preload included (the masses drawn 30 % off
 # the robot file's, as a user's file is).
@@ -105,6 +113,15 @@ DESCRIPTION = {
                   "twisting about the link frame's axes",
     "link_fore": "a spring inside the forearm at a random point along it, bending and twisting "
                  "about the link frame's axes",
+    "link_column": "a spring inside the column (link 1) at a random point along it, bending and "
+                   "twisting about the link frame's axes",
+    "link_wrist": "a spring inside the wrist (link 4) at a random point along it, bending and "
+                  "twisting about the link frame's axes",
+    "offset_meas": "the measured point (SMR) alone off the robot file's along a random flange "
+                   "direction, the length set by the size (the load point where the file "
+                   "puts it)",
+    "offset_load": "the load point alone off the robot file's along a random flange direction, "
+                   "the length set by the size (the measured point where the file puts it)",
     "compensator_lever": "a compensator spring on joint 2 acting through a lever (its tangent "
                          "stiffness from the spring's geometry, not a few harmonics of q2)",
 }
@@ -242,7 +259,7 @@ def drift_course(kind, rng):
     return course, amp, {"direction": amp.tolist(), "time_constant_sessions": tau}
 
 
-def make_probe(kind, rng, robot, arrays, dh_robot):
+def make_probe(kind, rng, robot, arrays, dh_robot, compliance):
     """Per file: (displacement added [m] at unit scale, forces written or None, extra columns of
     the generating form for the reachable refit (3N x m) at unit scale), and the parameters.
     The caller scales the added displacement; forces and rotations are final."""
@@ -299,8 +316,8 @@ def make_probe(kind, rng, robot, arrays, dh_robot):
             params["law"] = "softening" if sign > 0 else "hardening"
         if kind == "softzone23":
             params["knee_Nm"] = knee
-    elif kind in ("link_upper", "link_fore"):
-        link = {"link_upper": 1, "link_fore": 2}[kind]
+    elif kind.startswith("link_"):
+        link = {"link_column": 0, "link_upper": 1, "link_fore": 2, "link_wrist": 3}[kind]
         along = rng.uniform(0.2, 0.8)
         # A casting bends and twists about the principal axes of its section (the link
         # frame's); its shear and stretch (1e8 N/m and stiffer) are below a micrometre at these
@@ -331,6 +348,25 @@ def make_probe(kind, rng, robot, arrays, dh_robot):
             d = jv[:, :, 1] * (tau[:, 1] * g)[:, None]
             out[fn] = (d, None, d.reshape(-1, 1))
         params = {"lever_m": small, "anchor_m": big, "free_length_m": l0, "phase_rad": phi}
+    elif kind in ("offset_meas", "offset_load"):
+        # Through the joint compliances C the load turns the flange by J_w C J_v^T F: a
+        # measured point off by r moves by that turn x R r more; a load point off by r adds the
+        # moment (R r) x F, moving the point by J_v C J_w^T ((R r) x F). Both are linear in r:
+        # three columns, one per flange axis.
+        r = rotation(rng)[:, 0]  # direction; the size sets the length
+        for fn, (q, f, n) in arrays.items():
+            jac = robot.jacobian(q)
+            jv, jw = jac[:, :3, :], jac[:, 3:, :]
+            rot = robot.tool_pose(q)[:, :3, :3]
+            if kind == "offset_meas":
+                turn = np.einsum("nij,j,nkj,nk->ni", jw, compliance, jv, f)
+                cols = [np.cross(turn, rot[:, :, k]) for k in range(3)]
+            else:
+                cols = [np.einsum("nij,j,nkj,nk->ni", jv, compliance, jw,
+                                  np.cross(rot[:, :, k], f)) for k in range(3)]
+            d = sum(r[k] * cols[k] for k in range(3))
+            out[fn] = (d, None, np.stack([c.reshape(-1) for c in cols], axis=1))
+        params = {"direction_flange": r.tolist()}
     elif kind == "force_flange":
         axis = rotation(rng)[:, 0] * np.deg2rad(rng.uniform(3, 8))
         gains = rng.uniform(0.02, 0.05, 3) * rng.choice([-1.0, 1.0], 3)
@@ -371,7 +407,7 @@ def add_form(kind, rng, robot, arrays, dh_robot, joint, compliance, size, state)
     """Adds one form to state (per file: y the displacements, flat; cols the regressors of the
     generating model, the joint compliances' first; forces the written forces or None); returns
     its parameters, None when it cannot be made visible."""
-    probe, params = make_probe(kind, rng, robot, arrays, dh_robot)
+    probe, params = make_probe(kind, rng, robot, arrays, dh_robot, compliance)
     files = list(arrays)
     for fn in files:  # a form that writes the readings' times
         if probe[fn] is not None and len(probe[fn]) > 3:

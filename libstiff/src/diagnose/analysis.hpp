@@ -272,6 +272,11 @@ struct Chain {
   /// takes up on the calibration poses carries over at all.)
   bool group_validates(const Level& L) const;
 
+  /// The member of level L's ambiguity group whose single step predicts the validation poses
+  /// significantly better than every other member's (F test of the validation mean squares at
+  /// alpha), or empty: the calibration poses cannot tell the members apart, the new poses can.
+  std::string validation_separates(const Level& L, std::string* why) const;
+
   /// Is the residual of level L at the noise floor? With a stated noise: the chi-square test,
   /// allowing for the uncertainty of the stated level. Without: a model that explains the data
   /// predicts the validation poses about as well as it fits (F test of the two mean squares),

@@ -112,6 +112,36 @@ bool Chain::group_validates(const Level& L) const {
   return false;
 }
 
+std::string Chain::validation_separates(const Level& L, std::string* why) const {
+  if (!L.a.quality.has_validation || L.group.size() < 2) return "";
+  std::vector<double> rms;
+  for (const auto& g : L.group) {
+    std::vector<std::string> eff = L.a.effects;
+    eff.push_back(g);
+    try {
+      const Analysis a = analyse(*cx, eff, fixed);
+      rms.push_back(a.quality.has_validation ? comparable_validation(a.quality) : INFINITY);
+    } catch (const NumericalError&) {
+      rms.push_back(INFINITY);  // a member whose re-fit fails predicts nothing
+    }
+  }
+  const size_t best = static_cast<size_t>(std::min_element(rms.begin(), rms.end()) - rms.begin());
+  if (!std::isfinite(rms[best]) || rms[best] <= 0) return "";
+  const double m3 = 3.0 * cx->validation->rows.size();
+  std::string text;
+  for (size_t k = 0; k < rms.size(); ++k) {
+    if (k == best) continue;
+    const double ratio = (rms[k] * rms[k]) / (rms[best] * rms[best]);
+    const double p = std::isfinite(ratio) ? stats::f_sf(ratio, m3, m3) : 0.0;
+    if (!(p < cx->opt->alpha)) return "";
+    text += (text.empty() ? "" : ", ") + L.group[k] + " " + um(rms[k]) + " (p = " + num(p, 2) + ")";
+  }
+  *why = "the calibration poses cannot tell " + join(L.group, ", ") + " apart, but with " +
+         L.group[best] + " the validation poses are predicted to " + um(rms[best]) +
+         ", significantly better than with " + text;
+  return L.group[best];
+}
+
 bool Chain::explained_by_chain(
     size_t i, int depth, std::string* why, std::string* top_why, bool* weak) {
   static constexpr size_t kAlternatives = 3;
@@ -358,10 +388,40 @@ std::string Chain::decide(size_t i, std::string* why) {
   if (!claims(L)) return nothing("");
   const CandidateScore& top = L.scores[0];
   if (!L.separable) {
+    // The calibration poses cannot separate the group. When the validation poses single out
+    // one member and its chain explains the data, that member is the claim; otherwise the
+    // group stands (a member that does not explain the rest is no better evidence than the
+    // group).
+    std::string separated_why;
+    const std::string member = validation_separates(L, &separated_why);
+    if (!member.empty()) {
+      // What decide() and the chains change on level i, to restore when the group stands.
+      const std::vector<std::string> group = L.group;
+      const std::string experiment = L.experiment;
+      levels[i].separable = true;
+      std::string w;
+      const std::string v = decide(i, &w);
+      if (v == "missing_effect" && levels[i].scores[levels[i].pick].effect == member) {
+        *why = w + "; " + separated_why;
+        return v;
+      }
+      levels.resize(i + 1);
+      Level& back = levels[i];
+      back.separable = back.validated = back.refuted = back.tentative = false;
+      back.pick = 0;
+      back.rival.clear();
+      back.group = group;
+      back.experiment = experiment;
+    }
+    // The loop still takes the top's step when the validation poses confirm it (their errors
+    // fall significantly): the group is the claim, the step a model that predicts better.
+    if (const Level* n = next(i); n && L.a.quality.has_validation && n->a.quality.has_validation)
+      levels[i].tentative = paired_fall_p(L.a.quality.validation_error_m,
+                                          n->a.quality.validation_error_m) < cx->opt->alpha;
     *why =
         "these candidates explain the same part of the residual and this data cannot tell "
         "them apart: " +
-        join(L.group, ", ");
+        join(levels[i].group, ", ");
     return "ambiguous";
   }
   std::string reason, top_reason;
@@ -404,6 +464,7 @@ std::string Chain::decide(size_t i, std::string* why) {
     return "unexplained";
   }
   if (!L.rival.empty()) {
+    levels[i].tentative = levels[i].validated;  // the top's chain explains: the loop follows it
     levels[i].group = {top.effect, L.rival};
     levels[i].experiment = experiment_for(*cx, levels[i].group);
     *why = top.effect + " and " + L.rival +

@@ -219,7 +219,7 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
 
     out = tmp_path / "forms"
     kinds = ("kinkg23,drift_reversed,force_flange,tracker,coupling24,link_fore,"
-             "compensator_lever,kinkg23+drift_reversed,drift_timed")
+             "compensator_lever,kinkg23+drift_reversed,drift_timed,offset_meas,offset_load")
     p = subprocess.run([sys.executable, str(root / "bench" / "form_probes.py"), "--data",
                         str(suite), "--out", str(out), "--sets", "base", "--seeds", "0",
                         "--kinds", kinds], capture_output=True, text=True, timeout=600)
@@ -266,6 +266,28 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
             t = np.array([float(x.split(",")[-1]) for x in lines[1:]])
             assert len(t) == len(moved) and np.all(np.diff(t) >= 5.0 - 0.05)
             assert (np.diff(t) >= 600.0).sum() == 1
+        if kind.startswith("offset_"):
+            # The load turns the joints by dq = C J^T (F, M); a point off the flange by R r moves
+            # with the flange's turn, a load off it adds the moment (R r) x F. Checked against
+            # finite turns of the chain (tool_pose only, not the Jacobian's rotation rows).
+            par = truth["effect_parameters"]
+            r = np.array(par["direction_flange"]) * par["scale"]
+            comp = 1.0 / np.asarray(stiff.identify(robot, base).stiffness)
+            comp[~np.isfinite(comp)] = 0.0
+            jac = robot.jacobian(base.q)
+            rot = robot.tool_pose(base.q)[:, :3, :3]
+            h = 1e-3
+            for i in range(len(base.q)):
+                if kind == "offset_meas":
+                    dq = comp * (jac[i, :3].T @ base.force[i])
+                    turned = robot.tool_pose(base.q[i] + h * dq)[:3, :3] @ rot[i].T
+                    theta = np.array([turned[2, 1], turned[0, 2], turned[1, 0]]) / h
+                    expect = np.cross(theta, rot[i] @ r)
+                else:
+                    dq = comp * (jac[i, 3:].T @ np.cross(rot[i] @ r, base.force[i]))
+                    expect = (robot.tool_pose(base.q[i] + h * dq)[:3, 3] -
+                              robot.tool_pose(base.q[i])[:3, 3]) / h
+                assert np.allclose(added.reshape(-1, 3)[i], expect, rtol=2e-3, atol=1e-9)
         if kind == "tracker":
             angle = np.deg2rad(truth["effect_parameters"]["angle_deg"])
             r = fp.rodrigues(np.array(truth["effect_parameters"]["axis"]) * angle)

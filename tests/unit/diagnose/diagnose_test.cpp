@@ -1188,6 +1188,36 @@ TEST(DiagnoseLink, SpringsOfTheColumnAndTheWristAreFound) {
     for (uint64_t seed = 1; seed <= 2; ++seed) expect_found("link", spring, value, seed, 4);
 }
 
+// A spring in the wrist (link 4, about its x axis) moves the measured point much as a compliant
+// tool does: on 60 calibration poses the two explain each other's evidence away (ambiguity
+// group link + tool_compliance). At three times the wrist joint's compliance the 40 validation
+// poses tell them apart: with link they are predicted significantly better (F test at alpha),
+// so the verdict names link. At twice it they do not, the verdict stays `ambiguous`, and the
+// loop still takes the group's step the validation poses confirm: the final model predicts the
+// new poses at the floor, within three standard deviations of an RMS over 3 x 40 components
+// (1 + 3 / sqrt(240) = 1.19).
+TEST(DiagnoseLink, AWristSpringToolComplianceCannotMimicOnNewPosesIsNamed) {
+  const double c5 = 1.0 / test::paper_stiffness()(4);
+  DiagnosisOptions o;
+  o.auto_loop = true;
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
+    const Diagnosis d = run(scenario_of(joint_and("link", {{"c_link4_x", 3 * c5}}), seed, 78), o);
+    print("link c_link4_x x3", seed, d);
+    EXPECT_EQ(d.verdict, "missing_effect") << d.summary;
+    EXPECT_EQ(named(d), "link") << d.summary;
+  }
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
+    const Diagnosis d = run(scenario_of(joint_and("link", {{"c_link4_x", 2 * c5}}), seed, 78), o);
+    print("link c_link4_x x2", seed, d);
+    EXPECT_TRUE(found(d, "link")) << d.summary;
+    ASSERT_GE(d.steps.size(), 2u) << d.summary;
+    const ModelQuality& end = d.steps.back().quality;
+    EXPECT_TRUE(end.model == "joint+link" || end.model == "joint+tool_compliance") << end.model;
+    EXPECT_LT(end.validation_rms_m, d.fit.validation_rms_m);
+    EXPECT_LE(end.validation_rms_m / end.validation_floor_m, 1.19);
+  }
+}
+
 // An effect at half the example's size, often strongly significant in the calibration but
 // small against the prediction variance of its parameters on 40 new poses. When the validation
 // poses neither confirm nor refute it, the verdict names it (`ambiguous` with it) instead of
