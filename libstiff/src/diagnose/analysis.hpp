@@ -275,7 +275,10 @@ struct Chain {
   /// The member of level L's ambiguity group whose single step predicts the validation poses
   /// significantly better than every other member's (F test of the validation mean squares at
   /// alpha), or empty: the calibration poses cannot tell the members apart, the new poses can.
-  std::string validation_separates(const Level& L, std::string* why) const;
+  /// `top_errors`: the validation errors of the step with the group's first member (the top).
+  std::string validation_separates(const Level& L,
+                                   std::string* why,
+                                   std::vector<double>* top_errors) const;
 
   /// Is the residual of level L at the noise floor? With a stated noise: the chi-square test,
   /// allowing for the uncertainty of the stated level. Without: a model that explains the data

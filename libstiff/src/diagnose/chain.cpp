@@ -112,7 +112,10 @@ bool Chain::group_validates(const Level& L) const {
   return false;
 }
 
-std::string Chain::validation_separates(const Level& L, std::string* why) const {
+std::string Chain::validation_separates(const Level& L,
+                                        std::string* why,
+                                        std::vector<double>* top_errors) const {
+  top_errors->clear();
   if (!L.a.quality.has_validation || L.group.size() < 2) return "";
   std::vector<double> rms;
   for (const auto& g : L.group) {
@@ -121,6 +124,7 @@ std::string Chain::validation_separates(const Level& L, std::string* why) const 
     try {
       const Analysis a = analyse(*cx, eff, fixed);
       rms.push_back(a.quality.has_validation ? comparable_validation(a.quality) : INFINITY);
+      if (rms.size() == 1 && a.quality.has_validation) *top_errors = a.quality.validation_error_m;
     } catch (const NumericalError&) {
       rms.push_back(INFINITY);  // a member whose re-fit fails predicts nothing
     }
@@ -393,7 +397,8 @@ std::string Chain::decide(size_t i, std::string* why) {
     // group stands (a member that does not explain the rest is no better evidence than the
     // group).
     std::string separated_why;
-    const std::string member = validation_separates(L, &separated_why);
+    std::vector<double> top_errors;
+    const std::string member = validation_separates(L, &separated_why, &top_errors);
     if (!member.empty()) {
       // What decide() and the chains change on level i, to restore when the group stands.
       const std::vector<std::string> group = L.group;
@@ -415,9 +420,8 @@ std::string Chain::decide(size_t i, std::string* why) {
     }
     // The loop still takes the top's step when the validation poses confirm it (their errors
     // fall significantly): the group is the claim, the step a model that predicts better.
-    if (const Level* n = next(i); n && L.a.quality.has_validation && n->a.quality.has_validation)
-      levels[i].tentative = paired_fall_p(L.a.quality.validation_error_m,
-                                          n->a.quality.validation_error_m) < cx->opt->alpha;
+    levels[i].tentative = !top_errors.empty() && paired_fall_p(L.a.quality.validation_error_m,
+                                                               top_errors) < cx->opt->alpha;
     *why =
         "these candidates explain the same part of the residual and this data cannot tell "
         "them apart: " +
