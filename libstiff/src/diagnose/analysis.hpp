@@ -172,6 +172,12 @@ struct GroupScore {
 
 GroupScore score_group(const Analysis& a, const MatrixXd& z, const VectorXd& typical, double tol);
 
+/// Does the group with orthonormal basis ug (projected off the current model) explain away the
+/// evidence of the group with basis ut: is t's partial F test given the current model and g not
+/// significant at alpha? (True when g spans t, or too few rows are left to test.)
+bool explains_away(
+    const Analysis& a, const MatrixXd& ut, const MatrixXd& ug, double alpha, double rank_tol);
+
 /// `g` (from score_group) tested with the variance of the score u^T r estimated from each row's
 /// own residual (cluster-robust, a row's three components one cluster) instead of one residual
 /// variance for all rows: W = s^T V^-1 s, s = u^T r, V = c sum_i u_i^T r_i r_i^T u_i, c = G/(G-1)
@@ -186,8 +192,9 @@ struct Level {
   std::vector<MatrixXd> bases;         ///< projected basis per score (testable)
   std::vector<std::string> group;      ///< ambiguity set around the top (incl. top)
   size_t pick = 0;                     ///< the candidate the next level adds (index in scores)
-  std::string rival;      ///< a group member whose chain explains the data as well as the pick
-  bool separable = true;  ///< the top is separable from every group member
+  std::string rival;          ///< a group member whose chain explains the data as well as the pick
+  std::string outside_rival;  ///< a mechanism outside the library that explains the pick's evidence
+  bool separable = true;      ///< the top is separable from every group member
   std::string experiment;
   bool cross_validated = false;  ///< a.quality.cross_validation_error_m has been computed
   bool validated = false;        ///< adding the pick lowered the validation error (explained_by)
@@ -276,6 +283,11 @@ struct Chain {
   /// significantly better than every other member's (F test of the validation mean squares at
   /// alpha), or empty: the calibration poses cannot tell the members apart, the new poses can.
   /// `top_errors`: the validation errors of the step with the group's first member (the top).
+  /// The mechanism outside the library (outside_trends; not the flexible groups tested beyond
+  /// each candidate) that is significant at level i and explains away the evidence of its pick:
+  /// the data cannot tell the pick from an effect no candidate has. Null when none.
+  std::optional<OutsideTrend> outside_rival(size_t i) const;
+
   std::string validation_separates(const Level& L,
                                    std::string* why,
                                    std::vector<double>* top_errors) const;

@@ -146,6 +146,19 @@ std::string Chain::validation_separates(const Level& L,
   return L.group[best];
 }
 
+std::optional<OutsideTrend> Chain::outside_rival(size_t i) const {
+  const Level& L = levels[i];
+  if (L.pick >= L.bases.size()) return std::nullopt;
+  const MatrixXd& ut = L.bases[L.pick];
+  for (OutsideTrend& o : outside_trends(*cx, L.a)) {
+    if (o.beyond_candidates) continue;
+    const GroupScore g = score_group(L.a, o.z, VectorXd::Ones(o.z.cols()), 1e-6);
+    if (g.df == 0 || !(std::exp(g.log_p) < cx->opt->alpha)) continue;
+    if (explains_away(L.a, ut, g.u, cx->opt->alpha, cx->opt->rank_tolerance)) return std::move(o);
+  }
+  return std::nullopt;
+}
+
 bool Chain::explained_by_chain(
     size_t i, int depth, std::string* why, std::string* top_why, bool* weak) {
   static constexpr size_t kAlternatives = 3;
@@ -349,6 +362,7 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
 
 std::string Chain::decide(size_t i, std::string* why) {
   levels[i].tentative = false;
+  levels[i].outside_rival.clear();
   const Level& L = levels[i];
   const double alpha = cx->opt->alpha;
   const ModelQuality& q = L.a.quality;
@@ -415,6 +429,7 @@ std::string Chain::decide(size_t i, std::string* why) {
       back.separable = back.validated = back.refuted = back.tentative = false;
       back.pick = 0;
       back.rival.clear();
+      back.outside_rival.clear();
       back.group = group;
       back.experiment = experiment;
     }
@@ -477,6 +492,19 @@ std::string Chain::decide(size_t i, std::string* why) {
     return "ambiguous";
   }
   const CandidateScore& pick = L.scores[L.pick];
+  // A mechanism outside the library that takes up the same part of the residual: the chain
+  // explains the data, but so may an effect that no candidate has. No claim; the loop follows
+  // the step the validation poses confirmed.
+  if (const std::optional<OutsideTrend> o = outside_rival(i)) {
+    levels[i].tentative = levels[i].validated;
+    levels[i].group = {pick.effect};
+    levels[i].outside_rival = o->name;
+    levels[i].experiment = experiment_for(*cx, levels[i].group);
+    *why = pick.effect + " explains the misfit (partial F = " + num(pick.statistic, 4) +
+           ", p_adj = " + num(pick.p_adjusted, 2) + "), but so does " + o->description +
+           ": it takes up the same part of the residual, and this data cannot tell them apart";
+    return "ambiguous";
+  }
   *why = pick.effect + " is missing (partial F = " + num(pick.statistic, 4) +
          ", Holm-adjusted p = " + num(pick.p_adjusted, 2) + ", expected RMS drop " +
          um(pick.expected_rms_drop_m) + ")";

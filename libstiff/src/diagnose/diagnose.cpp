@@ -184,6 +184,7 @@ Diagnosis diagnose(const RobotModel& robot,
   }
   if (d.verdict == "ambiguous") {
     d.ambiguous_group = L0.group;
+    d.outside_rival = L0.outside_rival;
     d.experiment = L0.experiment;
   }
   if (d.verdict == "unexplained") d.unexplained_signature = signature_of(d);

@@ -89,6 +89,7 @@ std::string diagnosis_to_json(const Diagnosis& d) {
   j["suggested_command"] = text_or_null(d.suggested_command);
   if (d.after_valid) j["after"] = quality_json(d.after);
   j["ambiguous_group"] = d.ambiguous_group;
+  j["outside_rival"] = text_or_null(d.outside_rival);
   j["experiment"] = text_or_null(d.experiment);
   j["unexplained_signature"] = text_or_null(d.unexplained_signature);
   json cands = json::array();

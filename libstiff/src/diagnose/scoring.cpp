@@ -126,6 +126,19 @@ std::string experiment_for(const Context& cx, const std::vector<std::string>& gr
   return join(tips, "; ");
 }
 
+bool explains_away(
+    const Analysis& a, const MatrixXd& ut, const MatrixXd& ug, double alpha, double rank_tol) {
+  const VectorXd rg = a.r - ug * (ug.transpose() * a.r);
+  const MatrixXd utg = ut - ug * (ug.transpose() * ut);
+  const MatrixXd b = orthonormal_basis(utg, rank_tol, nullptr, nullptr, 1.0);
+  if (b.cols() == 0) return true;  // g spans t
+  const double d = (b.transpose() * rg).squaredNorm();
+  const int dof2 = a.n - a.p - static_cast<int>(ug.cols() + b.cols());
+  if (dof2 <= 0) return true;
+  const double f = (d / b.cols()) / (std::max(rg.squaredNorm() - d, 1e-300) / dof2);
+  return stats::f_sf(f, b.cols(), dof2) >= alpha;
+}
+
 Level score_level(const Context& cx, Analysis a, const std::vector<std::string>& candidates) {
   const DiagnosisOptions& opt = *cx.opt;
   Level L;
@@ -280,19 +293,7 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
       const double rho = svd.singularValues().size() ? svd.singularValues()(0) : 0.0;
       L.scores[i].max_correlation = std::min(1.0, rho);
       if (!L.scores[i].significant && rho <= opt.ambiguity_correlation) continue;
-      // Does g explain the top's evidence away? Test top | (current + g).
-      const VectorXd rg = a.r - ug * (ug.transpose() * a.r);
-      MatrixXd utg = ut - ug * (ug.transpose() * ut);
-      const MatrixXd b = orthonormal_basis(utg, opt.rank_tolerance, nullptr, nullptr, 1.0);
-      bool explained_away = true;
-      if (b.cols() > 0) {
-        const double d = (b.transpose() * rg).squaredNorm();
-        const int dof2 = a.n - a.p - static_cast<int>(ug.cols() + b.cols());
-        if (dof2 > 0) {
-          const double f = (d / b.cols()) / (std::max(rg.squaredNorm() - d, 1e-300) / dof2);
-          explained_away = stats::f_sf(f, b.cols(), dof2) >= opt.alpha;
-        }
-      }
+      const bool explained_away = explains_away(a, ut, ug, opt.alpha, opt.rank_tolerance);
       if (rho > opt.ambiguity_correlation || (explained_away && L.scores[i].significant)) {
         L.group.push_back(L.scores[i].effect);
         if (explained_away) L.separable = false;

@@ -252,6 +252,9 @@ def diagnosis_report(d, title: str = "stiff diagnose") -> str:
     parts.append(_added_variable_figure(d))
     if d.get("experiment"):
         parts.append(f"<p><b>Discriminating experiment:</b> {_e(d['experiment'])}</p>")
+    if d.get("outside_rival"):
+        parts.append(f"<p><b>Also explained by a mechanism outside the library:</b> "
+                     f"{_e(d['outside_rival'])} (see the verdict)</p>")
     if d.get("unexplained_signature"):
         parts.append(f"<p><b>Signature of the unexplained structure:</b> {_e(d['unexplained_signature'])}</p>")
     parts.append("<h2>4. Before / after</h2>")

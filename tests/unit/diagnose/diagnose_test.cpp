@@ -897,12 +897,11 @@ int claims_outside_library(const char* what,
 // refutes it where, pooled with that fit, they passed (claimed in 3 of these 4 seeds). Where the
 // chain predicts the new poses within 1.12 times the floor (one seed) the residual still turns
 // with the base moment (the `base_tilt` trend test): claimed in none of the seeds, where that
-// seed was claimed before the test (and 2 of the 8 without a statement). A stiffer pedestal
-// (2e5 and 3e5 N*m/rad) is named link compliance, the model with it predicting the new poses at
-// 0.97-1.23 times the floor: this data cannot tell them apart.
-void tilt_pedestal(Dataset& data) {
+// seed was claimed before the test (and 2 of the 8 without a statement). A stiffer pedestal:
+// AStiffPedestalIsNotNamedLink.
+void tilt_pedestal(Dataset& data, double stiffness_x = 6.0e4) {
   const RobotModel robot = test::rokae();
-  const Eigen::Vector3d c(1.0 / 6.0e4, 1.0 / 9.0e4, 0.0);
+  const Eigen::Vector3d c(1.0 / stiffness_x, 1.0 / (1.5 * stiffness_x), 0.0);
   for (auto& m : data.rows) {
     const ChainState chain = robot.chain(m.q);
     const Eigen::Vector3d load = robot.point_position(chain, robot.load_point);
@@ -913,12 +912,33 @@ void tilt_pedestal(Dataset& data) {
 }
 
 TEST(DiagnoseHonesty, SlowPedestalTiltIsNotClaimed) {
-  const auto tilt = tilt_pedestal;
+  const auto tilt = [](Dataset& d) { tilt_pedestal(d); };
   EXPECT_EQ(claims_outside_library("pedestal tilt", tilt), 0);
   // Without a statement, link then a force-frame step: the second step's gain on the new
   // poses is no more than chance in most seeds, so the chain is not confirmed (claimed in 6
   // of these 8 seeds before a later step had to lower the validation error significantly).
   EXPECT_EQ(claims_outside_library("pedestal tilt, noise unknown", tilt, false, 8), 0);
+}
+
+// A pedestal three times stiffer (2e5 and 3e5 N*m/rad) turns the arm about horizontal axes by
+// little more than the noise, much as a spring in the upper arm does: `link` explains the
+// misfit and its model predicts the new poses near the floor, and it was named. The `base_tilt`
+// mechanism explains link's evidence away as well (link's partial F test given it is not
+// significant), so the data cannot tell them apart: `ambiguous` with link alone and
+// `outside_rival` base_tilt, or `unexplained` where the tilt's trend is left after link; never
+// `missing_effect`.
+TEST(DiagnoseHonesty, AStiffPedestalIsNotNamedLink) {
+  const auto tilt = [](Dataset& d) { tilt_pedestal(d, 2.0e5); };
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
+    const Diagnosis d = run(altered_scenario(tilt, seed, true));
+    print("stiff pedestal", seed, d);
+    EXPECT_NE(d.verdict, "missing_effect") << d.summary;
+    EXPECT_NE(d.verdict, "adequate") << d.summary;
+    if (d.verdict == "ambiguous" && d.ambiguous_group == std::vector<std::string>{"link"}) {
+      EXPECT_EQ(d.outside_rival, "base_tilt") << d.summary;
+      EXPECT_NE(diagnosis_to_json(d).find("\"outside_rival\": \"base_tilt\""), std::string::npos);
+    }
+  }
 }
 
 // The model that mimics the tilt, diagnosed on its own (no loop): no candidate is left
@@ -931,7 +951,8 @@ TEST(DiagnoseHonesty, TheModelThatMimicsAPedestalTiltIsNotAdequate) {
   int adequate = 0, named = 0;
   for (const bool stated : {true, false})
     for (uint64_t seed = 1; seed <= 4; ++seed) {
-      const Diagnosis d = run(altered_scenario(tilt_pedestal, seed, stated), {}, mimic);
+      const Diagnosis d =
+          run(altered_scenario([](Dataset& x) { tilt_pedestal(x); }, seed, stated), {}, mimic);
       print(stated ? "pedestal, mimic" : "pedestal, mimic, noise unknown", seed, d);
       adequate += d.verdict == "adequate";
       named +=
@@ -1320,7 +1341,10 @@ Diagnosis auto_loop(const Truth& calib_truth,
 // model with the validation error lower. (Without that rule the first seed already ended
 // `unexplained` with the model `joint`.) With the noise stated and link's model at the floor,
 // the candidate the validation poses do not confirm is calibration noise taken up: link is
-// named `missing_effect` (before that rule 3 of 4 seeds left it `ambiguous`).
+// named `missing_effect` (before that rule 3 of 4 seeds left it `ambiguous`), or `ambiguous`
+// with link alone because a pedestal tilt explains its evidence as well (the example's
+// upper-arm springs turn the arm about horizontal axes much as a tilting pedestal does; 3 of
+// the 4 seeds), never because of the refuted candidate.
 TEST(DiagnoseAuto, ACandidateTheValidationRefutesDoesNotUndoAConfirmedStep) {
   const auto [calib_truth, valid_truth] = clocked_in_calibration_only({"joint", "link"});
   int kept = 0, claimed = 0;
@@ -1328,7 +1352,9 @@ TEST(DiagnoseAuto, ACandidateTheValidationRefutesDoesNotUndoAConfirmedStep) {
     const Diagnosis d = auto_loop(calib_truth, valid_truth, seed, 0);
     print("link, force frame in calibration only", seed, d);
     kept += found(d, "link");
-    claimed += d.verdict == "missing_effect" && named(d) == "link";
+    claimed += (d.verdict == "missing_effect" && named(d) == "link") ||
+               (d.verdict == "ambiguous" && d.outside_rival == "base_tilt" &&
+                d.ambiguous_group == std::vector<std::string>{"link"});
     EXPECT_NE(d.verdict, "unexplained") << d.summary;
     EXPECT_NE(d.final_model.find("link"), std::string::npos) << d.final_model;
     ASSERT_GE(d.steps.size(), 2u);

@@ -228,6 +228,9 @@ struct Diagnosis {
   std::string suggested_command;
   std::string experiment;  ///< discriminating experiment (ambiguous)
   std::vector<std::string> ambiguous_group;
+  /// The mechanism outside the library (a "where it fails" covariate, e.g. base_tilt) that
+  /// explains the group's evidence as well (ambiguous); "" when none.
+  std::string outside_rival;
   std::string unexplained_signature;  ///< what the structure looks like (unexplained)
   double noise_floor_m = 0.0;
   std::string noise_source;  ///< "sigma_d", "metadata", "replicates" or "none"
