@@ -151,10 +151,15 @@ std::optional<OutsideTrend> Chain::outside_rival(size_t i) const {
   if (L.pick >= L.bases.size()) return std::nullopt;
   const MatrixXd& ut = L.bases[L.pick];
   for (OutsideTrend& o : outside_trends(*cx, L.a)) {
-    if (o.beyond_candidates) continue;
     const GroupScore g = score_group(L.a, o.z, VectorXd::Ones(o.z.cols()), 1e-6);
     if (g.df == 0 || !(std::exp(g.log_p) < cx->opt->alpha)) continue;
-    if (explains_away(L.a, ut, g.u, cx->opt->alpha, cx->opt->rank_tolerance)) return std::move(o);
+    if (!explains_away(L.a, ut, g.u, cx->opt->alpha, cx->opt->rank_tolerance)) continue;
+    // A flexible group contains much of the library's own laws (a compensator is a joint-2
+    // compliance that varies with q2): it is a rival only when the candidate does not explain
+    // it away in turn, i.e. when it takes up more than the candidate does.
+    if (o.beyond_candidates && explains_away(L.a, g.u, ut, cx->opt->alpha, cx->opt->rank_tolerance))
+      continue;
+    return std::move(o);
   }
   return std::nullopt;
 }

@@ -1006,9 +1006,10 @@ std::pair<Eigen::Matrix3Xd, Eigen::VectorXd> joint_motion_and_torque(const Robot
 // and 0.5 (the joint model's fit 1.3-1.8 times the floor). Coupling, the gravity compensator,
 // link compliance or backlash take part of it up on the calibration poses; what they leave
 // follows the joint's deflection times the angles' harmonics (the pose_compliance trend tests),
-// so nothing is claimed but in runs close to the floor: two of twenty, the joint-3 law named
-// nonlinear_joint or the compensator with the new poses predicted at 1.14-1.3 times the floor
-// (one before the stated force error entered each row's covariance).
+// so nothing is claimed but in runs close to the floor: one of twenty, the joint-3 law named
+// without a statement (two, named nonlinear_joint or the compensator at 1.14-1.3 times the
+// floor, before a pose-dependent group that takes up more than the candidate became its rival,
+// docs/diagnosis.md section 3, rule 3).
 TEST(DiagnoseHonesty, SlowAJointCompliancePoseDependentIsNotClaimed) {
   const RobotModel robot = test::rokae();
   const Eigen::VectorXd c = test::paper_stiffness().cwiseInverse();
