@@ -279,15 +279,16 @@ struct Chain {
   /// takes up on the calibration poses carries over at all.)
   bool group_validates(const Level& L) const;
 
+  /// The mechanism outside the library (outside_trends) that is significant at level i and
+  /// explains away the evidence of its pick: the data cannot tell the pick from an effect no
+  /// candidate has. A flexible group (tested beyond each candidate) counts only when the pick
+  /// does not explain it away in turn. Null when none.
+  std::optional<OutsideTrend> outside_rival(size_t i) const;
+
   /// The member of level L's ambiguity group whose single step predicts the validation poses
   /// significantly better than every other member's (F test of the validation mean squares at
   /// alpha), or empty: the calibration poses cannot tell the members apart, the new poses can.
   /// `top_errors`: the validation errors of the step with the group's first member (the top).
-  /// The mechanism outside the library (outside_trends; not the flexible groups tested beyond
-  /// each candidate) that is significant at level i and explains away the evidence of its pick:
-  /// the data cannot tell the pick from an effect no candidate has. Null when none.
-  std::optional<OutsideTrend> outside_rival(size_t i) const;
-
   std::string validation_separates(const Level& L,
                                    std::string* why,
                                    std::vector<double>* top_errors) const;
