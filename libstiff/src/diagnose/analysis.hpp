@@ -279,6 +279,12 @@ struct Chain {
   /// takes up on the calibration poses carries over at all.)
   bool group_validates(const Level& L) const;
 
+  /// The comparable validation RMS of level L's model with `g` added (INFINITY when the re-fit
+  /// fails or there are no validation poses); `errors`: that model's validation errors.
+  double step_validation(const Level& L,
+                         const std::string& g,
+                         std::vector<double>* errors = nullptr) const;
+
   /// The mechanism outside the library (outside_trends) that is significant at level i and
   /// explains away the evidence of its pick: the data cannot tell the pick from an effect no
   /// candidate has. A flexible group (tested beyond each candidate) counts only when the pick

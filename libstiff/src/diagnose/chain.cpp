@@ -95,20 +95,35 @@ double comparable_validation(const ModelQuality& q) {
                     q.validation_session_leverage * q.sigma_hat_m * q.sigma_hat_m;
   return std::sqrt(std::max(0.0, ms));
 }
+
+/// p of the F test that a model predicting the validation poses at `worse` (comparable RMS)
+/// does so no worse than one at `better`: the ratio of the two mean squares, 3m dof each.
+double validation_f_p(double worse, double better, size_t m) {
+  const double m3 = 3.0 * static_cast<double>(m);
+  const double ratio = (worse * worse) / (better * better);
+  return std::isfinite(ratio) ? stats::f_sf(ratio, m3, m3) : 0.0;
+}
 }  // namespace
+
+double Chain::step_validation(const Level& L,
+                              const std::string& g,
+                              std::vector<double>* errors) const {
+  std::vector<std::string> eff = L.a.effects;
+  eff.push_back(g);
+  try {
+    const Analysis a = analyse(*cx, eff, fixed);
+    if (!a.quality.has_validation) return INFINITY;
+    if (errors) *errors = a.quality.validation_error_m;
+    return comparable_validation(a.quality);
+  } catch (const NumericalError&) {
+    return INFINITY;  // a member whose re-fit fails predicts nothing
+  }
+}
 
 bool Chain::group_validates(const Level& L) const {
   const double before = comparable_validation(L.a.quality);
-  for (const auto& g : L.group) {
-    std::vector<std::string> eff = L.a.effects;
-    eff.push_back(g);
-    try {
-      const Analysis a = analyse(*cx, eff, fixed);
-      if (a.quality.has_validation && comparable_validation(a.quality) < before) return true;
-    } catch (const NumericalError&) {
-      // A member whose re-fit fails confirms nothing; the others are still asked.
-    }
-  }
+  for (const auto& g : L.group)
+    if (step_validation(L, g) < before) return true;
   return false;
 }
 
@@ -118,25 +133,14 @@ std::string Chain::validation_separates(const Level& L,
   top_errors->clear();
   if (!L.a.quality.has_validation || L.group.size() < 2) return "";
   std::vector<double> rms;
-  for (const auto& g : L.group) {
-    std::vector<std::string> eff = L.a.effects;
-    eff.push_back(g);
-    try {
-      const Analysis a = analyse(*cx, eff, fixed);
-      rms.push_back(a.quality.has_validation ? comparable_validation(a.quality) : INFINITY);
-      if (rms.size() == 1 && a.quality.has_validation) *top_errors = a.quality.validation_error_m;
-    } catch (const NumericalError&) {
-      rms.push_back(INFINITY);  // a member whose re-fit fails predicts nothing
-    }
-  }
+  for (const auto& g : L.group)
+    rms.push_back(step_validation(L, g, rms.empty() ? top_errors : nullptr));
   const size_t best = static_cast<size_t>(std::min_element(rms.begin(), rms.end()) - rms.begin());
   if (!std::isfinite(rms[best]) || rms[best] <= 0) return "";
-  const double m3 = 3.0 * cx->validation->rows.size();
   std::string text;
   for (size_t k = 0; k < rms.size(); ++k) {
     if (k == best) continue;
-    const double ratio = (rms[k] * rms[k]) / (rms[best] * rms[best]);
-    const double p = std::isfinite(ratio) ? stats::f_sf(ratio, m3, m3) : 0.0;
+    const double p = validation_f_p(rms[k], rms[best], cx->validation->rows.size());
     if (!(p < cx->opt->alpha)) return "";
     text += (text.empty() ? "" : ", ") + L.group[k] + " " + um(rms[k]) + " (p = " + num(p, 2) + ")";
   }
@@ -234,9 +238,7 @@ bool Chain::explained_by_chain(
   // better (F test of the two validation mean squares, 3m dof each); a rival that is not
   // significantly better or worse leaves the data unable to choose (ambiguous).
   if (best != 0 && top_rms < INFINITY) {
-    const double m3 = 3.0 * cx->validation->rows.size();
-    const double ratio = (top_rms * top_rms) / (best_rms * best_rms);
-    if (stats::f_sf(ratio, m3, m3) >= cx->opt->alpha) {
+    if (validation_f_p(top_rms, best_rms, cx->validation->rows.size()) >= cx->opt->alpha) {
       levels[i].rival = levels[i].scores[best].effect;
       best = 0;
     }
