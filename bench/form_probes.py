@@ -44,7 +44,8 @@ verdict: `missing_effect` naming the class):
                    law or a soft zone (knee 5-30 N*m) of the total torque, gravity preload
                    included                                                 -> nonlinear_joint
   backlash3, backlash25   lost motion of joint 3, or of joints 2 and 5     -> backlash
-  k1+k2            two of the above at once (expected: both named), e.g. coupling24+drift_settle
+  k1+k2            two of the above at once (expected: both named), e.g. coupling24+drift_settle;
+                   beside a point offset the other form is seen at the moved points
 
 Usage:
   .venv/bin/python bench/form_probes.py --data DIR --out /tmp/forms --seeds 0-9
@@ -197,22 +198,27 @@ def gravity_torques(chain, q, masses, coms):
     return out
 
 
-def link_spring(chain, q, f, link, along, c_rot):
+def link_spring(chain, q, f, link, along, c_rot, robot=None, shift=None):
     """(N, 3): the measured point's (the flange origin's) displacement from a spring inside
     link `link` (0-based frame index), at the fraction `along` of the way to the next joint's
     origin: the rest of the arm turns by c_rot (3 x 3 in the link's own frame) times the
-    moment about the spring."""
+    moment about the spring. `shift` (with `robot`, whose tool frame turns the offsets): the
+    measured and load points' offsets (r_meas, r_load) from the flange origin [m]."""
     if chain["standard"]:
         raise SystemExit("form_probes: link springs need a modified-DH robot (its frame i sits "
                          "at link i's root)")
+    offsets = np.zeros((2, len(q), 3))
+    if shift is not None:
+        rot = robot.tool_pose(q)[:, :3, :3]
+        offsets = np.stack([np.einsum("nij,j->ni", rot, r) for r in shift])
     out = np.zeros((len(q), 3))
     for r in range(len(q)):
         frames, _ = chain_frames(chain, q[r])
         rot = frames[link][:3, :3]
         o = (1 - along) * frames[link][:3, 3] + along * frames[link + 1][:3, 3]
         lever = frames[-1][:3, 3] - o
-        turn = rot @ c_rot @ rot.T @ np.cross(lever, f[r])
-        out[r] = np.cross(turn, lever)
+        turn = rot @ c_rot @ rot.T @ np.cross(lever + offsets[1, r], f[r])
+        out[r] = np.cross(turn, lever + offsets[0, r])
     return out
 
 
@@ -230,6 +236,24 @@ def joint_columns(robot, q, f):
     """(3N, n): each joint's deflection per unit compliance under the row's force."""
     jv, tau = load_torques(robot, q, f)
     return (jv * tau[:, None, :]).reshape(-1, jv.shape[2])
+
+
+def shifted_torques(robot, q, f, shift):
+    """(the linear Jacobians N x 3 x n at the measured point, the joint torques N x n of the
+    forces f applied at the load point), the two points moved by shift = (r_meas, r_load)
+    [m, flange frame] from where the robot file puts them (None: where it puts them). A
+    point R r off the flange's moves by v - (R r) x w."""
+    if shift is None:
+        return load_torques(robot, q, f)
+    jac = robot.jacobian(q)
+    jv, jw = jac[:, :3, :], jac[:, 3:, :]
+    rot = robot.tool_pose(q)[:, :3, :3]
+
+    def at(r):
+        arm = np.einsum("nij,j->ni", rot, r)
+        return jv - np.cross(arm[:, :, None], jw, axis=1)
+
+    return at(shift[0]), np.einsum("nij,ni->nj", at(shift[1]), f)
 
 
 def drift_course(kind, rng):
@@ -259,23 +283,25 @@ def drift_course(kind, rng):
     return course, amp, {"direction": amp.tolist(), "time_constant_sessions": tau}
 
 
-def make_probe(kind, rng, robot, arrays, dh_robot, compliance):
+def make_probe(kind, rng, robot, arrays, dh_robot, compliance, shift=None):
     """Per file: (displacement added [m] at unit scale, forces written or None, extra columns of
     the generating form for the reachable refit (3N x m) at unit scale), and the parameters.
-    The caller scales the added displacement; forces and rotations are final."""
+    The caller scales the added displacement; forces and rotations are final. `shift`: the
+    measured and load points' offsets (r_meas, r_load) of another form of the same arm (an
+    SMR or load point off the file's sees this form's deflection there too), or None."""
     m = re.fullmatch(r"coupling([1-9])([1-9])", kind)
     out, params = {}, {}
     if m:
         j, k = int(m.group(1)) - 1, int(m.group(2)) - 1
         for fn, (q, f, n) in arrays.items():
-            jv, tau = load_torques(robot, q, f)
+            jv, tau = shifted_torques(robot, q, f, shift)
             d = jv[:, :, j] * tau[:, k, None] + jv[:, :, k] * tau[:, j, None]
             out[fn] = (d, None, d.reshape(-1, 1))
         params = {"joints": [j + 1, k + 1]}
     elif kind == "cubic23":
         w = rng.uniform(0.5, 1.0, 2) * rng.choice([-1.0, 1.0])
         for fn, (q, f, n) in arrays.items():
-            jv, tau = load_torques(robot, q, f)
+            jv, tau = shifted_torques(robot, q, f, shift)
             cols = [jv[:, :, j] * (tau[:, j] ** 3 / T_REF**2)[:, None] for j in (1, 2)]
             out[fn] = (w[0] * cols[0] + w[1] * cols[1], None,
                        np.stack([c.reshape(-1) for c in cols], axis=1))
@@ -284,7 +310,7 @@ def make_probe(kind, rng, robot, arrays, dh_robot, compliance):
     elif kind == "kink3":
         sign = rng.choice([-1.0, 1.0])
         for fn, (q, f, n) in arrays.items():
-            jv, tau = load_torques(robot, q, f)
+            jv, tau = shifted_torques(robot, q, f, shift)
             d = jv[:, :, 2] * np.maximum(sign * tau[:, 2], 0.0)[:, None]
             out[fn] = (d, None, d.reshape(-1, 1))
         params = {"softer_direction": sign}
@@ -304,7 +330,7 @@ def make_probe(kind, rng, robot, arrays, dh_robot, compliance):
         masses = [m * rng.uniform(0.7, 1.3) for m in dh_robot[1]]
         coms = [c * rng.uniform(0.7, 1.3, 3) for c in dh_robot[2]]
         for fn, (q, f, n) in arrays.items():
-            jv, tau = load_torques(robot, q, f)
+            jv, tau = shifted_torques(robot, q, f, shift)
             tau_g = gravity_torques(dh_robot[0], q, masses, coms)
             cols = [jv[:, :, j] * (law(tau_g[:, j] + tau[:, j]) - law(tau_g[:, j]))[:, None]
                     for j in joints]
@@ -324,7 +350,7 @@ def make_probe(kind, rng, robot, arrays, dh_robot, compliance):
         # loads, so the spring turns and does not shift.
         c_rot = np.diag(rng.uniform(0.3, 1.0, 3)) * 1e-5  # rad/(N*m)
         for fn, (q, f, n) in arrays.items():
-            d = link_spring(dh_robot[0], q, f, link, along, c_rot)
+            d = link_spring(dh_robot[0], q, f, link, along, c_rot, robot, shift)
             out[fn] = (d, None, d.reshape(-1, 1))
         params = {"link_frame": link + 1, "along": along, "C_rot": c_rot.tolist()}
     elif kind == "compensator_lever":
@@ -343,7 +369,7 @@ def make_probe(kind, rng, robot, arrays, dh_robot, compliance):
         grid = spring_stiffness(np.linspace(-np.pi, np.pi, 721))
         kappa = 0.5 / np.abs(grid).max()
         for fn, (q, f, n) in arrays.items():
-            jv, tau = load_torques(robot, q, f)
+            jv, tau = shifted_torques(robot, q, f, shift)
             g = 1.0 / (1.0 + kappa * spring_stiffness(q[:, 1] + phi))
             d = jv[:, :, 1] * (tau[:, 1] * g)[:, None]
             out[fn] = (d, None, d.reshape(-1, 1))
@@ -407,7 +433,7 @@ def add_form(kind, rng, robot, arrays, dh_robot, joint, compliance, size, state)
     """Adds one form to state (per file: y the displacements, flat; cols the regressors of the
     generating model, the joint compliances' first; forces the written forces or None); returns
     its parameters, None when it cannot be made visible."""
-    probe, params = make_probe(kind, rng, robot, arrays, dh_robot, compliance)
+    probe, params = make_probe(kind, rng, robot, arrays, dh_robot, compliance, state["shift"])
     files = list(arrays)
     for fn in files:  # a form that writes the readings' times
         if probe[fn] is not None and len(probe[fn]) > 3:
@@ -446,6 +472,9 @@ def add_form(kind, rng, robot, arrays, dh_robot, joint, compliance, size, state)
         y[fn] = y[fn] + probe[fn][0].reshape(-1) * scale
         cols[fn] = np.hstack([cols[fn], probe[fn][2]])
     params["scale"] = scale
+    if kind in ("offset_meas", "offset_load"):
+        r = np.array(params["direction_flange"]) * scale
+        state["shift"] = (r, np.zeros(3)) if kind == "offset_meas" else (np.zeros(3), r)
     return params
 
 
@@ -486,10 +515,14 @@ def main() -> int:
         joint = {fn: joint_columns(robot, *arrays[fn][:2]) for fn in files}
         compliance = 1.0 / np.asarray(stiff.identify(robot, data["calib.csv"]).stiffness)
         for kind in kinds:
-            # A pair "k1+k2" adds both forms (the tracker's rotation last: it turns what the
-            # tracker reads, the other effect included), each drawn as it is alone.
-            parts = sorted(kind.split("+"), key=lambda k: k == "tracker")
-            state = {"y": dict(meas), "cols": dict(joint), "forces": None, "times": {}}
+            # A pair "k1+k2" adds both forms, each drawn as it is alone: a point offset first
+            # (the other form's deflection is then seen at the moved points, as on an arm), the
+            # tracker's rotation last (it turns what the tracker reads, the other effect
+            # included).
+            parts = sorted(kind.split("+"),
+                           key=lambda k: (k == "tracker") - k.startswith("offset_"))
+            state = {"y": dict(meas), "cols": dict(joint), "forces": None, "times": {},
+                     "shift": None}
             params = {}
             for part in parts:
                 rng = np.random.default_rng([seed] + [ord(c) for c in part])

@@ -57,9 +57,9 @@ Eigen::Vector3d closest_error(const DeflectionModel& model,
 /// then can closest_error differ from the point prediction's error.
 bool has_confidence_sets(const DeflectionModel& model);
 
-/// One-sided p-value of a paired t test that the squared errors `b` (per row, norms) are lower
-/// than `a` on the same rows (the common prefix; NaN entries skipped): 1 with fewer than 3
-/// pairs or no fall on average, 0 when every pair falls by the same amount.
+/// One-sided p-value of a paired t test that the errors `b` (per row, lengths) are lower than
+/// `a` on the same rows (the common prefix; NaN entries skipped): 1 with fewer than 3 pairs or
+/// no fall on average, 0 when every pair falls by the same amount.
 double paired_fall_p(const std::vector<double>& a, const std::vector<double>& b);
 
 /// Prediction errors (observed - predicted position) [m] of `split.scored`'s rows under

@@ -154,15 +154,40 @@ std::optional<OutsideTrend> Chain::outside_rival(size_t i) const {
   const Level& L = levels[i];
   if (L.pick >= L.bases.size()) return std::nullopt;
   const MatrixXd& ut = L.bases[L.pick];
+  const double alpha = cx->opt->alpha, tol = cx->opt->rank_tolerance;
+  // The effects the pick's chain adds after it (levels i + 1 ... built by explained_by) take up
+  // their part of the residual in both tests: a second effect left in it (a drift beside a
+  // link spring) would otherwise inflate the residual variance and let the mechanism explain
+  // the pick away on its noise.
+  MatrixXd others(L.a.r.size(), 0);
+  for (size_t j = i + 1; j + 1 < levels.size(); ++j) {
+    const std::string& e = levels[j].scores[levels[j].pick].effect;
+    for (size_t k = 0; k < L.bases.size(); ++k)
+      if (k != L.pick && L.scores[k].effect == e) {
+        MatrixXd m(others.rows(), others.cols() + L.bases[k].cols());
+        m << others, L.bases[k];
+        others = std::move(m);
+      }
+  }
+  auto with_others = [&](const MatrixXd& u) {
+    if (others.cols() == 0) return u;
+    if (u.cols() == 0) return orthonormal_basis(others, tol, nullptr, nullptr, 1.0);
+    MatrixXd m(u.rows(), u.cols() + others.cols());
+    m << u, others;
+    return orthonormal_basis(m, tol, nullptr, nullptr, 1.0);
+  };
+  // The pick must stand against the chain's other effects alone: else they, not the
+  // mechanism, explain it away.
+  if (others.cols() > 0 && explains_away(L.a, ut, with_others(MatrixXd(ut.rows(), 0)), alpha, tol))
+    others.resize(L.a.r.size(), 0);
   for (OutsideTrend& o : outside_trends(*cx, L.a)) {
     const GroupScore g = score_group(L.a, o.z, VectorXd::Ones(o.z.cols()), 1e-6);
-    if (g.df == 0 || !(std::exp(g.log_p) < cx->opt->alpha)) continue;
-    if (!explains_away(L.a, ut, g.u, cx->opt->alpha, cx->opt->rank_tolerance)) continue;
+    if (g.df == 0 || !(std::exp(g.log_p) < alpha)) continue;
+    if (!explains_away(L.a, ut, with_others(g.u), alpha, tol)) continue;
     // A flexible group contains much of the library's own laws (a compensator is a joint-2
     // compliance that varies with q2): it is a rival only when the candidate does not explain
     // it away in turn, i.e. when it takes up more than the candidate does.
-    if (o.beyond_candidates && explains_away(L.a, g.u, ut, cx->opt->alpha, cx->opt->rank_tolerance))
-      continue;
+    if (o.beyond_candidates && explains_away(L.a, g.u, with_others(ut), alpha, tol)) continue;
     return std::move(o);
   }
   return std::nullopt;

@@ -187,7 +187,8 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     """bench/form_probes.py on the control: its own gravity torques (modified DH read from the
     robot file) agree with stiff's Jacobian, each probe leaves the requested amount after the
     joint compliances, the flange sensor's forces and the tracker's rotation are what
-    truth.json says, a pair is the sum of its two forms, a drift over the clock writes the
+    truth.json says, a pair is the sum of its two forms (a coupling beside an SMR offset seen
+    at the moved SMR), a drift over the clock writes the
     loaded readings' times, and the diagnosis names the class of a kinked reducer about the
     gravity preload, of a drift read in reversed order and of one read at irregular times
     (docs/diagnosis.md, section 6)."""
@@ -219,7 +220,8 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
 
     out = tmp_path / "forms"
     kinds = ("kinkg23,drift_reversed,force_flange,tracker,coupling24,link_fore,"
-             "compensator_lever,kinkg23+drift_reversed,drift_timed,offset_meas,offset_load")
+             "compensator_lever,kinkg23+drift_reversed,drift_timed,offset_meas,offset_load,"
+             "offset_meas+coupling24")
     p = subprocess.run([sys.executable, str(root / "bench" / "form_probes.py"), "--data",
                         str(suite), "--out", str(out), "--sets", "base", "--seeds", "0",
                         "--kinds", kinds], capture_output=True, text=True, timeout=600)
@@ -228,6 +230,27 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     cols = fp.joint_columns(robot, base.q, base.force)
     for kind in kinds.split(","):
         folder = out / "base" / f"{kind}_00"
+        if kind == "offset_meas+coupling24":
+            # The coupling's deflection seen at the moved SMR: each joint's column of the
+            # point R r off the flange by finite turns of the chain, the torques the file's.
+            par = json.loads((folder / "truth.json").read_text())["effect_parameters"]
+            r = np.array(par["offset_meas"]["direction_flange"]) * par["offset_meas"]["scale"]
+            alone = stiff.Dataset.read(out / "base" / "offset_meas_00" / "calib.csv", robot)
+            pair = stiff.Dataset.read(folder / "calib.csv", robot)
+            coupled = pair.displacement - alone.displacement
+            tau_f = np.einsum("nij,ni->nj", robot.jacobian(base.q)[:, :3, :], base.force)
+            h = 1e-6
+
+            def point(qi):
+                t = robot.tool_pose(qi)
+                return t[:3, 3] + t[:3, :3] @ r
+
+            for i in range(len(base.q)):
+                col = [(point(base.q[i] + h * np.eye(robot.dof)[j]) - point(base.q[i])) / h
+                       for j in (1, 3)]
+                expect = par["coupling24"]["scale"] * (col[0] * tau_f[i, 3] + col[1] * tau_f[i, 1])
+                assert np.allclose(coupled[i], expect, rtol=1e-4, atol=1e-12)
+            continue
         if "+" in kind:
             # Two forms at once: each drawn as it is alone, the displacements their sum.
             pair = stiff.Dataset.read(folder / "calib.csv", robot).displacement

@@ -17,6 +17,7 @@
 #include <stdexcept>
 
 #include "../effects/effect_truths.hpp"
+#include "diagnose/analysis.hpp"
 #include "stiff/error.hpp"
 #include "stiff/identify/identify.hpp"
 #include "stiff/io/robot_io.hpp"
@@ -60,6 +61,28 @@ TEST(DiagnoseStats, IncompleteBetaAndFTail) {
   EXPECT_TRUE(std::isfinite(stats::log_f_sf(1e7, 6, 150)));
   EXPECT_EQ(stats::f_sf(0.0, 3, 10), 1.0);
   EXPECT_THROW(stats::beta_i(1, 1, 1.5), InvalidArgument);
+}
+
+TEST(DiagnoseStats, PairedFallTestsTheErrorsLengths) {
+  using diagnose_detail::paired_fall_p;
+  // A fall carried by two rows of twenty (validation errors of a softening joint's step, um):
+  // scipy ttest_1samp(a - b, alternative='greater') gives 0.018894; on the squares a^2 - b^2
+  // (the large rows' own scatter in the variance) 0.0529 would hide it at 5 %.
+  const std::vector<double> a = {669, 559, 276, 178, 150, 140, 122, 114, 106, 90,
+                                 89,  85,  77,  77,  72,  71,  68,  66,  64,  64};
+  const std::vector<double> b = {28, 48, 80, 116, 91, 38,  59, 32, 42, 80,
+                                 46, 83, 58, 43,  77, 193, 49, 56, 82, 56};
+  EXPECT_NEAR(paired_fall_p(a, b), 0.018893980902336016, 1e-12);
+  EXPECT_EQ(paired_fall_p(b, a), 1.0);  // the other way round: no fall on average
+  std::vector<double> c = b, nan_row = a;
+  for (double& x : c) x -= 5.0;  // every row 5 um lower: no scatter, certain
+  EXPECT_EQ(paired_fall_p(b, c), 0.0);
+  nan_row[3] = std::nan("");  // a row not used is skipped, not a fall
+  std::vector<double> a19 = a, b19 = b;
+  a19.erase(a19.begin() + 3);
+  b19.erase(b19.begin() + 3);
+  EXPECT_DOUBLE_EQ(paired_fall_p(nan_row, b), paired_fall_p(a19, b19));
+  EXPECT_EQ(paired_fall_p({1.0, 2.0}, {0.5, 1.0}), 1.0);  // fewer than three pairs
 }
 
 TEST(DiagnoseStats, HolmAdjustment) {
