@@ -198,6 +198,7 @@ bool Chain::explained_by_chain(
   static constexpr size_t kAlternatives = 3;
   std::string first, alt_why;
   bool first_weak = false, top_validated = false, top_refuted = false;
+  std::vector<double> top_step_errors;  // validation errors of the top's step, when not validated
   size_t best = SIZE_MAX, alt = SIZE_MAX;
   // A copy: levels grows (and may move) while the chains are built.
   const std::string top_effect = levels[i].scores.empty() ? "" : levels[i].scores[0].effect;
@@ -219,14 +220,23 @@ bool Chain::explained_by_chain(
     if (k == 0) {
       top_validated = levels[i].validated;
       top_refuted = levels[i].refuted;
+      if (!top_validated && levels.size() > i + 1)
+        top_step_errors = levels[i + 1].a.quality.validation_error_m;
     }
     // A rival whose chain explains the data only once the top is added later is no evidence
     // for the rival: the top's own chain asked whether the rival is needed after the top, and
     // the data did not say so; the rival's first step only took up part of the top's signal.
+    // When the top's own step did not lower the validation error, its chain never asked: the
+    // rival then counts if the validation poses need it beside the top (their errors fall
+    // from the top's step to the rival chain's end).
     const auto& chain_effects = levels.back().a.effects;
     const bool needs_top =
         std::find(chain_effects.begin(), chain_effects.end(), top_effect) != chain_effects.end();
-    if (explains && k > 0 && needs_top) continue;
+    if (explains && k > 0 && needs_top &&
+        !(!top_step_errors.empty() &&
+          paired_fall_p(top_step_errors, levels.back().a.quality.validation_error_m) <
+              cx->opt->alpha))
+      continue;
     // A rival whose step the validation poses confirm, with only marginal evidence beyond it:
     // the lead when the top's chain is refuted outright.
     if (!explains && k > 0 && wk && levels[i].validated && !needs_top && alt == SIZE_MAX) {
@@ -366,6 +376,14 @@ bool Chain::explained_by(size_t i, int depth, std::string* why, bool* weak) {
     // step's, and only the evidence beyond it, marginal, remains.
     *weak = deeper_weak && (floor || floor_weak || levels[i + 1].validated);
     return false;
+  }
+  // A group the calibration poses cannot separate (a soft reducer zone and a preloaded gap,
+  // both at the torque reversal): the chain explains the data when a member's own chain
+  // does. Which member, that level's own verdict says (ambiguous); this step stands.
+  if (claims(*n) && !n->separable && depth > 1) {
+    std::string deeper;
+    bool deeper_weak = false;
+    if (explained_by_chain(i + 1, depth - 1, &deeper, nullptr, &deeper_weak)) return true;
   }
   if (floor && marginal) return dismissed();
   n = &levels[i + 1];
