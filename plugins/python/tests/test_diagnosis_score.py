@@ -190,7 +190,9 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     truth.json says, a pair is the sum of its two forms (a coupling beside an SMR offset seen
     at the moved SMR), a drift over the clock writes the
     loaded readings' times, and the diagnosis names the class of a kinked reducer about the
-    gravity preload, of a drift read in reversed order and of one read at irregular times
+    gravity preload, of a drift read in reversed order, of one read at irregular times and of
+    a reducer hardening with the cube of the load torque and of one stiffer in one direction of
+    the load, at a 10 um tracker's noise
     (docs/diagnosis.md, section 6)."""
     np = pytest.importorskip("numpy")
     import stiff
@@ -221,7 +223,7 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     out = tmp_path / "forms"
     kinds = ("kinkg23,drift_reversed,force_flange,tracker,coupling24,link_fore,"
              "compensator_lever,kinkg23+drift_reversed,drift_timed,offset_meas,offset_load,"
-             "offset_meas+coupling24")
+             "offset_meas+coupling24,cubic23,kink3")
     p = subprocess.run([sys.executable, str(root / "bench" / "form_probes.py"), "--data",
                         str(suite), "--out", str(out), "--sets", "base", "--seeds", "0",
                         "--kinds", kinds], capture_output=True, text=True, timeout=600)
@@ -323,8 +325,9 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
             assert left == pytest.approx(40e-6, rel=1e-6)
         else:
             assert left < 40e-6
-    rows = scored(root, out, "given", "kinkg23,drift_reversed,drift_timed", tmp_path)
-    assert len(rows) == 3
+    rows = scored(root, out, "given", "kinkg23,drift_reversed,drift_timed,cubic23,kink3",
+                  tmp_path)
+    assert len(rows) == 5
     for r in rows:
         assert r["outcome"] == "right" and r["ratio"] < 1.25, r
 

@@ -1135,10 +1135,13 @@ TEST(DiagnoseHonesty, SlowAZeroOffsetOfTheForceReadingIsNotClaimed) {
 // The nonlinear reducer in the forms the library's example does not use: hardening about the
 // unloaded state (the compliance of joints 2 and 3 falls by half of c per 100 N*m of load
 // torque), softening about the gravity preload (a stiff zone, e = -0.4 c), hardening with the
-// cube of the total torque (h = -0.5 c) and a bilinear curve, 30 % softer on one side of the
-// torque reversal than on the other (r = +-0.3 c). Found as
-// `nonlinear_joint` (or in its group), the fit keeps the terms that carry the truth, and the
-// validation error after it sits within 1.25x the floor (as the hidden-effect sweep asks).
+// cube of the total torque (h = -0.5 c), a bilinear curve, 30 % softer on one side of the
+// torque reversal than on the other (r = +-0.3 c), hardening with the cube of the load
+// torque (g = -3 c: the compliance change g tau^2 / T0^2 is about a tenth of g at the load
+// torques of a few tens of N*m; at -0.5 c it stays within the noise) and a curve 30 % softer one
+// way of the load than the other (k = +-0.3 c). Found as `nonlinear_joint` (or in its group), the
+// fit keeps the terms that carry the truth, and the validation error after it sits within 1.25x the
+// floor (as the hidden-effect sweep asks).
 TEST(DiagnoseNonlinearJoint, SlowLoadCentredHardeningAndSofteningAreFound) {
   const Eigen::VectorXd c = test::paper_stiffness().cwiseInverse();
   struct Form {
@@ -1149,7 +1152,9 @@ TEST(DiagnoseNonlinearJoint, SlowLoadCentredHardeningAndSofteningAreFound) {
       {"load-centred hardening", {{"s2", -0.5 * c(1)}, {"s3", -0.5 * c(2)}}},
       {"softening about the preload", {{"e2", -0.4 * c(1)}, {"e3", -0.4 * c(2)}}},
       {"hardening with the total torque", {{"h2", -0.5 * c(1)}, {"h3", -0.5 * c(2)}}},
-      {"a kink at the torque reversal", {{"r2", 0.3 * c(1)}, {"r3", -0.3 * c(2)}}}};
+      {"a kink at the torque reversal", {{"r2", 0.3 * c(1)}, {"r3", -0.3 * c(2)}}},
+      {"hardening with the cube of the load torque", {{"g2", -3.0 * c(1)}, {"g3", -3.0 * c(2)}}},
+      {"a kink at the unloaded state", {{"k2", 0.3 * c(1)}, {"k3", -0.3 * c(2)}}}};
   for (const auto& form : forms)
     for (uint64_t seed = 1; seed <= 2; ++seed) {
       const Diagnosis d = run(scenario_of(joint_and("nonlinear_joint", form.values), seed, 1));
