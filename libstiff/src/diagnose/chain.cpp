@@ -169,17 +169,17 @@ std::optional<OutsideTrend> Chain::outside_rival(size_t i) const {
         others = std::move(m);
       }
   }
+  // The pick must stand against the chain's other effects alone: else they, not the
+  // mechanism, explain it away.
+  if (others.cols() > 0 &&
+      explains_away(L.a, ut, orthonormal_basis(others, tol, nullptr, nullptr, 1.0), alpha, tol))
+    others.resize(L.a.r.size(), 0);
   auto with_others = [&](const MatrixXd& u) {
     if (others.cols() == 0) return u;
-    if (u.cols() == 0) return orthonormal_basis(others, tol, nullptr, nullptr, 1.0);
     MatrixXd m(u.rows(), u.cols() + others.cols());
     m << u, others;
     return orthonormal_basis(m, tol, nullptr, nullptr, 1.0);
   };
-  // The pick must stand against the chain's other effects alone: else they, not the
-  // mechanism, explain it away.
-  if (others.cols() > 0 && explains_away(L.a, ut, with_others(MatrixXd(ut.rows(), 0)), alpha, tol))
-    others.resize(L.a.r.size(), 0);
   for (OutsideTrend& o : outside_trends(*cx, L.a)) {
     const GroupScore g = score_group(L.a, o.z, VectorXd::Ones(o.z.cols()), 1e-6);
     if (g.df == 0 || !(std::exp(g.log_p) < alpha)) continue;
@@ -232,11 +232,10 @@ bool Chain::explained_by_chain(
     const auto& chain_effects = levels.back().a.effects;
     const bool needs_top =
         std::find(chain_effects.begin(), chain_effects.end(), top_effect) != chain_effects.end();
-    if (explains && k > 0 && needs_top &&
-        !(!top_step_errors.empty() &&
-          paired_fall_p(top_step_errors, levels.back().a.quality.validation_error_m) <
-              cx->opt->alpha))
-      continue;
+    const bool needed_beside_top =
+        !top_step_errors.empty() &&
+        paired_fall_p(top_step_errors, levels.back().a.quality.validation_error_m) < cx->opt->alpha;
+    if (explains && k > 0 && needs_top && !needed_beside_top) continue;
     // A rival whose step the validation poses confirm, with only marginal evidence beyond it:
     // the lead when the top's chain is refuted outright.
     if (!explains && k > 0 && wk && levels[i].validated && !needs_top && alt == SIZE_MAX) {

@@ -228,7 +228,7 @@ Diagnosis diagnose(const RobotModel& robot,
     // while the evidence holds, and the last step says what is left. Displacement data stop at
     // rule 4: their verdicts name a physical effect, not an accuracy.
     //
-    // Do the held-out errors b fall against a (paired_fall_p: t or signed-rank, at alpha)? The
+    // Do the held-out errors b fall against a (paired_fall_p: t test of the lengths, at alpha)? The
     // pairs are the common prefix: the validation rows, then the cross-validated calibration
     // rows when both levels have them (NaN: a row that is not used).
     auto falls = [&](const std::vector<double>& a, const std::vector<double>& b) {

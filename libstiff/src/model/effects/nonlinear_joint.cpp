@@ -109,11 +109,9 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
     return "nonlinear reducer: dtheta_j += e_j [phi(tau_g+tau_F) - phi(tau_g)] + s_j "
            "tau_F|tau_F|/T0 + a_j tau_F^2/T0 + h_j [(tau_g+tau_F)^3 - tau_g^3]/T0^2 + r_j "
            "[|tau_g+tau_F| - |tau_g|] + g_j tau_F^3/T0^2 + k_j |tau_F| (arm joints), phi = T1 "
-           "tanh(tau/T1), "
-           "T0 = 100 N*m: soft "
-           "zone about zero torque, symmetric and asymmetric hardening or softening about the "
-           "unloaded state and about the preload, a kinked curve; "
-           "a fit keeps the terms the data support";
+           "tanh(tau/T1), T0 = 100 N*m: soft zone about zero torque, symmetric and asymmetric "
+           "hardening or softening about the unloaded state and about the preload, a kinked "
+           "curve; a fit keeps the terms the data support";
   }
   std::string reference() const override {
     return "Harmonic Drive AG, engineering data CSF/CSG (three-segment torque-torsion curve); "
