@@ -529,7 +529,7 @@ def main() -> int:
                 p = add_form(part, rng, robot, arrays, dh_robot, joint, compliance, a.size,
                              state)
                 if p is None:
-                    shutil.rmtree(a.out)  # nothing half written
+                    shutil.rmtree(a.out, ignore_errors=True)  # nothing half written
                     return 2
                 params[part] = p
             if len(parts) == 1:

@@ -1084,7 +1084,7 @@ Eigen::Matrix4d DeflectionModel::tool_pose(const Eigen::VectorXd& theta,
 namespace {
 
 /// The 3 x P Jacobian of the displacement (or, with `orientation`, of the orientation
-/// discrepancy) by kJetStride parameters per pass of evaluate<Jet>.
+/// discrepancy) by kJetStride parameters per pass of evaluate_jet.
 Eigen::Matrix<double, 3, Eigen::Dynamic> jet_jacobian(const DeflectionModel& model,
                                                       const Eigen::VectorXd& theta,
                                                       const Measurement& m,
@@ -1095,14 +1095,17 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> jet_jacobian(const DeflectionModel& mod
   Eigen::Matrix<double, 3, Eigen::Dynamic> out = Eigen::Matrix3Xd::Zero(3, count);
   std::vector<Jet> t(count);
   for (int k = 0; k < count; ++k) t[k] = Jet(theta(k));
+  EvalState<Jet> s;  // later passes reuse the first's chain (the same values)
   for (int first = std::max(0, from); first < count; first += kJetStride) {
-    for (int k = 0; k < count; ++k) t[k].v.setZero();
     const int last = std::min(count, first + kJetStride);
     for (int k = first; k < last; ++k) t[k].v(k - first) = 1.0;
     Vector3<Jet> d, o;
-    model.evaluate<Jet>(t.data(), m, c, &d, nullptr, orientation ? &o : nullptr);
-    for (int k = first; k < last; ++k)
+    s.same_values = first > std::max(0, from);
+    model.evaluate_jet(t.data(), m, c, s, &d, orientation ? &o : nullptr);
+    for (int k = first; k < last; ++k) {
+      t[k].v(k - first) = 0.0;
       for (int r = 0; r < 3; ++r) out(r, k) = (orientation ? o : d)(r).v(k - first);
+    }
   }
   return out;
 }

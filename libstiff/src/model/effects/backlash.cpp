@@ -9,6 +9,8 @@
 #include <deque>
 #include <limits>
 #include <mutex>
+#include <string>
+#include <unordered_map>
 
 #include "stiff/kinematics/joint_torque.hpp"
 #include "stiff/model/effects/common.hpp"
@@ -378,7 +380,16 @@ class Backlash : public EffectT<Backlash> {
     Eigen::VectorXd b(nl), t(nl);
     Eigen::MatrixXd a(nl, nl), pj(rank, nl);
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(nl);
+    // The drop depends on the jump decisions alone, which change in steps: the sweeps and the
+    // bisections below meet the same decisions again and again, so each is computed once.
+    std::unordered_map<std::string, double> known;
+    std::string decisions(static_cast<size_t>(N) * nl, '\0');
     auto gain = [&]() {
+      for (int x = 0; x < nl; ++x)
+        for (int i = 0; i < N; ++i)  // 2 jump is an integer in [-2, 2]
+          decisions[static_cast<size_t>(x) * N + i] = static_cast<char>(2 * jump(i, levered[x]));
+      const auto [hit, fresh] = known.try_emplace(decisions, 0.0);
+      if (!fresh) return hit->second;
       for (int x = 0; x < nl; ++x) {
         const int j = levered[x];
         b(x) = jump.col(j).dot(along.col(j));
@@ -399,6 +410,7 @@ class Backlash : public EffectT<Backlash> {
       double out_gain = 0;
       for (int k = 0; k < nl; ++k)
         if (ev(k) > floor) out_gain += t(k) * t(k) / ev(k);
+      hit->second = out_gain;
       return out_gain;
     };
     const Eigen::VectorXd none = Eigen::VectorXd::Zero(n);
