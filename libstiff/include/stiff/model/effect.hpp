@@ -77,6 +77,12 @@ struct ParameterSpec {
   /// comparison on a session the fit has not seen re-estimates it from that session's rows
   /// (DeflectionModel::align_sessions) instead of carrying the calibration's value over.
   bool per_session = false;
+  /// A gain of the load that the compliances absorb exactly (a common scale of the load
+  /// rescales every compliance-like term: d(s F) = s d(F) for every term homogeneous in the
+  /// load). When a combination of parameters must be held, identification holds such a gain
+  /// rather than a compliance: a compliance held goes to its null value, 0, where it no longer
+  /// takes part in the combination, which then forms again among the others.
+  bool gauge = false;
 };
 
 /// Data of one measurement that does not depend on the parameters (computed once).

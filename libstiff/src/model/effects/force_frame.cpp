@@ -12,7 +12,8 @@ namespace {
 ///   F_true = R(omega_b) diag(1 + s_b) R_06 R(omega) diag(1 + s) R_06^T F_meas  (and moment).
 /// A common scale (s_x = s_y = s_z) is exactly collinear with the joint compliances,
 /// A(sF) c = A(F) (s c): no displacement data can see it, only an independent force
-/// reference (dead weights). identify() then holds one scale at 0 and names the combination.
+/// reference (dead weights). identify() then holds one scale of each frame at 0 (the gains are
+/// gauge parameters: the compliances keep their values) and names the combination.
 class ForceFrame : public EffectT<ForceFrame> {
  public:
   explicit ForceFrame(const EffectSetup&) {
@@ -23,22 +24,26 @@ class ForceFrame : public EffectT<ForceFrame> {
                              std::string("rotation of the force-sensor frame about the flange ") +
                                  axis[k] + " axis (clocking)",
                              -0.5, 0.5, 0.02, 0.0, 0.0));
-    for (int k = 0; k < 3; ++k)
+    for (int k = 0; k < 3; ++k) {
       params_.push_back(effects::parameter(
           std::string("scale_") + axis[k], "1",
           std::string("relative gain error of the force sensor's ") + axis[k] + " axis", -0.5, 0.5,
           0.02, 0.0, 0.0));
+      params_.back().gauge = true;
+    }
     for (int k = 0; k < 3; ++k)
       params_.push_back(
           effects::parameter(std::string("omega_base_") + axis[k], "rad",
                              std::string("rotation of the applied load about the base ") + axis[k] +
                                  " axis (fixture or load-cell alignment fixed in the base frame)",
                              -0.5, 0.5, 0.02, 0.0, 0.0));
-    for (int k = 0; k < 3; ++k)
+    for (int k = 0; k < 3; ++k) {
       params_.push_back(effects::parameter(
           std::string("scale_base_") + axis[k], "1",
           std::string("relative gain error of the load along the base ") + axis[k] + " axis", -0.5,
           0.5, 0.02, 0.0, 0.0));
+      params_.back().gauge = true;
+    }
   }
   const std::string& name() const override { return name_; }
   bool example_parameters(const Eigen::VectorXd& /*c*/, double* p) const override {
