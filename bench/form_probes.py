@@ -198,6 +198,11 @@ def gravity_torques(chain, q, masses, coms):
     return out
 
 
+def flange_arm(robot, q, r):
+    """(N, 3): the vector r [m, flange frame] in the base frame at each row's pose."""
+    return np.einsum("nij,j->ni", robot.tool_pose(q)[:, :3, :3], r)
+
+
 def link_spring(chain, q, f, link, along, c_rot, robot=None, shift=None):
     """(N, 3): the measured point's (the flange origin's) displacement from a spring inside
     link `link` (0-based frame index), at the fraction `along` of the way to the next joint's
@@ -209,8 +214,7 @@ def link_spring(chain, q, f, link, along, c_rot, robot=None, shift=None):
                          "at link i's root)")
     offsets = np.zeros((2, len(q), 3))
     if shift is not None:
-        rot = robot.tool_pose(q)[:, :3, :3]
-        offsets = np.stack([np.einsum("nij,j->ni", rot, r) for r in shift])
+        offsets = np.stack([flange_arm(robot, q, r) for r in shift])
     out = np.zeros((len(q), 3))
     for r in range(len(q)):
         frames, _ = chain_frames(chain, q[r])
@@ -247,11 +251,9 @@ def shifted_torques(robot, q, f, shift):
         return load_torques(robot, q, f)
     jac = robot.jacobian(q)
     jv, jw = jac[:, :3, :], jac[:, 3:, :]
-    rot = robot.tool_pose(q)[:, :3, :3]
 
     def at(r):
-        arm = np.einsum("nij,j->ni", rot, r)
-        return jv - np.cross(arm[:, :, None], jw, axis=1)
+        return jv - np.cross(flange_arm(robot, q, r)[:, :, None], jw, axis=1)
 
     return at(shift[0]), np.einsum("nij,ni->nj", at(shift[1]), f)
 
