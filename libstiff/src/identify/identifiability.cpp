@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <map>
 
 #include "stiff/error.hpp"
 #include "stiff/model/effect.hpp"
@@ -50,7 +51,8 @@ std::vector<int> priority_order(const DeflectionModel& model, const std::vector<
   for (int k = 0; k < p; ++k)
     if (std::find(order.begin(), order.end(), k) == order.end()) order.push_back(k);
   // The load's gains last: a combination is completed, and held, by the last of its members.
-  std::stable_partition(order.begin(), order.end(), [&](int k) { return !model.spec(k).gauge; });
+  std::stable_partition(order.begin(), order.end(),
+                        [&](int k) { return model.spec(k).gauge == 0; });
   if (first && static_cast<int>(first->size()) == p)
     std::stable_partition(order.begin(), order.end(), [&](int k) { return (*first)[k]; });
   return order;
@@ -88,6 +90,15 @@ Identifiability structural(const DeflectionModel& model,
   out.fixed.assign(p, false);
   out.reason.assign(p, "");
   const std::vector<int> order = priority_order(model, first);
+  // The last gain of each frame of the load is held whatever the data seem to see of it (a
+  // force reference alone can tell a common gain; ParameterSpec::gauge).
+  std::vector<bool> gauge_last(p, false);
+  {
+    std::map<std::pair<const Effect*, int>, int> last;
+    for (int k : order)
+      if (model.spec(k).gauge > 0) last[{&model.owner(k), model.spec(k).gauge}] = k;
+    for (const auto& entry : last) gauge_last[entry.second] = true;
+  }
 
   // The same decisions on the p x p Gram matrix J^T J (Cholesky of the normalised columns in
   // this order: the squared orthogonal rest is 1 - |L^-1 c|^2), which costs a third of the
@@ -104,6 +115,10 @@ Identifiability structural(const DeflectionModel& model,
         fast.fixed[k] = true;
         fast.reason[k] = "it has no effect on any of these measurements";
         continue;
+      }
+      if (gauge_last[k]) {  // decided, with its reason, by the exact path below
+        clear = false;
+        break;
       }
       const int a = static_cast<int>(acc.size());
       Eigen::VectorXd y(a);
@@ -146,12 +161,19 @@ Identifiability structural(const DeflectionModel& model,
     for (int pass = 0; pass < 2; ++pass)
       for (const auto& b : basis) v -= b.dot(v) * b;
     const double rest = v.norm();
-    if (rest > tolerance) {
+    if (rest > tolerance && !gauge_last[k]) {
       basis.push_back(v / rest);
       accepted.push_back(k);
       continue;
     }
     out.fixed[k] = true;
+    if (rest > tolerance) {
+      out.reason[k] =
+          "it is the last gain of its frame, and the frame's common gain is a scale of every "
+          "compliance that only an independent force reference can tell (the other gains are "
+          "relative to it)";
+      continue;
+    }
     if (accepted.empty()) {
       out.reason[k] = "it has no effect on any of these measurements";
       continue;

@@ -77,12 +77,15 @@ struct ParameterSpec {
   /// comparison on a session the fit has not seen re-estimates it from that session's rows
   /// (DeflectionModel::align_sessions) instead of carrying the calibration's value over.
   bool per_session = false;
-  /// A gain of the load that the compliances absorb exactly (a common scale of the load
-  /// rescales every compliance-like term: d(s F) = s d(F) for every term homogeneous in the
-  /// load). When a combination of parameters must be held, identification holds such a gain
-  /// rather than a compliance: a compliance held goes to its null value, 0, where it no longer
-  /// takes part in the combination, which then forms again among the others.
-  bool gauge = false;
+  /// A gain of the load along one axis of a frame (its number, > 0; 0: not a gain). The gains
+  /// of one frame share a common part, a scale of every compliance-like term (d(s F) = s d(F)
+  /// for every term homogeneous in the load; terms of the total torque or of the gravity
+  /// preload break the identity only weakly), which only an independent force reference can
+  /// tell. Identification takes the gains last and always holds the last gain of each frame,
+  /// so that the others are relative to it: a compliance held instead goes to its null value,
+  /// 0, where it no longer takes part in the combination, which then forms again among the
+  /// others; and a common gain left free trades against a nonlinear reducer's level terms.
+  int gauge = 0;
 };
 
 /// Data of one measurement that does not depend on the parameters (computed once).

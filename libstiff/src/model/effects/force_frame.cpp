@@ -12,8 +12,8 @@ namespace {
 ///   F_true = R(omega_b) diag(1 + s_b) R_06 R(omega) diag(1 + s) R_06^T F_meas  (and moment).
 /// A common scale (s_x = s_y = s_z) is exactly collinear with the joint compliances,
 /// A(sF) c = A(F) (s c): no displacement data can see it, only an independent force
-/// reference (dead weights). identify() then holds one scale of each frame at 0 (the gains are
-/// gauge parameters: the compliances keep their values) and names the combination.
+/// reference (dead weights). identify() therefore holds one scale of each frame at 0 (the gains
+/// are gauge parameters, ParameterSpec::gauge) and names the combination.
 class ForceFrame : public EffectT<ForceFrame> {
  public:
   explicit ForceFrame(const EffectSetup&) {
@@ -29,7 +29,7 @@ class ForceFrame : public EffectT<ForceFrame> {
           std::string("scale_") + axis[k], "1",
           std::string("relative gain error of the force sensor's ") + axis[k] + " axis", -0.5, 0.5,
           0.02, 0.0, 0.0));
-      params_.back().gauge = true;
+      params_.back().gauge = 1;  // the sensor's frame
     }
     for (int k = 0; k < 3; ++k)
       params_.push_back(
@@ -42,7 +42,7 @@ class ForceFrame : public EffectT<ForceFrame> {
           std::string("scale_base_") + axis[k], "1",
           std::string("relative gain error of the load along the base ") + axis[k] + " axis", -0.5,
           0.5, 0.02, 0.0, 0.0));
-      params_.back().gauge = true;
+      params_.back().gauge = 2;  // the base frame
     }
   }
   const std::string& name() const override { return name_; }
