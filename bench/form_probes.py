@@ -198,9 +198,9 @@ def gravity_torques(chain, q, masses, coms):
     return out
 
 
-def flange_arm(robot, q, r):
-    """(N, 3): the vector r [m, flange frame] in the base frame at each row's pose."""
-    return np.einsum("nij,j->ni", robot.tool_pose(q)[:, :3, :3], r)
+def flange_arms(robot, q, vectors):
+    """(K, N, 3): each of the K vectors [m, flange frame] in the base frame at each row's pose."""
+    return np.einsum("nij,kj->kni", robot.tool_pose(q)[:, :3, :3], np.asarray(vectors))
 
 
 def link_spring(chain, q, f, link, along, c_rot, robot=None, shift=None):
@@ -214,7 +214,7 @@ def link_spring(chain, q, f, link, along, c_rot, robot=None, shift=None):
                          "at link i's root)")
     offsets = np.zeros((2, len(q), 3))
     if shift is not None:
-        offsets = np.stack([flange_arm(robot, q, r) for r in shift])
+        offsets = flange_arms(robot, q, shift)
     out = np.zeros((len(q), 3))
     for r in range(len(q)):
         frames, _ = chain_frames(chain, q[r])
@@ -251,11 +251,9 @@ def shifted_torques(robot, q, f, shift):
         return load_torques(robot, q, f)
     jac = robot.jacobian(q)
     jv, jw = jac[:, :3, :], jac[:, 3:, :]
-
-    def at(r):
-        return jv - np.cross(flange_arm(robot, q, r)[:, :, None], jw, axis=1)
-
-    return at(shift[0]), np.einsum("nij,ni->nj", at(shift[1]), f)
+    meas, load = (jv - np.cross(arm[:, :, None], jw, axis=1)
+                  for arm in flange_arms(robot, q, shift))
+    return meas, np.einsum("nij,ni->nj", load, f)
 
 
 def drift_course(kind, rng):

@@ -50,9 +50,6 @@ std::vector<int> priority_order(const DeflectionModel& model, const std::vector<
     for (int k = 0; k < model.effects()[je]->size(); ++k) order.push_back(model.offset(je) + k);
   for (int k = 0; k < p; ++k)
     if (std::find(order.begin(), order.end(), k) == order.end()) order.push_back(k);
-  // The load's gains last: a combination is completed, and held, by the last of its members.
-  std::stable_partition(order.begin(), order.end(),
-                        [&](int k) { return model.spec(k).gauge == 0; });
   if (first && static_cast<int>(first->size()) == p)
     std::stable_partition(order.begin(), order.end(), [&](int k) { return (*first)[k]; });
   return order;

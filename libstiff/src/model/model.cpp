@@ -1096,11 +1096,12 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> jet_jacobian(const DeflectionModel& mod
   std::vector<Jet> t(count);
   for (int k = 0; k < count; ++k) t[k] = Jet(theta(k));
   EvalState<Jet> s;  // later passes reuse the first's chain (the same values)
-  for (int first = std::max(0, from); first < count; first += kJetStride) {
+  const int start = std::max(0, from);
+  for (int first = start; first < count; first += kJetStride) {
     const int last = std::min(count, first + kJetStride);
     for (int k = first; k < last; ++k) t[k].v(k - first) = 1.0;
     Vector3<Jet> d, o;
-    s.same_values = first > std::max(0, from);
+    s.same_values = first > start;
     model.evaluate_jet(t.data(), m, c, s, &d, orientation ? &o : nullptr);
     for (int k = first; k < last; ++k) {
       t[k].v(k - first) = 0.0;

@@ -690,7 +690,7 @@ TEST(IdentifyCeres, LoadGainsAreHeldNotTheCouplings) {
     // At the noise (20 um per axis of a displacement; the fit's degrees of freedom lower it).
     EXPECT_LT(fit.rms_m, 1.1 * noise.tracker_sigma_m) << effects[1];
   }
-  // Without the gains last in the order the two differ by 3 %.
+  // Without the last gain of each frame held, the two differ by 3 %.
   EXPECT_NEAR(rms[0], rms[1], 0.01 * rms[1]);
 }
 

@@ -81,8 +81,8 @@ struct ParameterSpec {
   /// of one frame share a common part, a scale of every compliance-like term (d(s F) = s d(F)
   /// for every term homogeneous in the load; terms of the total torque or of the gravity
   /// preload break the identity only weakly), which only an independent force reference can
-  /// tell. Identification takes the gains last and always holds the last gain of each frame,
-  /// so that the others are relative to it: a compliance held instead goes to its null value,
+  /// tell. Identification always holds the last gain of each frame, so that the others are
+  /// relative to it: a compliance held instead goes to its null value,
   /// 0, where it no longer takes part in the combination, which then forms again among the
   /// others; and a common gain left free trades against a nonlinear reducer's level terms.
   int gauge = 0;
