@@ -115,6 +115,20 @@ def test_examples_lists_and_copies_builtin_files(tmp_path):
     assert (tmp_path / "ex" / "robots" / "rokae.yaml").is_file()
 
 
+def test_effects_of_a_robot_without_masses_lists_every_effect():
+    """The ABB IRB 120's file has no link masses: the effects that need them are listed as not
+    available (and why), the others with their parameters; asked for by name, one is an error."""
+    out = run("effects", "--robot", "abb_irb120").stdout
+    assert out.count("not available for this robot") == 2
+    assert "coupling" in out and "needs link masses" in out
+    infos = json.loads(run("effects", "--robot", "abb_irb120", "--json").stdout)
+    off = {i["name"] for i in infos if "unavailable" in i}
+    assert off == {"nonlinear_joint", "backlash"}
+    assert len(infos) == len(json.loads(run("effects", "--json").stdout))
+    p = run("effects", "backlash", "--robot", "abb_irb120", check=False)
+    assert p.returncode == 2 and "needs link masses" in p.stderr
+
+
 def test_fmu_export_array_inputs(tmp_path):
     """`--array-inputs` (FMI 3) gives an FMU whose inputs are q[n] and wrench[6] only; with
     FMI 2 it is a one-line error and nothing is written."""

@@ -5,6 +5,7 @@ import json
 import textwrap
 
 from .. import api
+from ..errors import StiffError
 from .common import Formatter, robot_path
 
 EXAMPLE = """example:
@@ -25,13 +26,27 @@ def register(sub):
 def run(args):
     robot = api.Robot(robot_path(args.robot)) if args.robot else None
     names = [args.name] if args.name else api.effects()
-    infos = [api.describe_effect(n, robot) for n in names]
+    if args.name:
+        infos = [api.describe_effect(args.name, robot)]
+    else:
+        # One effect this robot cannot carry (no link masses) must not hide the others.
+        infos = []
+        for n in names:
+            try:
+                infos.append(api.describe_effect(n, robot))
+            except StiffError as e:
+                info = api.describe_effect(n)
+                info["unavailable"] = str(e).split(": ", 1)[-1]
+                infos.append(info)
     if args.json:
         print(json.dumps(infos if not args.name else infos[0], indent=2))
         return 0
     for info in infos:
         needs = f"  (needs: {', '.join(info['needs'])})" if info["needs"] else ""
         print(f"{info['name']:<20} {info['description']}{needs}")
+        if "unavailable" in info:
+            print(f"{'':<20} not available for this robot: {info['unavailable']}")
+            continue
         if args.name:
             print(textwrap.fill(f"reference: {info['reference']}", 100, subsequent_indent="  "))
             print("parameters:")
