@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from stiff.cli import main
@@ -372,3 +373,35 @@ def test_probes_refuse_an_unknown_kind(root, suite, tmp_path, script):
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and "unknown kind 'pedestal'" in p.stderr
     assert not (tmp_path / "x").exists()
+
+
+def test_arm_probes_make_scenarios_the_harness_reads(root, tmp_path):
+    """bench/arm_probes.py on a UR10: the coupling is drawn at the asked size (55 um RMS per
+    axis on the calibration rows, against about 20 um of noise) and named, the control stays
+    `adequate`; the IRB 120's file has no masses, so its backlash is skipped with a message."""
+    out = tmp_path / "arms"
+    p = subprocess.run([sys.executable, str(root / "bench" / "arm_probes.py"), "--out", str(out),
+                        "--robots", "ur10,abb_irb120", "--kinds", "none,coupling,backlash",
+                        "--seeds", "0"], capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    assert "abb_irb120: backlash skipped" in p.stderr
+    index = json.loads((out / "abb_irb120" / "index.json").read_text())
+    assert [e["type"] for e in index] == ["none", "coupling"]
+    import stiff
+
+    ur10 = out / "ur10" / "base"
+    truth = json.loads((ur10 / "coupling_00" / "truth.json").read_text())
+    noisy = stiff.Dataset.read(ur10 / "coupling_00" / "calib.csv").displacement
+    control = stiff.Dataset.read(ur10 / "none_00" / "calib.csv").displacement
+    # Same poses and noise draw in both files: the difference is the effect alone.
+    assert np.sqrt(np.mean((noisy - control) ** 2)) == pytest.approx(55e-6, rel=0.05)
+    assert 15 < truth["true_class_refit_valid_um"]["axis_um"] < 30
+    scores = tmp_path / "scores.json"
+    p = subprocess.run([sys.executable, str(root / "bench" / "diagnosis_score.py"), "--data",
+                        str(out / "ur10"), "--robot", "ur10", "--sets", "base", "--seeds", "0",
+                        "--noise", "given", "--jobs", "1", "--json", str(scores)],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    rows = {r["type"]: r for r in json.loads(scores.read_text())}
+    assert rows["none"]["outcome"] == "right" and rows["coupling"]["outcome"] == "right", rows
+    assert rows["coupling"]["final"] == ["coupling"]
