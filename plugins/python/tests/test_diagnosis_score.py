@@ -9,6 +9,7 @@ import sys
 import numpy as np
 import pytest
 
+from pystiff_support import bench_module
 from stiff.cli import main
 
 PAPER_K = [5.0914e4, 1.6382e4, 3.1311e4, 7.7911e3, 5.6136e3, 4.0e3]
@@ -198,14 +199,7 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     np = pytest.importorskip("numpy")
     import stiff
 
-    spec = importlib.util.spec_from_file_location("form_probes",
-                                                  root / "bench" / "form_probes.py")
-    sys.path.insert(0, str(root / "bench"))
-    try:
-        fp = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(fp)
-    finally:
-        sys.path.remove(str(root / "bench"))
+    fp = bench_module(root, "form_probes")
     for name in ("puma560", "rokae"):  # standard and modified DH, the latter's kept below
         robot = stiff.Robot(name)
         dh, masses, coms = fp.read_dh_robot(root / "examples" / "robots" / f"{name}.yaml")

@@ -12,6 +12,11 @@ namespace {
 ///   dtheta_j += e_j [phi(tau_g + tau_F) - phi(tau_g)]   soft zone about zero torque, the
 ///               catalogue three-segment curve (phi = T1 tanh(./T1), knee T1 fixed: 10 N*m arm,
 ///               2 N*m wrist), a secant about the preload; e > 0 hardening, e < 0 softening;
+///             + w_j [psi(tau_g + tau_F) - psi(tau_g)]    (arm joints) the same with a knee
+///               three times as wide (psi = 3 T1 tanh(./(3 T1))): a catalogue's knee grows with
+///               the reducer's size, and two knees a factor 3 apart (and their sum) span the
+///               sizes of an arm; an alternative to e, outside the common sub-forms, so that a
+///               fit pays the extended criterion's price to keep it;
 ///             + s_j tau_F |tau_F| / T0                   symmetric change of stiffness with
 ///               the load torque (s < 0 hardening, s > 0 softening), about the unloaded state;
 ///             + a_j tau_F^2 / T0                         asymmetric curve (stiffer in one
@@ -42,6 +47,7 @@ namespace {
 class NonlinearJoint : public EffectT<NonlinearJoint> {
  public:
   static constexpr double kT0 = 100.0;  ///< N*m
+  static constexpr double kWide = 3.0;  ///< the wide soft zone's knee, in the narrow one's
 
   explicit NonlinearJoint(const EffectSetup& s) {
     const int n = s.robot->dof();
@@ -59,6 +65,14 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
           -1e-2, 1e-2, 1e-5, 0.0, 0.0)));
     }
     arm_ = n > 3 ? n - 3 : n;
+    for (int j = 0; j < arm_; ++j) {
+      const std::string jn = std::to_string(j + 1);
+      wide_params_.push_back(optional(effects::parameter(
+          "w" + jn, "rad/(N*m)",
+          "extra compliance of joint " + jn + " in a wide soft zone about zero torque (knee " +
+              std::to_string(static_cast<int>(kWide * knee_[j])) + " N*m; < 0: softening)",
+          -1e-2, 1e-2, 1e-5, 0.0, 0.0)));
+    }
     // Only the arm joints carry the second-order terms and the laws of the total torque (see
     // above): a parameter without a regressor would count as a degree of freedom in the F tests
     // and cost them power. Each term: its letter and what it is, after "joint j".
@@ -75,12 +89,14 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
         params_.push_back(optional(effects::parameter(
             letter + jn, "rad/(N*m)", "joint " + jn + what, -1e-2, 1e-2, 1e-6, 0.0, 0.0)));
       }
+    params_.insert(params_.end(), wide_params_.begin(), wide_params_.end());
   }
   const std::string& name() const override { return name_; }
   /// The families a reducer's law comes in, each scored on its own by the diagnosis: the
   /// smooth second-order function of the load torque about the unloaded state (s, a), its cube
   /// and its kink there (g, k), the catalogue soft zone (e), and every function of the total
-  /// torque, preload included (e, h, r). (The second-order family is the common one: scored
+  /// torque, preload included (e, h, r). The wide soft zone (w) is in none of them: a rare
+  /// alternative to e (docs/effects.md). (The second-order family is the common one: scored
   /// with the cube and the kink in its columns it lost power at N = 30.)
   std::vector<std::vector<int>> sub_forms() const override {
     const int n = static_cast<int>(knee_.size());
@@ -106,10 +122,11 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
     return {effects::kHintLoadReversal, effects::kHintLoadLevel, effects::kHintGravityVariety};
   }
   std::string description() const override {
-    return "nonlinear reducer: dtheta_j += e_j [phi(tau_g+tau_F) - phi(tau_g)] + s_j "
-           "tau_F|tau_F|/T0 + a_j tau_F^2/T0 + h_j [(tau_g+tau_F)^3 - tau_g^3]/T0^2 + r_j "
-           "[|tau_g+tau_F| - |tau_g|] + g_j tau_F^3/T0^2 + k_j |tau_F| (arm joints), phi = T1 "
-           "tanh(tau/T1), T0 = 100 N*m: soft zone about zero torque, symmetric and asymmetric "
+    return "nonlinear reducer: dtheta_j += e_j [phi(tau_g+tau_F) - phi(tau_g)] + w_j "
+           "[psi(tau_g+tau_F) - psi(tau_g)] + s_j tau_F|tau_F|/T0 + a_j tau_F^2/T0 + h_j "
+           "[(tau_g+tau_F)^3 - tau_g^3]/T0^2 + r_j [|tau_g+tau_F| - |tau_g|] + g_j tau_F^3/T0^2 "
+           "+ k_j |tau_F| (arm joints), phi = T1 tanh(tau/T1), psi = 3 T1 tanh(tau/(3 T1)), T0 "
+           "= 100 N*m: soft zones about zero torque (two knees), symmetric and asymmetric "
            "hardening or softening about the unloaded state and about the preload, a kinked "
            "curve; a fit keeps the terms the data support";
   }
@@ -135,6 +152,9 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
       const T preload = T(t1 * std::tanh(tg(j) / t1));
       s.dtheta(j) += p[j] * (loaded - preload);
       if (j >= arm_) continue;
+      const double t2 = kWide * t1;
+      s.dtheta(j) += p[n + 6 * arm_ + j] *
+                     (T(t2) * tanh((T(tg(j)) + t) / T(t2)) - T(t2 * std::tanh(tg(j) / t2)));
       s.dtheta(j) += (p[n + j] * abs(t) + p[n + arm_ + j] * t) * t / T(kT0);
       const T total = T(tg(j)) + t;
       const double g = tg(j);  // cubed by hand: std::pow would need a newer libm in the FMU
@@ -149,7 +169,7 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
   std::vector<double> knee_;
   int arm_ = 0;  ///< joints with second-order terms
   std::string name_ = "nonlinear_joint";
-  std::vector<ParameterSpec> params_;
+  std::vector<ParameterSpec> params_, wide_params_;
 };
 
 }  // namespace
