@@ -65,9 +65,10 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
           -1e-2, 1e-2, 1e-5, 0.0, 0.0)));
     }
     arm_ = n > 3 ? n - 3 : n;
+    std::vector<ParameterSpec> wide;  // after the other terms: their indices stay as they were
     for (int j = 0; j < arm_; ++j) {
       const std::string jn = std::to_string(j + 1);
-      wide_params_.push_back(optional(effects::parameter(
+      wide.push_back(optional(effects::parameter(
           "w" + jn, "rad/(N*m)",
           "extra compliance of joint " + jn + " in a wide soft zone about zero torque (knee " +
               std::to_string(static_cast<int>(kWide * knee_[j])) + " N*m; < 0: softening)",
@@ -89,7 +90,7 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
         params_.push_back(optional(effects::parameter(
             letter + jn, "rad/(N*m)", "joint " + jn + what, -1e-2, 1e-2, 1e-6, 0.0, 0.0)));
       }
-    params_.insert(params_.end(), wide_params_.begin(), wide_params_.end());
+    params_.insert(params_.end(), wide.begin(), wide.end());
   }
   const std::string& name() const override { return name_; }
   /// The families a reducer's law comes in, each scored on its own by the diagnosis: the
@@ -169,7 +170,7 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
   std::vector<double> knee_;
   int arm_ = 0;  ///< joints with second-order terms
   std::string name_ = "nonlinear_joint";
-  std::vector<ParameterSpec> params_, wide_params_;
+  std::vector<ParameterSpec> params_;
 };
 
 }  // namespace
