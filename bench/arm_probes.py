@@ -25,7 +25,6 @@ Needs numpy and the `stiff` Python package (run it with .venv/bin/python).
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import os
 import subprocess
@@ -60,9 +59,9 @@ def simulate(robot, truth, count, seed, out, noisy):
 
 
 def displacements(path):
-    with open(path) as f:
-        rows = list(csv.DictReader(l for l in f if not l.startswith("#")))
-    return np.array([[float(r[k]) for k in ("dx_m", "dy_m", "dz_m")] for r in rows])
+    import stiff
+
+    return stiff.Dataset.read(path).displacement
 
 
 def truth_yaml(stiffness, effects):
@@ -122,15 +121,17 @@ def make_arm(robot, kinds, seeds, out, joint_um, effect_um, tmp):
     shape = np.array(SHAPE.get(robot, [3.0, 2.0, 2.0, 0.6, 0.5, 0.4]))
     simulate(robot, truth_yaml(1e4 * shape, {}), 60, 999, f"{tmp}/s.csv", False)
     stiffness = 1e4 * shape * rms_um(displacements(f"{tmp}/s.csv")) / joint_um
-    index = []
+    index, bases = [], {}
     for kind in kinds:
         if kind != "none" and kind not in available:
             print(f"{robot}: {kind} skipped ({robot}'s file has no link masses)", file=sys.stderr)
             continue
         for seed in seeds:
             rng = np.random.default_rng([seed, KINDS.index(kind)])
-            simulate(robot, truth_yaml(stiffness, {}), 60, 100 + seed, f"{tmp}/b.csv", False)
-            base = displacements(f"{tmp}/b.csv")
+            if seed not in bases:  # the calibration poses without an effect, one per seed
+                simulate(robot, truth_yaml(stiffness, {}), 60, 100 + seed, f"{tmp}/b.csv", False)
+                bases[seed] = displacements(f"{tmp}/b.csv")
+            base = bases[seed]
             effects = {}
             for _ in range(20 if kind != "none" else 0):
                 effects, size = draw(kind, rng, link_params), 0.0

@@ -179,36 +179,29 @@ def test_a_wide_soft_zone_on_a_larger_arm_is_a_reducer_not_a_gap(root, tmp_path)
     np = pytest.importorskip("numpy")
     from pystiff_support import bench_module
 
-    fp = bench_module(root, "form_probes")
+    fp, op = bench_module(root, "form_probes"), bench_module(root, "outside_probes")
     chain, masses, coms = fp.read_dh_robot(root / "examples" / "robots" / "ur10.yaml")
     robot = stiff.Robot("ur10")
     truth = tmp_path / "truth.yaml"
     truth.write_text(f"stiffness_Nm_per_rad: {UR10_K}\n")
-    knee, scale = 27.0, None
+    control, files, add, knee, scale = tmp_path / "control", {}, {}, 27.0, None
+    control.mkdir()
     for name, count, seed in (("calib.csv", 60, 105), ("valid.csv", 40, 5005)):
-        path = tmp_path / name
+        path = control / name
         assert main(["simulate", "--robot", "ur10", "--count", str(count), "--seed", str(seed),
                      "--truth", str(truth), "--noise", "noise_realistic", "-o", str(path)]) == 0
         data = stiff.Dataset.read(path, robot)
-        jv = robot.jacobian(data.q)[:, :3, :]
-        tau = np.einsum("nij,ni->nj", jv, data.force)
+        jv, tau = op.load_torques(robot, data.q, data.force)
         tau_g = fp.gravity_torques(chain, data.q, masses, coms)
         zone = knee * (np.tanh((tau_g + tau) / knee) - np.tanh(tau_g / knee))
         d = jv[:, :, 1] * zone[:, 1, None] + 0.7 * jv[:, :, 2] * zone[:, 2, None]
         scale = scale or 55e-6 / np.sqrt(np.mean(d ** 2))  # set on the calibration rows
-        lines = path.read_text().splitlines()
-        head = next(i for i, l in enumerate(lines) if not l.startswith("#"))
-        cols = lines[head].split(",")
-        k = [cols.index(c) for c in ("dx_m", "dy_m", "dz_m")]
-        for i, row in enumerate(lines[head + 1:]):
-            v = row.split(",")
-            for a in range(3):
-                v[k[a]] = repr(float(v[k[a]]) + float(scale * d[i, a]))
-            lines[head + 1 + i] = ",".join(v)
-        path.write_text("\n".join(lines) + "\n")
+        files[name], add[name] = op.read_csv(path), scale * d
+    op.write_scenario(control, tmp_path / "soft", files, add)
     js = tmp_path / "d.json"
-    assert main(["diagnose", "--robot", "ur10", "--data", str(tmp_path / "calib.csv"),
-                 "--validate", str(tmp_path / "valid.csv"), "--auto", "--json", str(js)]) == 0
+    assert main(["diagnose", "--robot", "ur10", "--data", str(tmp_path / "soft" / "calib.csv"),
+                 "--validate", str(tmp_path / "soft" / "valid.csv"), "--auto", "--json",
+                 str(js)]) == 0
     d = json.loads(js.read_text())
     assert d["verdict"] == "missing_effect" and d["candidates"][0]["effect"] == "nonlinear_joint"
     # One effect, and no second: the 10 N*m zone alone left a misfit that `backlash` took up

@@ -147,15 +147,14 @@ class NonlinearJoint : public EffectT<NonlinearJoint> {
     const auto& tg = s.context->tau_gravity;
     const int n = static_cast<int>(s.dtheta.size());
     for (int j = 0; j < n; ++j) {
-      const double t1 = knee_[j];
       const T t = s.tau(j);
-      const T loaded = T(t1) * tanh((T(tg(j)) + t) / T(t1));
-      const T preload = T(t1 * std::tanh(tg(j) / t1));
-      s.dtheta(j) += p[j] * (loaded - preload);
+      // The soft zone of knee T1 about zero torque, loaded minus unloaded (at the preload).
+      auto zone = [&](double t1) {
+        return T(t1) * tanh((T(tg(j)) + t) / T(t1)) - T(t1 * std::tanh(tg(j) / t1));
+      };
+      s.dtheta(j) += p[j] * zone(knee_[j]);
       if (j >= arm_) continue;
-      const double t2 = kWide * t1;
-      s.dtheta(j) += p[n + 6 * arm_ + j] *
-                     (T(t2) * tanh((T(tg(j)) + t) / T(t2)) - T(t2 * std::tanh(tg(j) / t2)));
+      s.dtheta(j) += p[n + 6 * arm_ + j] * zone(kWide * knee_[j]);
       s.dtheta(j) += (p[n + j] * abs(t) + p[n + arm_ + j] * t) * t / T(kT0);
       const T total = T(tg(j)) + t;
       const double g = tg(j);  // cubed by hand: std::pow would need a newer libm in the FMU

@@ -25,19 +25,18 @@ def register(sub):
 
 def run(args):
     robot = api.Robot(robot_path(args.robot)) if args.robot else None
-    names = [args.name] if args.name else api.effects()
-    if args.name:
-        infos = [api.describe_effect(args.name, robot)]
-    else:
-        # One effect this robot cannot carry (no link masses) must not hide the others.
-        infos = []
-        for n in names:
-            try:
-                infos.append(api.describe_effect(n, robot))
-            except StiffError as e:
-                info = api.describe_effect(n)
-                info["unavailable"] = str(e).split(": ", 1)[-1]
-                infos.append(info)
+
+    def listed(name):
+        """One effect this robot cannot carry (no link masses) must not hide the others."""
+        try:
+            return api.describe_effect(name, robot)
+        except StiffError as e:
+            info = api.describe_effect(name)
+            info["unavailable"] = str(e).split(": ", 1)[-1]
+            return info
+
+    infos = [api.describe_effect(args.name, robot)] if args.name else [
+        listed(n) for n in api.effects()]
     if args.json:
         print(json.dumps(infos if not args.name else infos[0], indent=2))
         return 0
