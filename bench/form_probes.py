@@ -19,6 +19,11 @@ verdict: `missing_effect` naming the class):
   force_flange     a force sensor on the flange turned by 3-8 deg about a random axis with
                    per-axis gains off by 2-5 %: the file states A F, the arm felt F (the
                    development data's frame error is fixed in the base frame) -> force_frame
+  force_crosstalk  a force sensor on the flange with cross-axis sensitivity: the file states
+                   (I + R X R^T) F, the arm felt F, X symmetric with a zero diagonal (8-12 %)
+                                                                             -> force_frame
+  force_crosstalk_base  the same reading error fixed in the base frame (a force plate under a
+                   fixture): the file states (I + X) F                      -> force_frame
   tracker          the measured displacements rotated about a random axis   -> tracker_frame
   drift_settle     the tracker settling exponentially (time constant 0.5-1.5 sessions), the
                    unloaded pass first                                       -> drift
@@ -53,9 +58,10 @@ Usage:
 
 Size: the part of the effect that five joint compliances cannot take up is set to `--size` um
 RMS per axis on the calibration rows (default 40, about 1.3 times the development data's noise;
-the development data's classes leave 5-20 % of the signal, 15-60 um), except force_flange,
-whose angles and gains are drawn, and a coupling that would need |c_jk| above 0.8 sqrt(c_j c_k)
-of the control's fitted compliances (not positive definite), which is held there (smaller).
+the development data's classes leave 5-20 % of the signal, 15-60 um), except force_flange and
+force_crosstalk(_base), whose angles, gains and cross-talk are drawn, and a coupling that
+would need |c_jk| above 0.8 sqrt(c_j c_k) of the control's fitted compliances (not positive
+definite), which is held there (smaller).
 The laws of the total torque use gravity torques of this script's own modified-DH chain with
 every link's mass and centre of mass drawn 30 % off the robot file's, as a user's file is.
 `true_class_refit_valid_um` is the joint compliances and the generating form (its shape fixed, its amplitudes free) refitted on calib.csv by least squares,
@@ -78,7 +84,8 @@ from outside_probes import (controls, load_torques, prepare, probe_arguments, ro
 KINDS = {
     "coupling45": "coupling", "coupling35": "coupling", "coupling13": "coupling",
     "coupling24": "coupling", "cubic23": "nonlinear_joint", "kink3": "nonlinear_joint",
-    "force_flange": "force_frame", "tracker": "tracker_frame", "drift_settle": "drift",
+    "force_flange": "force_frame", "force_crosstalk": "force_frame",
+    "force_crosstalk_base": "force_frame", "tracker": "tracker_frame", "drift_settle": "drift",
     "drift_loaded_first": "drift", "drift_reversed": "drift", "drift_interleaved": "drift",
     "drift_timed": "drift",
     "kinkg23": "nonlinear_joint", "cubicg23": "nonlinear_joint", "softzone23": "nonlinear_joint",
@@ -94,6 +101,8 @@ DESCRIPTION = {
     "cubic23": "joints 2 and 3 hardening or softening with the cube of the load torque",
     "kink3": "joint 3 stiffer in one load direction (a kinked torque-torsion curve)",
     "force_flange": "force-sensor frame error on the flange: rotation and per-axis gains",
+    "force_crosstalk": "cross-axis sensitivity of a flange force sensor",
+    "force_crosstalk_base": "cross-axis sensitivity of a force reading fixed in the base frame",
     "tracker": "laser-tracker frame misregistration about a random axis",
     "drift_settle": "tracker settling exponentially, the unloaded pass first",
     "drift_loaded_first": "tracker settling exponentially, the loaded pass first",
@@ -128,6 +137,13 @@ DESCRIPTION = {
 }
 T_REF = 100.0  # N*m, the torque that scales the cubic law
 GRAVITY = np.array([0.0, 0.0, -9.81])
+
+
+def symmetric_offdiagonal(rng, low, high):
+    """A symmetric 3 x 3 matrix with a zero diagonal, its three entries of sizes in [low, high]
+    and random signs."""
+    v = rng.uniform(low, high, 3) * rng.choice([-1.0, 1.0], 3)
+    return np.array([[0, v[0], v[1]], [v[0], 0, v[2]], [v[1], v[2], 0]])
 
 
 def read_dh_robot(path):
@@ -402,6 +418,16 @@ def make_probe(kind, rng, robot, arrays, dh_robot, compliance, shift=None):
             written = np.einsum("nij,jk,nlk,nl->ni", rot, a, rot, f)
             out[fn] = (np.zeros_like(f), written, np.zeros((3 * n, 0)))
         params = {"rotation_rad": axis.tolist(), "gains": gains.tolist()}
+    elif kind in ("force_crosstalk", "force_crosstalk_base"):
+        x = symmetric_offdiagonal(rng, 0.08, 0.12)
+        for fn, (q, f, n) in arrays.items():
+            if kind == "force_crosstalk":
+                rot = robot.tool_pose(q)[:, :3, :3]
+                written = f + np.einsum("nij,jk,nlk,nl->ni", rot, x, rot, f)
+            else:
+                written = f + f @ x.T
+            out[fn] = (np.zeros_like(f), written, np.zeros((3 * n, 0)))
+        params = {"X": x.tolist(), "frame": "flange" if kind == "force_crosstalk" else "base"}
     elif kind == "tracker":
         axis = rotation(rng)[:, 0]
         params = {"axis": axis.tolist()}
@@ -451,7 +477,7 @@ def add_form(kind, rng, robot, arrays, dh_robot, joint, compliance, size, state)
             cols[fn] = (cols[fn].T.reshape(-1, n, 3) @ rot.T).reshape(cols[fn].shape[1], -1).T
         params["angle_deg"] = float(np.rad2deg(angle))
         return params
-    if kind == "force_flange":
+    if kind in ("force_flange", "force_crosstalk", "force_crosstalk_base"):
         # The arm felt the true force: the regressors stay the true ones.
         state["forces"] = {fn: probe[fn][1] for fn in files}
         return params

@@ -13,9 +13,6 @@ reads (expected verdict: no confident claim):
                changes over the output turn): d += J_3 c(q3) tau_3, c = a cos(2 q3 + phi)
   k<j>q<k>     joint j's compliance varying with joint k's angle, a cos(q_k + phi) (e.g.
                k3q2: the forearm's reducer stiffer as the shoulder turns; not in the default set)
-  crosstalk    a force sensor on the flange with cross-axis sensitivity: the written force is
-               the true one off by R X R^T F, X symmetric with a zero diagonal (8-12 %)
-  crosstalk_base  the same sensor fixed in the base frame (a force plate under a fixture)
   warmup       the joints' compliance growing over the session (a reducer's lubricant warming
                up): d += s (i / N) J C J^T F, row i of N, C the control's fitted compliances
   growth       thermal growth of the arm between the unloaded and the loaded pass: d += k P,
@@ -35,9 +32,10 @@ Usage:
   .venv/bin/python bench/diagnosis_score.py --data /tmp/probes --sets base,sigma --noise given
 
 The effect's RMS is set to `--size` (default 55 um per axis on the calibration rows, about
-1.8 times the development data's noise), the same scale on the validation rows; crosstalk's
-size follows from its 8-12 % and the joint compliances fitted to the control. Each scenario's
-truth.json records the effect's parameters and RMS. Needs the `stiff` Python package and numpy.
+1.8 times the development data's noise), the same scale on the validation rows. A force
+sensor's cross-talk is in the library (force_frame): bench/form_probes.py force_crosstalk,
+force_crosstalk_base. Each scenario's truth.json records the effect's parameters and RMS.
+Needs the `stiff` Python package and numpy.
 """
 from __future__ import annotations
 
@@ -50,14 +48,12 @@ import sys
 
 import numpy as np
 
-KINDS = ("base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth", "warmup",
+KINDS = ("base_shift", "angle_joint", "growth", "warmup",
          "sensor_level", "sensor_offset", "sensor_offset_base")
 DESCRIPTION = {
     "base_shift": "outside the library: the arm shifts as a whole under the force (base plate "
                   "compliance fixed in the base frame)",
     "angle_joint": "outside the library: joint 3's compliance varies with its own angle",
-    "crosstalk": "outside the library: cross-axis sensitivity of a flange force sensor",
-    "crosstalk_base": "outside the library: cross-axis sensitivity of a base-fixed force sensor",
     "growth": "outside the library: thermal growth of the arm scaling its position",
     "warmup": "outside the library: the joints' compliance growing over the session",
     "sensor_level": "outside the library: a force sensor's gain changing with the load's level",
@@ -197,11 +193,6 @@ def rotation(rng):
     return q * np.sign(np.linalg.det(q))
 
 
-def symmetric_offdiagonal(rng, low, high):
-    v = rng.uniform(low, high, 3) * rng.choice([-1.0, 1.0], 3)
-    return np.array([[0, v[0], v[1]], [v[0], 0, v[2]], [v[1], v[2], 0]])
-
-
 def angle_pair(kind):
     """(j, k), 0-based, of a kind `k<j>q<k>`, else None."""
     m = re.fullmatch(r"k([1-9])q([1-9])", kind)
@@ -229,18 +220,6 @@ def make_effect(kind, rng, robot, compliance):
             jv, tau = load_torques(robot, q, f)
             return jv[:, :, j] * (np.cos(q[:, k] + phi) * tau[:, j])[:, None]
         return joint_by_angle, {"phase_rad": phi}
-    if kind in ("crosstalk", "crosstalk_base"):
-        x = symmetric_offdiagonal(rng, 0.08, 0.12)
-        flange = kind == "crosstalk"
-
-        def crosstalk(q, f, n):
-            if flange:
-                rot = robot.tool_pose(q)[:, :3, :3]
-                df = np.einsum("nij,jk,nlk,nl->ni", rot, x, rot, f)
-            else:
-                df = f @ x.T
-            return joint_deflection(robot, q, df, compliance)
-        return crosstalk, {"X": x.tolist(), "frame": "flange" if flange else "base"}
     if kind == "warmup":
         def warmup(q, f, n):
             return joint_deflection(robot, q, f, compliance) * (np.arange(n) / n)[:, None]
@@ -290,9 +269,7 @@ def main() -> int:
                 [seed, KINDS.index(kind)] if kind in KINDS else [seed] + [ord(c) for c in kind])
             fn_effect, params = make_effect(kind, rng, robot, compliance)
             add = {fn: fn_effect(*arrays[fn]) for fn in files}
-            scale = 1.0
-            if kind != "crosstalk" and kind != "crosstalk_base":
-                scale = a.size * 1e-6 / np.sqrt(np.mean(add["calib.csv"] ** 2))
+            scale = a.size * 1e-6 / np.sqrt(np.mean(add["calib.csv"] ** 2))
             # The parameters as applied (the size sets the scale of the drawn ones).
             if kind == "base_shift":
                 params["C_b_m_per_N"] = (np.array(params["C_b_m_per_N"]) * scale).tolist()

@@ -245,13 +245,23 @@ Analysis analyse(const Context& cx,
       VectorXd theta(mg->parameter_count());
       theta.head(pc) = a.theta;
       for (int k = 0; k < pg; ++k) theta(pc + k) = mg->spec(pc + k).null_value;
+      // The candidate's common forms (Effect::sub_forms) when it has them: a rare term, which
+      // a fit keeps only at a higher price, does not excuse a row from being an outlier.
+      std::vector<int> cols;
+      for (const auto& form : mg->effects().back()->sub_forms())
+        cols.insert(cols.end(), form.begin(), form.end());
+      std::sort(cols.begin(), cols.end());
+      cols.erase(std::unique(cols.begin(), cols.end()), cols.end());
+      if (cols.empty())
+        for (int k = 0; k < pg; ++k) cols.push_back(k);
       const auto ctx = mg->contexts(calib);
-      MatrixXd xz(3 * rows, pc + pg);
+      MatrixXd xz(3 * rows, pc + static_cast<int>(cols.size()));
       xz.leftCols(pc) = x;
-      for (int r = 0; r < rows; ++r)
-        xz.block(3 * r, pc, 3, pg) =
-            mg->displacement_jacobian(theta, calib.rows[r], ctx[r], pc).rightCols(pg) /
-            noise.sigma(r);
+      for (int r = 0; r < rows; ++r) {
+        const auto jac = mg->displacement_jacobian(theta, calib.rows[r], ctx[r], pc);
+        for (size_t k = 0; k < cols.size(); ++k)
+          xz.block(3 * r, pc + static_cast<int>(k), 3, 1) = jac.col(pc + cols[k]) / noise.sigma(r);
+      }
       const std::vector<bool> fg =
           improbable_rows(xz, y, cx.opt->outlier_alpha, noise.known, &too_many);
       for (int r = 0; r < rows; ++r) flag[r] = flag[r] && fg[r];

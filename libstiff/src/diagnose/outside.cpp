@@ -152,43 +152,29 @@ void load_response(const Context&, const Analysis& a, const std::string& name, G
                     std::move(level), false});
 }
 
-/// Errors of the force reading that force_frame (its rotations and gains) does not have: the
-/// displacement they leave is the model's own response to the force error, G(q) dF, with G the
-/// model's displacement per unit force at the row (Analysis::force_response), so that the
-/// columns are those of whatever the arm's compliance is. Two groups:
-///  - cross-talk of a sensor on the flange, its reading off by a symmetric matrix with a zero
-///    diagonal in the sensor frame (the off-diagonal part of its calibration matrix):
-///    dF = R E_k R^T F, three columns;
-///  - a zero offset of the reading (a sensor not tared, or its zero drifted with temperature;
-///    a load cell's bias under a fixture): dF = R e_k in the sensor frame and e_k in the base
-///    frame, six columns. The force reading's own noise moves the point along these very
-///    directions, by each row's compliance: the group is tested with each row's own residual
-///    variance (robust_group), where one variance for all rows reads a soft arm's force noise
-///    as an offset when the data do not state it (stated, it is in each row's covariance).
-///    Only rows with a written force have either.
+/// A zero offset of the force reading, an error that force_frame (the reading's linear map:
+/// rotations, gains, cross-talk) does not have: a sensor not tared or its zero drifted with
+/// temperature, a load cell's bias under a fixture. The displacement it leaves is the model's
+/// own response to the force error, G(q) dF, with G the model's displacement per unit force at
+/// the row (Analysis::force_response), so that the columns are those of whatever the arm's
+/// compliance is: dF = R e_k in the sensor frame and e_k in the base frame, six columns. The
+/// force reading's own noise moves the point along these very directions, by each row's
+/// compliance: the group is tested with each row's own residual variance (robust_group), where
+/// one variance for all rows reads a soft arm's force noise as an offset when the data do not
+/// state it (stated, it is in each row's covariance). Only rows with a written force have it.
 void force_reading(const Context&, const Analysis& a, const std::string& name, Groups* out) {
-  const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
-  MatrixXd crosstalk = MatrixXd::Zero(a.n, 3), offset = MatrixXd::Zero(a.n, 6);
+  MatrixXd offset = MatrixXd::Zero(a.n, 6);
   for (size_t i = 0; i < a.used.rows.size(); ++i) {
     const auto& m = a.used.rows[i];
     if (m.force.squaredNorm() == 0.0) continue;  // an unloaded (absolute) row: no reading
     const auto& c = a.ctx[i];
     const Eigen::Matrix3d wg = a.W[i] * a.force_response[i];
     const Eigen::Matrix3d rot = c.chain.flange.topLeftCorner<3, 3>();
-    const Eigen::Vector3d fs = rot.transpose() * m.force;
     for (int k = 0; k < 3; ++k) {
-      Eigen::Vector3d df = Eigen::Vector3d::Zero();
-      df(pairs[k][0]) = fs(pairs[k][1]);
-      df(pairs[k][1]) = fs(pairs[k][0]);
-      crosstalk.block<3, 1>(3 * i, k) = wg * (rot * df);
       offset.block<3, 1>(3 * i, k) = wg * rot.col(k);
       offset.block<3, 1>(3 * i, 3 + k) = wg.col(k);
     }
   }
-  out->push_back({name + "crosstalk",
-                  "the model's response to a force error symmetric between the sensor's axes "
-                  "(force sensor cross-talk, not in the library)",
-                  std::move(crosstalk), false});
   out->push_back({name + "offset",
                   "the model's response to a constant force error in the sensor or the base "
                   "frame (a force reading's zero offset, not in the library)",

@@ -137,8 +137,8 @@ def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_p
     assert p.returncode == 0, p.stderr
     index = json.loads((out / "index.json").read_text())
     assert sorted(e["type"] for e in index) == sorted(
-        ["base_shift", "angle_joint", "crosstalk", "crosstalk_base", "growth", "warmup",
-         "sensor_level", "sensor_offset", "sensor_offset_base"])
+        ["base_shift", "angle_joint", "growth", "warmup", "sensor_level", "sensor_offset",
+         "sensor_offset_base"])
 
     robot = stiff.Robot("rokae")
     base = stiff.Dataset.read(suite / "base" / "none_00" / "calib.csv", robot)
@@ -178,7 +178,7 @@ def test_outside_probes_add_their_physics_and_are_not_claimed(root, suite, tmp_p
             assert np.linalg.norm(par["direction"]) == pytest.approx(1.0, rel=1e-12)
             expect = joints(-robot.tool_pose(base.q)[:, :3, :3] @ b)
         assert np.allclose(added, expect, rtol=0, atol=1e-12)
-    rows = scored(root, out, "both", "base_shift,crosstalk,sensor_level,sensor_offset",
+    rows = scored(root, out, "both", "base_shift,angle_joint,sensor_level,sensor_offset",
                   tmp_path)
     assert len(rows) == 8
     for r in rows:
@@ -193,8 +193,9 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     at the moved SMR), a drift over the clock writes the
     loaded readings' times, and the diagnosis names the class of a kinked reducer about the
     gravity preload, of a drift read in reversed order, of one read at irregular times and of
-    a reducer hardening with the cube of the load torque and of one stiffer in one direction of
-    the load, at a 10 um tracker's noise
+    a reducer hardening with the cube of the load torque, of one stiffer in one direction of
+    the load and of a force reading's cross-talk fixed in the base frame, at a 10 um tracker's
+    noise
     (docs/diagnosis.md, section 6)."""
     np = pytest.importorskip("numpy")
     import stiff
@@ -218,7 +219,7 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
     out = tmp_path / "forms"
     kinds = ("kinkg23,drift_reversed,force_flange,tracker,coupling24,link_fore,"
              "compensator_lever,kinkg23+drift_reversed,drift_timed,offset_meas,offset_load,"
-             "offset_meas+coupling24,cubic23,kink3")
+             "offset_meas+coupling24,cubic23,kink3,force_crosstalk,force_crosstalk_base")
     p = subprocess.run([sys.executable, str(root / "bench" / "form_probes.py"), "--data",
                         str(suite), "--out", str(out), "--sets", "base", "--seeds", "0",
                         "--kinds", kinds], capture_output=True, text=True, timeout=600)
@@ -262,11 +263,22 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
         truth = json.loads((folder / "truth.json").read_text())
         assert truth["expected"]["effects"] == [fp.KINDS[kind]]
         added = (probe.displacement - base.displacement).reshape(-1)
-        if kind == "force_flange":
+        if kind in ("force_flange", "force_crosstalk", "force_crosstalk_base"):
+            # The sensor's reading A F (A in the sensor's frame, or the base's), the arm's
+            # displacements those of the true force.
             assert np.array_equal(probe.displacement, base.displacement)
             par = truth["effect_parameters"]
-            a = fp.rodrigues(np.array(par["rotation_rad"])) @ np.diag(1 + np.array(par["gains"]))
-            rot = robot.tool_pose(base.q)[:, :3, :3]
+            if kind == "force_flange":
+                a = (fp.rodrigues(np.array(par["rotation_rad"])) @
+                     np.diag(1 + np.array(par["gains"])))
+            else:
+                x = np.array(par["X"])
+                assert np.allclose(x, x.T) and np.all(np.diag(x) == 0)
+                assert np.all((np.abs(x[np.triu_indices(3, 1)]) >= 0.08) &
+                              (np.abs(x[np.triu_indices(3, 1)]) <= 0.12))
+                a = np.eye(3) + x
+            rot = (robot.tool_pose(base.q)[:, :3, :3] if kind != "force_crosstalk_base"
+                   else np.broadcast_to(np.eye(3), (len(base.q), 3, 3)))
             expect = np.einsum("nij,jk,nlk,nl->ni", rot, a, rot, base.force)
             assert np.allclose(probe.force, expect, atol=0.0051)  # written to 0.01 N
             continue
@@ -320,9 +332,10 @@ def test_form_probes_add_their_physics_and_are_found(root, suite, tmp_path):
             assert left == pytest.approx(40e-6, rel=1e-6)
         else:
             assert left < 40e-6
-    rows = scored(root, out, "given", "kinkg23,drift_reversed,drift_timed,cubic23,kink3",
+    rows = scored(root, out, "given",
+                  "kinkg23,drift_reversed,drift_timed,cubic23,kink3,force_crosstalk_base",
                   tmp_path)
-    assert len(rows) == 5
+    assert len(rows) == 6
     for r in rows:
         assert r["outcome"] == "right" and r["ratio"] < 1.25, r
 

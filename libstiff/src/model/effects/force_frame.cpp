@@ -1,4 +1,6 @@
-// force_frame: orientation and scale errors of the force sensor (docs/effects.md).
+// force_frame: orientation, scale and cross-talk errors of the force reading (docs/effects.md).
+#include <utility>
+
 #include "stiff/model/effects/common.hpp"
 
 namespace stiff {
@@ -14,6 +16,11 @@ namespace {
 /// A(sF) c = A(F) (s c): no displacement data can see it, only an independent force
 /// reference (dead weights). identify() therefore holds one scale of each frame at 0 (the gains
 /// are gauge parameters, ParameterSpec::gauge) and names the combination.
+/// Each frame's map is the general linear one: besides the rotation (the antisymmetric part)
+/// and the gains (the diagonal), a sensor's cross-axis sensitivity is the symmetric part off the
+/// diagonal, (I + X), X_kl = X_lk = x_kl (the calibration matrix's off-diagonal error, a few per
+/// cent on a strain-gauge sensor). The cross-talk terms are optional: a fit keeps those the data
+/// support (sub_forms below).
 class ForceFrame : public EffectT<ForceFrame> {
  public:
   explicit ForceFrame(const EffectSetup&) {
@@ -44,6 +51,18 @@ class ForceFrame : public EffectT<ForceFrame> {
           0.5, 0.02, 0.0, 0.0));
       params_.back().gauge = 2;  // the base frame
     }
+    for (int frame = 0; frame < 2; ++frame)
+      for (const auto& [k, l] : kPairs) {
+        const std::string pair = std::string(axis[k]) + axis[l];
+        params_.push_back(effects::parameter(
+            std::string(frame == 0 ? "crosstalk_" : "crosstalk_base_") + pair, "1",
+            std::string("cross-axis sensitivity between the ") +
+                (frame == 0 ? "force sensor's " : "load's base ") + axis[k] + " and " + axis[l] +
+                " axes (symmetric off-diagonal error of the " +
+                (frame == 0 ? "sensor's" : "base-fixed reading's") + " calibration matrix)",
+            -0.5, 0.5, 0.02, 0.0, 0.0));
+        params_.back().optional_term = true;
+      }
   }
   const std::string& name() const override { return name_; }
   bool example_parameters(const Eigen::VectorXd& /*c*/, double* p) const override {
@@ -55,14 +74,24 @@ class ForceFrame : public EffectT<ForceFrame> {
     return true;
   }
   std::string description() const override {
-    return "force frame: clocking omega and per-axis gain s of a flange sensor, direction "
-           "omega_b and gain s_b of a load fixed in the base frame, F = R(omega_b) diag(1+s_b) "
-           "R_06 R(omega) diag(1+s) R_06^T F_meas (a common gain is not identifiable)";
+    return "force frame: clocking omega, per-axis gain s and cross-talk X of a flange sensor, "
+           "direction omega_b, gain s_b and cross-talk X_b of a load read in the base frame, F = "
+           "R(omega_b) (I+X_b) diag(1+s_b) R_06 R(omega) (I+X) diag(1+s) R_06^T F_meas (X "
+           "symmetric, zero diagonal, kept only where the data support it; a common gain is not "
+           "identifiable)";
   }
   std::string reference() const override {
     return "OnRobot HEX-E/H datasheet (crosstalk < 5 %); docs/effects.md";
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
+  /// The rotations and gains of both frames (a sensor mounted turned, a fixture pulling
+  /// askew). The cross-talk terms stay outside the common form: a fit keeps one only at the
+  /// extended information criterion's price (a term chosen among six).
+  std::vector<std::vector<int>> sub_forms() const override {
+    std::vector<int> frame(12);
+    for (int k = 0; k < 12; ++k) frame[k] = k;
+    return {frame};
+  }
 
   template <typename T>
   void wrench_t(const T* p, EvalState<T>& s) const {
@@ -73,12 +102,22 @@ class ForceFrame : public EffectT<ForceFrame> {
     const Matrix3<T> rb = effects::rotation_matrix(p + 6);
     Vector3<T> gain_b;
     for (int k = 0; k < 3; ++k) gain_b(k) = T(1) + p[9 + k];
-    const Matrix3<T> map = rb * gain_b.asDiagonal() * rf * r * gain.asDiagonal() * rf.transpose();
+    const Matrix3<T> map = rb * cross(p + 15) * gain_b.asDiagonal() * rf * r * cross(p + 12) *
+                           gain.asDiagonal() * rf.transpose();
     s.force = map * s.force;
     s.moment = map * s.moment;
   }
 
  private:
+  static constexpr std::pair<int, int> kPairs[3] = {{0, 1}, {0, 2}, {1, 2}};
+  /// I + X, X symmetric with a zero diagonal and x = (X_xy, X_xz, X_yz).
+  template <typename T>
+  static Matrix3<T> cross(const T* x) {
+    Matrix3<T> m = Matrix3<T>::Identity();
+    for (int i = 0; i < 3; ++i)
+      m(kPairs[i].first, kPairs[i].second) = m(kPairs[i].second, kPairs[i].first) = x[i];
+    return m;
+  }
   std::string name_ = "force_frame";
   std::vector<ParameterSpec> params_;
 };
