@@ -102,21 +102,28 @@ class ForceFrame : public EffectT<ForceFrame> {
     const Matrix3<T> rb = effects::rotation_matrix(p + 6);
     Vector3<T> gain_b;
     for (int k = 0; k < 3; ++k) gain_b(k) = T(1) + p[9 + k];
-    const Matrix3<T> map = rb * cross(p + 15) * gain_b.asDiagonal() * rf * r * cross(p + 12) *
-                           gain.asDiagonal() * rf.transpose();
-    s.force = map * s.force;
-    s.moment = map * s.moment;
+    // The map applied factor by factor to each vector (3 x 3 times a vector, not the product
+    // of seven matrices: the Jet passes of a fit evaluate this for every row).
+    auto map = [&](const Vector3<T>& v) {
+      const Vector3<T> sensor = cross<T>(p + 12, gain.cwiseProduct(rf.transpose() * v));
+      return Vector3<T>(rb * cross<T>(p + 15, gain_b.cwiseProduct(rf * (r * sensor))));
+    };
+    s.force = map(s.force);
+    s.moment = map(s.moment);
   }
 
  private:
   static constexpr std::pair<int, int> kPairs[3] = {{0, 1}, {0, 2}, {1, 2}};
-  /// I + X, X symmetric with a zero diagonal and x = (X_xy, X_xz, X_yz).
+  /// (I + X) v, X symmetric with a zero diagonal and x = (X_xy, X_xz, X_yz).
   template <typename T>
-  static Matrix3<T> cross(const T* x) {
-    Matrix3<T> m = Matrix3<T>::Identity();
-    for (int i = 0; i < 3; ++i)
-      m(kPairs[i].first, kPairs[i].second) = m(kPairs[i].second, kPairs[i].first) = x[i];
-    return m;
+  static Vector3<T> cross(const T* x, const Vector3<T>& v) {
+    Vector3<T> out = v;
+    for (int i = 0; i < 3; ++i) {
+      const auto [k, l] = kPairs[i];
+      out(k) += x[i] * v(l);
+      out(l) += x[i] * v(k);
+    }
+    return out;
   }
   std::string name_ = "force_frame";
   std::vector<ParameterSpec> params_;
