@@ -49,6 +49,9 @@ verdict: `missing_effect` naming the class):
                    law or a soft zone (knee 5-30 N*m) of the total torque, gravity preload
                    included                                                 -> nonlinear_joint
   backlash3, backlash25   lost motion of joint 3, or of joints 2 and 5     -> backlash
+  backlash1        lost motion of joint 1, which gravity does not preload: unloaded it rests
+                   anywhere in its gap (uniform), the load pushes it to the gap's side
+                                                                             -> backlash
   k1+k2            two of the above at once (expected: both named), e.g. coupling24+drift_settle;
                    beside a point offset the other form is seen at the moved points
 
@@ -89,7 +92,7 @@ KINDS = {
     "drift_loaded_first": "drift", "drift_reversed": "drift", "drift_interleaved": "drift",
     "drift_timed": "drift",
     "kinkg23": "nonlinear_joint", "cubicg23": "nonlinear_joint", "softzone23": "nonlinear_joint",
-    "backlash3": "backlash", "backlash25": "backlash", "link_upper": "link",
+    "backlash3": "backlash", "backlash25": "backlash", "backlash1": "backlash", "link_upper": "link",
     "link_fore": "link", "link_column": "link", "link_wrist": "link",
     "compensator_lever": "gravity_compensator", "offset_meas": "point_offset",
     "offset_load": "point_offset",
@@ -117,6 +120,8 @@ DESCRIPTION = {
     "softzone23": "joints 2 and 3 with a soft zone about zero total torque, knee 5-30 N*m "
                   "(gravity preload; masses off the robot file's)",
     "backlash3": "lost motion of joint 3 under gravity preload (masses off the robot file's)",
+    "backlash1": "lost motion of joint 1 without gravity preload (its unloaded rest anywhere in "
+                 "the gap)",
     "backlash25": "lost motion of joints 2 and 5 under gravity preload (masses off the robot "
                   "file's)",
     "link_upper": "a spring inside the upper arm at a random point along it, bending and "
@@ -358,6 +363,16 @@ def make_probe(kind, rng, robot, arrays, dh_robot, compliance, shift=None):
             params["law"] = "softening" if sign > 0 else "hardening"
         if kind == "softzone23":
             params["knee_Nm"] = knee
+    elif kind == "backlash1":
+        # Where the joint rests in its gap unloaded is where the last motion left it: uniform
+        # over the gap, drawn per reading; the load takes it to the side its torque pushes to.
+        # What a model can reach is the mean, b/2 sgn(tau); the rest is scatter.
+        for fn, (q, f, n) in arrays.items():
+            jv, tau = shifted_torques(robot, q, f, shift)
+            rest = rng.uniform(-0.5, 0.5, n)
+            d = jv[:, :, 0] * (0.5 * np.sign(tau[:, 0]) - rest)[:, None]
+            mean = jv[:, :, 0] * (0.5 * np.sign(tau[:, 0]))[:, None]
+            out[fn] = (d, None, mean.reshape(-1, 1))
     elif kind.startswith("link_"):
         link = {"link_column": 0, "link_upper": 1, "link_fore": 2, "link_wrist": 3}[kind]
         along = rng.uniform(0.2, 0.8)
