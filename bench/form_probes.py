@@ -151,6 +151,17 @@ def symmetric_offdiagonal(rng, low, high):
     return np.array([[0, v[0], v[1]], [v[0], 0, v[2]], [v[1], v[2], 0]])
 
 
+def sensor_readings(robot, arrays, a, flange):
+    """Per file (no displacement added, the force the sensor reports A F, no regressor): a
+    reading error A in the sensor's frame on the flange (R A R^T F) or fixed in the base."""
+    out = {}
+    for fn, (q, f, n) in arrays.items():
+        rot = robot.tool_pose(q)[:, :3, :3] if flange else np.broadcast_to(np.eye(3), (n, 3, 3))
+        written = np.einsum("nij,jk,nlk,nl->ni", rot, a, rot, f)
+        out[fn] = (np.zeros_like(f), written, np.zeros((3 * n, 0)))
+    return out
+
+
 def read_dh_robot(path):
     """(the DH chain: convention and rows (alpha, a, d, theta offset) [rad, m]; masses [kg] and
     centres of mass [m] of links 1..n, then the tool's) from a robot file whose joints are
@@ -428,20 +439,11 @@ def make_probe(kind, rng, robot, arrays, dh_robot, compliance, shift=None):
         axis = rotation(rng)[:, 0] * np.deg2rad(rng.uniform(3, 8))
         gains = rng.uniform(0.02, 0.05, 3) * rng.choice([-1.0, 1.0], 3)
         a = rodrigues(axis) @ np.diag(1 + gains)
-        for fn, (q, f, n) in arrays.items():
-            rot = robot.tool_pose(q)[:, :3, :3]
-            written = np.einsum("nij,jk,nlk,nl->ni", rot, a, rot, f)
-            out[fn] = (np.zeros_like(f), written, np.zeros((3 * n, 0)))
+        out = sensor_readings(robot, arrays, a, True)
         params = {"rotation_rad": axis.tolist(), "gains": gains.tolist()}
     elif kind in ("force_crosstalk", "force_crosstalk_base"):
         x = symmetric_offdiagonal(rng, 0.08, 0.12)
-        for fn, (q, f, n) in arrays.items():
-            if kind == "force_crosstalk":
-                rot = robot.tool_pose(q)[:, :3, :3]
-                written = f + np.einsum("nij,jk,nlk,nl->ni", rot, x, rot, f)
-            else:
-                written = f + f @ x.T
-            out[fn] = (np.zeros_like(f), written, np.zeros((3 * n, 0)))
+        out = sensor_readings(robot, arrays, np.eye(3) + x, kind == "force_crosstalk")
         params = {"X": x.tolist(), "frame": "flange" if kind == "force_crosstalk" else "base"}
     elif kind == "tracker":
         axis = rotation(rng)[:, 0]

@@ -1,7 +1,6 @@
 """bench/diagnosis_score.py, the scoring harness of the diagnosis: its rules, and a run on a
 small scenario directory of the same layout as the independent development suite (folders with
 calib.csv, valid.csv and truth.json; index.json), made here by the virtual robot."""
-import importlib.util
 import json
 import subprocess
 import sys
@@ -9,20 +8,15 @@ import sys
 import numpy as np
 import pytest
 
-from pystiff_support import bench_module
+from pystiff_support import PAPER_K, bench_module
 from stiff.cli import main
 
-PAPER_K = [5.0914e4, 1.6382e4, 3.1311e4, 7.7911e3, 5.6136e3, 4.0e3]
 TRACKER_SIGMA_UM = 10.0
 
 
 @pytest.fixture(scope="module")
 def score(root):
-    spec = importlib.util.spec_from_file_location("diagnosis_score",
-                                                  root / "bench" / "diagnosis_score.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return bench_module(root, "diagnosis_score")
 
 
 def test_classify_follows_the_documented_rules(score):
