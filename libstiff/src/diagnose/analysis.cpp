@@ -289,7 +289,11 @@ Analysis analyse(const Context& cx,
   for (int i = 0; i < nu; ++i) {
     const Eigen::Index row = a.used_rows[i];
     a.force_response[i] = force_response(*a.model, a.theta, a.used.rows[i], a.ctx[i]);
-    a.cov_factor[i] = cholesky_factor(row_covariance(noise, row, a.force_response[i]), row);
+    // A stated noise plus what the model itself leaves to chance at the row (a reducer's rest
+    // in its gap): the floor a right model reaches. Unstated, the scale is the residual's.
+    Eigen::Matrix3d cov = row_covariance(noise, row, a.force_response[i]);
+    if (noise.known) cov += a.model->displacement_scatter(a.theta, a.used.rows[i], a.ctx[i]);
+    a.cov_factor[i] = cholesky_factor(cov, row);
     a.W[i] = a.cov_factor[i].triangularView<Eigen::Lower>().solve(Eigen::Matrix3d::Identity());
   }
   // Weighted Jacobian of the identified parameters, and the weighted residual.
@@ -412,13 +416,16 @@ Analysis analyse(const Context& cx,
       // Each row's error over its covariance (row_covariance: the stated force error along
       // the model's force response at that row), the prediction's variance as a multiple.
       const bool directional = cx.vnoise->force_error_stated();
-      const auto vctx = directional ? a.model->contexts(scored) : std::vector<MeasurementContext>{};
+      const bool scatters = a.model->scatters();
+      const auto vctx =
+          directional || scatters ? a.model->contexts(scored) : std::vector<MeasurementContext>{};
       for (size_t r = 0; r < closest.size(); ++r) {
         const auto row = static_cast<Eigen::Index>(r);
         Eigen::Matrix3d cov = Eigen::Matrix3d::Identity() * (sr[r] * sr[r]);
         if (directional)
           cov = row_covariance(*cx.vnoise, row,
                                force_response(*a.model, a.theta, scored.rows[r], vctx[r]));
+        if (scatters) cov += a.model->displacement_scatter(a.theta, scored.rows[r], vctx[r]);
         const Eigen::Matrix3d l = cholesky_factor(cov, row);
         vchi2 += l.triangularView<Eigen::Lower>().solve(closest[r]).squaredNorm() /
                  (1.0 + lev[r] + session_leverage);

@@ -1126,6 +1126,24 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> DeflectionModel::displacement_jacobian(
   return jet_jacobian(*this, theta, m, c, false, from);
 }
 
+bool DeflectionModel::scatters() const {
+  return std::any_of(effects_.begin(), effects_.end(), [](const auto& e) { return e->scatters(); });
+}
+
+Eigen::Matrix3d DeflectionModel::displacement_scatter(const Eigen::VectorXd& theta,
+                                                      const Measurement& m,
+                                                      const MeasurementContext& c) const {
+  const int n = robot_.dof();
+  if (m.absolute || !deflects_ || !scatters()) return Eigen::Matrix3d::Zero();
+  EvalState<double> s;
+  evaluate_into(theta.data(), m, c, s, false);
+  Eigen::VectorXd var = Eigen::VectorXd::Zero(n);
+  for (size_t e = 0; e < effects_.size(); ++e)
+    effects_[e]->joint_scatter(theta.data() + offsets_[e], s, var);
+  const Eigen::Matrix3Xd jp = s.jac_meas.topRows<3>();
+  return jp * var.asDiagonal() * jp.transpose();
+}
+
 Eigen::VectorXd DeflectionModel::align_sessions(const Eigen::VectorXd& theta,
                                                 const Dataset& data,
                                                 const std::vector<MeasurementContext>& ctx,

@@ -275,6 +275,15 @@ class Effect {
   /// common sub-form is not tested diluted among every term the family has. Empty: the whole
   /// effect only.
   virtual std::vector<std::vector<int>> sub_forms() const { return {}; }
+  /// The variance [rad^2] the effect adds to each joint's deflection that no parameter
+  /// predicts, added to `var` (size dof): a state of the mechanism that the readings do not
+  /// set (a reducer's rest anywhere in its gap when nothing preloads it). `s` is the row's
+  /// state after its evaluation at p. The diagnosis adds what it makes of the measured point's
+  /// displacement to a stated noise (DeflectionModel::displacement_scatter).
+  virtual void joint_scatter(const double* /*p*/,
+                             const EvalState<double>& /*s*/,
+                             Eigen::VectorXd& /*var*/) const {}
+  virtual bool scatters() const { return false; }  ///< true when joint_scatter adds anything
   /// Experiments that tell this effect from its look-alikes, one sentence each (the
   /// diagnosis's advice when the data cannot decide).
   virtual std::vector<std::string> experiment_hints() const { return {}; }

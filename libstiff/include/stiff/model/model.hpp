@@ -158,6 +158,13 @@ class DeflectionModel {
                                                                  const Measurement& m,
                                                                  const MeasurementContext& c,
                                                                  int from = 0) const;
+  /// Covariance [m^2] of a displacement row's measured point that the model leaves to chance
+  /// (Effect::joint_scatter through the translational Jacobian at P: J_p diag(var) J_p^T) at
+  /// theta; zero for an absolute row and for a model without such an effect.
+  Eigen::Matrix3d displacement_scatter(const Eigen::VectorXd& theta,
+                                       const Measurement& m,
+                                       const MeasurementContext& c) const;
+  bool scatters() const;  ///< an effect of the model has a joint_scatter
   /// Jacobian (3 x P) of the orientation discrepancy of an absolute row with a measured
   /// orientation (evaluate's `o`; zeros on other rows), by automatic differentiation.
   Eigen::Matrix<double, 3, Eigen::Dynamic> orientation_jacobian(const Eigen::VectorXd& theta,

@@ -149,6 +149,19 @@ class Backlash : public EffectT<Backlash> {
       s.dtheta(j) += T(0.5) * p[j] * (loaded - preload);
     }
   }
+  /// A joint that gravity does not preload at this pose (every link's torque on it below eps:
+  /// a vertical joint 1) rests anywhere in its gap between readings, uniformly: its deflection
+  /// from the unloaded reading scatters about the model's mean b/2 sgn(tau_F) with the variance
+  /// of that rest, b^2/12.
+  bool scatters() const override { return true; }
+  void joint_scatter(const double* p,
+                     const EvalState<double>& s,
+                     Eigen::VectorXd& var) const override {
+    const Eigen::MatrixXd& tl = s.context->tau_gravity_links;
+    if (tl.rows() != var.size()) return;
+    for (Eigen::Index j = 0; j < var.size(); ++j)
+      if (tl.row(j).cwiseAbs().maxCoeff() < kEps) var(j) += p[j] * p[j] / 12.0;
+  }
 
  private:
   /// Upper quantile of chi2 with one degree of freedom at tail probability p: z^2 with
