@@ -248,12 +248,9 @@ Analysis analyse(const Context& cx,
       // The candidate's common forms (Effect::sub_forms) when it has them: a rare term, which
       // a fit keeps only at a higher price, does not excuse a row from being an outlier.
       std::vector<int> cols;
-      for (const auto& form : mg->effects().back()->sub_forms())
-        cols.insert(cols.end(), form.begin(), form.end());
-      std::sort(cols.begin(), cols.end());
-      cols.erase(std::unique(cols.begin(), cols.end()), cols.end());
-      if (cols.empty())
-        for (int k = 0; k < pg; ++k) cols.push_back(k);
+      const std::vector<bool> common = mg->effects().back()->common_terms();
+      for (int k = 0; k < pg; ++k)
+        if (common[static_cast<size_t>(k)]) cols.push_back(k);
       const auto ctx = mg->contexts(calib);
       MatrixXd xz(3 * rows, pc + static_cast<int>(cols.size()));
       xz.leftCols(pc) = x;

@@ -418,11 +418,7 @@ FitResult identify_at(const RobotModel& robot,
     Eigen::VectorXd price = Eigen::VectorXd::Constant(p, std::log(m));
     for (size_t ei = 0; ei < model.effects().size(); ++ei) {
       const Effect& eff = *model.effects()[ei];
-      const std::vector<std::vector<int>> forms = eff.sub_forms();
-      if (forms.empty()) continue;
-      std::vector<bool> common(eff.size(), false);
-      for (const auto& form : forms)
-        for (int k : form) common[k] = true;
+      const std::vector<bool> common = eff.common_terms();
       const auto rare = std::count(common.begin(), common.end(), false);
       if (rare < 2) continue;
       for (int k = 0; k < eff.size(); ++k)

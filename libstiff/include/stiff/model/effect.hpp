@@ -275,6 +275,9 @@ class Effect {
   /// common sub-form is not tested diluted among every term the family has. Empty: the whole
   /// effect only.
   virtual std::vector<std::vector<int>> sub_forms() const { return {}; }
+  /// Per parameter: whether it belongs to one of the common sub-forms (every parameter when
+  /// the effect has none). A term outside them is a rare one.
+  std::vector<bool> common_terms() const;
   /// The variance [rad^2] the effect adds to each joint's deflection that no parameter
   /// predicts, added to `var` (size dof): a state of the mechanism that the readings do not
   /// set (a reducer's rest anywhere in its gap when nothing preloads it). `s` is the row's

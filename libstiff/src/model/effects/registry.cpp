@@ -25,6 +25,14 @@ const std::vector<EffectEntry>& effect_registry() {
   return registry;
 }
 
+std::vector<bool> Effect::common_terms() const {
+  const std::vector<std::vector<int>> forms = sub_forms();
+  std::vector<bool> common(static_cast<size_t>(size()), forms.empty());
+  for (const auto& form : forms)
+    for (int k : form) common[static_cast<size_t>(k)] = true;
+  return common;
+}
+
 void Effect::set_parameter(double* p, const std::string& parameter, double value) const {
   for (int k = 0; k < size(); ++k)
     if (parameters()[static_cast<size_t>(k)].name == parameter) {
