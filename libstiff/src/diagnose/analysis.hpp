@@ -222,10 +222,12 @@ void where(const Context& cx, const Level& L, Diagnosis& d);
 /// The trend of level L's residual at p_adj < alpha/10 that is structure (CovariateTest::
 /// structure; the strongest), or none: structure
 /// whatever the noise level, where a trend at alpha/10 <= p_adj < alpha is left to chance.
-/// `outside_only`: only the trends of mechanisms outside the library (is_outside_library).
+/// `outside_only`: only the trends of mechanisms outside the library (is_outside_library);
+/// `level` > 0: that level of p_adj instead of alpha/10.
 std::optional<CovariateTest> strong_trend(const Context& cx,
                                           const Level& L,
-                                          bool outside_only = false);
+                                          bool outside_only = false,
+                                          double level = 0.0);
 
 /// The joint torques J(L)^T W of the measured wrench at the load point [N*m].
 inline VectorXd load_torques(const RobotModel& robot,

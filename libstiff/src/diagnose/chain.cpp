@@ -421,7 +421,7 @@ std::string Chain::decide(size_t i, std::string* why) {
                           " dof, residual " + num(q.residual_to_floor, 3) +
                           " times the floor, p = " + num(q.floor_p, 2) + " allowing " +
                           num(100 * cx->opt->noise_uncertainty, 2) + " % noise uncertainty";
-  auto nothing = [&](const std::string& extra) {
+  auto nothing = [&](const std::string& extra, bool refuted) {
     if (omnibus) {
       *why = "the residual is above the noise floor (" + chi + ") but no candidate effect " +
              "explains it" + extra;
@@ -443,6 +443,15 @@ std::string Chain::decide(size_t i, std::string* why) {
              ": the missing effect is probably not in the candidate list" + extra;
       return std::string("unexplained");
     }
+    // A candidate the calibration found but the validation refuted, and a mechanism outside
+    // the library whose trend the residual follows at alpha: two pieces of evidence that the
+    // residual is not noise, neither of them a library effect. No claim either way.
+    if (refuted)
+      if (const std::optional<CovariateTest> t = strong_trend(*cx, L, true, alpha)) {
+        *why = "no candidate effect explains the residual" + extra + ", and it follows " +
+               trend_text(*t) + ": the missing effect is probably not in the candidate list";
+        return std::string("unexplained");
+      }
     *why = known
                ? "the residuals are at the noise floor (" + chi + ") and no candidate " +
                      "effect is significant" + extra
@@ -452,7 +461,7 @@ std::string Chain::decide(size_t i, std::string* why) {
                      extra;
     return std::string("adequate");
   };
-  if (!claims(L)) return nothing("");
+  if (!claims(L)) return nothing("", false);
   const CandidateScore& top = L.scores[0];
   if (!L.separable) {
     // The calibration poses cannot separate the group. When the validation poses single out
@@ -499,8 +508,9 @@ std::string Chain::decide(size_t i, std::string* why) {
     // candidate the validation poses do not confirm on a model at a stated floor: no claim.
     if (!omnibus &&
         (top.p_adjusted > alpha / 10 || (known && q.has_validation && !levels[i].validated)))
-      return nothing(" (" + top.effect + " reached p_adj = " + num(top.p_adjusted, 2) + " but " +
-                     reason + ")");
+      return nothing(
+          " (" + top.effect + " reached p_adj = " + num(top.p_adjusted, 2) + " but " + reason + ")",
+          true);
     // The lead: the top, or a rival whose confirmed step replaced a top the validation poses
     // refuted (explained_by_chain).
     const CandidateScore& lead = L.scores[L.pick];

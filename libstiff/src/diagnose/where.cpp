@@ -209,12 +209,15 @@ void where(const Context& cx, const Level& L, Diagnosis& d) {
   d.covariates = tests;
 }
 
-std::optional<CovariateTest> strong_trend(const Context& cx, const Level& L, bool outside_only) {
+std::optional<CovariateTest> strong_trend(const Context& cx,
+                                          const Level& L,
+                                          bool outside_only,
+                                          double level) {
   Diagnosis d;
   where(cx, L, d);
+  const double at = level > 0 ? level : cx.opt->alpha / 10;
   for (const auto& c : d.covariates)  // sorted by p
-    if (c.structure && c.p_adjusted < cx.opt->alpha / 10 &&
-        (!outside_only || is_outside_library(c.covariate)))
+    if (c.structure && c.p_adjusted < at && (!outside_only || is_outside_library(c.covariate)))
       return c;
   return std::nullopt;
 }
