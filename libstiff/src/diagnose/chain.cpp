@@ -421,7 +421,7 @@ std::string Chain::decide(size_t i, std::string* why) {
                           " dof, residual " + num(q.residual_to_floor, 3) +
                           " times the floor, p = " + num(q.floor_p, 2) + " allowing " +
                           num(100 * cx->opt->noise_uncertainty, 2) + " % noise uncertainty";
-  auto nothing = [&](const std::string& extra, bool refuted) {
+  auto nothing = [&](const std::string& extra, bool top_failed) {
     if (omnibus) {
       *why = "the residual is above the noise floor (" + chi + ") but no candidate effect " +
              "explains it" + extra;
@@ -449,7 +449,7 @@ std::string Chain::decide(size_t i, std::string* why) {
     // is not noise, neither of them a library effect. No claim either way. (With a statement
     // the floor test is that check, and a small library effect the validation poses cannot yet
     // confirm stays `adequate`.)
-    if (refuted && !known)
+    if (top_failed && !known)
       if (const std::optional<CovariateTest> t = strong_trend(*cx, L, true, alpha)) {
         *why = "no candidate effect explains the residual" + extra + ", and it follows " +
                trend_text(*t) + ": the missing effect is probably not in the candidate list";

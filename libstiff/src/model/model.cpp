@@ -99,6 +99,7 @@ DeflectionModel::DeflectionModel(const RobotModel& robot,
     deflects_ = deflects_ || e->reads_jacobians() ||
                 (e->stages() & (unsigned{kJointStage} | unsigned{kCartesianStage}));
     linear_ = linear_ && e->linear();
+    scatters_ = scatters_ || e->scatters();
     offsets_.push_back(count_);
     count_ += e->size();
     effects_.push_back(std::move(e));
@@ -1126,15 +1127,11 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> DeflectionModel::displacement_jacobian(
   return jet_jacobian(*this, theta, m, c, false, from);
 }
 
-bool DeflectionModel::scatters() const {
-  return std::any_of(effects_.begin(), effects_.end(), [](const auto& e) { return e->scatters(); });
-}
-
 Eigen::Matrix3d DeflectionModel::displacement_scatter(const Eigen::VectorXd& theta,
                                                       const Measurement& m,
                                                       const MeasurementContext& c) const {
   const int n = robot_.dof();
-  if (m.absolute || !deflects_ || !scatters()) return Eigen::Matrix3d::Zero();
+  if (m.absolute || !deflects_ || !scatters_) return Eigen::Matrix3d::Zero();
   EvalState<double> s;
   evaluate_into(theta.data(), m, c, s, false);
   Eigen::VectorXd var = Eigen::VectorXd::Zero(n);

@@ -164,7 +164,7 @@ class DeflectionModel {
   Eigen::Matrix3d displacement_scatter(const Eigen::VectorXd& theta,
                                        const Measurement& m,
                                        const MeasurementContext& c) const;
-  bool scatters() const;  ///< an effect of the model has a joint_scatter
+  bool scatters() const { return scatters_; }  ///< an effect of the model has a joint_scatter
   /// Jacobian (3 x P) of the orientation discrepancy of an absolute row with a measured
   /// orientation (evaluate's `o`; zeros on other rows), by automatic differentiation.
   Eigen::Matrix<double, 3, Eigen::Dynamic> orientation_jacobian(const Eigen::VectorXd& theta,
@@ -241,6 +241,7 @@ class DeflectionModel {
   bool jet_jacobians_ = false;  ///< an effect reads EvalState::jac_meas / jac_load
   bool deflects_ = false;  ///< an effect acts in the joint or Cartesian stage or reads Jacobians
   bool linear_ = true;
+  bool scatters_ = false;  ///< an effect has a joint_scatter (Effect::scatters)
   bool analytic_ = false;
   std::vector<int> jet_parameters_;
   bool analytic_absolute_ = false;
