@@ -1356,6 +1356,54 @@ TEST(DiagnoseLink, AWristSpringToolComplianceCannotMimicOnNewPosesIsNamed) {
   }
 }
 
+// A spring part-way along the forearm (60 % of the way from the elbow to the wrist centre),
+// bending it in the arm's plane (about joint 3's direction, as stiff as joint 3) and across it
+// (twice as stiff), put into the virtual robot's data by its own statics: the arm beyond turns
+// about the spring's point by c u . M, M the load's moment about that point. No root spring
+// has this form (the in-plane spring turns about a point off joint 3's axis). `link`'s bending
+// terms do: named link (or ambiguous with it), with the noise stated and without, and the final
+// model predicts the new poses within three standard deviations of an RMS over 3 x 40
+// components of the floor (1.19); here at most 1.16. With the root springs alone the loop went
+// on to a point offset that is not there in 4 of the 6 runs (up to 1.22 times the floor), and
+// one run without a statement ended with a nonlinear joint and a tool compliance before link.
+constexpr double kSoftness = 3.0;  // the spring's compliance over joint 3's
+void bend_forearm(Dataset& data) {
+  const RobotModel robot = test::rokae();
+  const double k3 = test::paper_stiffness()(2);
+  for (auto& m : data.rows) {
+    const ChainState chain = robot.chain(m.q);
+    const Eigen::Vector3d root = chain.origin.col(2), end = chain.origin.col(3);
+    const Eigen::Vector3d o = root + 0.6 * (end - root);
+    const Eigen::Vector3d along = (end - root).normalized();
+    const Eigen::Vector3d in_plane = chain.axis.col(2);
+    const Eigen::Vector3d across = along.cross(in_plane).normalized();
+    const Eigen::Vector3d load = robot.point_position(chain, robot.load_point);
+    const Eigen::Vector3d point = robot.point_position(chain, robot.measured_point);
+    const Eigen::Vector3d moment = (load - o).cross(m.force) + m.moment;
+    const Eigen::Vector3d turn =
+        (in_plane * in_plane.dot(moment) + across * across.dot(moment)) * (kSoftness / k3);
+    m.displacement += turn.cross(point - o);
+  }
+}
+
+TEST(DiagnoseLink, SlowASpringPartWayAlongTheForearmIsFound) {
+  DiagnosisOptions o;
+  o.auto_loop = true;
+  for (const bool stated : {true, false})
+    for (uint64_t seed = 1; seed <= 3; ++seed) {
+      const Diagnosis d = run(altered_scenario(bend_forearm, seed, stated), o);
+      print(stated ? "forearm spring" : "forearm spring, noise unknown", seed, d);
+      EXPECT_TRUE(found(d, "link")) << d.summary;
+      EXPECT_TRUE(d.verdict == "missing_effect" || d.verdict == "ambiguous") << d.summary;
+      ASSERT_GE(d.steps.size(), 2u) << d.summary;
+      const ModelQuality& end = d.steps.back().quality;
+      EXPECT_EQ(end.model, "joint+link") << d.summary;
+      if (stated) {
+        EXPECT_LE(end.validation_rms_m / end.validation_floor_m, 1.19) << d.summary;
+      }
+    }
+}
+
 // An effect at half the example's size, often strongly significant in the calibration but
 // small against the prediction variance of its parameters on 40 new poses. When the validation
 // poses neither confirm nor refute it, the verdict names it (`ambiguous` with it) instead of

@@ -58,9 +58,51 @@ TEST(Effects, LinkKeepsOnlyDirectionsTheJointsCannotAbsorb) {
     names.push_back(p.name);
     if (!p.optional_term) always.push_back(p.name);
   }
-  EXPECT_EQ(names, (std::vector<std::string>{"c_link1_x", "c_link2_x", "c_link2_y", "c_link3_x",
-                                             "c_link4_x", "c_link5_x"}));
+  EXPECT_EQ(names, (std::vector<std::string>{
+                       "c_link1_x", "c_link2_x", "c_link2_y", "c_link3_x", "c_link4_x", "c_link5_x",
+                       "c_link2_y_coupled", "c_link2_y_lateral", "c_link3_z_coupled",
+                       "c_link3_z_lateral", "c_link3_x_coupled", "c_link3_x_lateral"}));
   EXPECT_EQ(always, (std::vector<std::string>{"c_link2_x", "c_link2_y", "c_link3_x"}));
+}
+
+// The bending terms are the expansion of a spring a fraction s along the link: with c, -c s and
+// c s^2 for its root spring (or the joint that stands for it), coupled and lateral terms, the
+// model moves the measured point as a spring at that point does, computed here from the
+// chain's statics directly. The forearm (link 3) bent in the arm's plane (about joint 3's
+// direction: its root spring is joint 3) and across it (about its frame's x axis, the axis of
+// its root spring c_link3_x).
+TEST(Effects, LinkBendingTermsAreASpringAlongTheLink) {
+  const RobotModel robot = test::rokae();
+  const DeflectionModel m(robot, {"joint", "link"});
+  const Dataset design = test::design60(4, 6);
+  const double c = 2e-5, s = 0.35;
+  for (const bool in_plane : {true, false}) {
+    Eigen::VectorXd theta = m.null_parameters();
+    const Effect& link = *m.effects()[1];
+    const std::string tag = in_plane ? "z" : "x";
+    if (in_plane)
+      theta(2) = c;  // joint 3
+    else
+      link.set_parameter(theta.data() + m.offset(1), "c_link3_x", c);
+    link.set_parameter(theta.data() + m.offset(1), "c_link3_" + tag + "_coupled", -c * s);
+    link.set_parameter(theta.data() + m.offset(1), "c_link3_" + tag + "_lateral", c * s * s);
+    const auto ctx = m.contexts(design);
+    for (size_t r = 0; r < design.size(); ++r) {
+      const Measurement& row = design.rows[r];
+      const ChainState chain = robot.chain(row.q);
+      const Eigen::Vector3d root = chain.origin.col(2), end = chain.origin.col(3);
+      const Eigen::Vector3d u =
+          in_plane ? chain.axis.col(2) : chain.link[2].block<3, 3>(0, 0).col(0).eval();
+      const Eigen::Vector3d o = root + s * (end - root);
+      const Eigen::Vector3d load = robot.point_position(chain, robot.load_point);
+      const Eigen::Vector3d point = robot.point_position(chain, robot.measured_point);
+      const double turn = c * u.dot((load - o).cross(row.force) + row.moment);
+      const Eigen::Vector3d expected = turn * u.cross(point - o);
+      const Eigen::Vector3d got = m.predict(theta, row, ctx[r]).head<3>();
+      EXPECT_LT((got - expected).norm(), 1e-9 * (1.0 + expected.norm()) + 1e-12)
+          << tag << " row " << r << ": " << got.transpose() << " vs " << expected.transpose();
+    }
+  }
 }
 
 TEST(Effects, NullParametersSwitchEveryEffectOff) {

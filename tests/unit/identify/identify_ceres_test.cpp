@@ -166,9 +166,10 @@ FitResult read_back_predicts_alike(const RobotModel& robot,
   return back;
 }
 
-// A fit written before its effect gained optional terms (link's column and wrist springs) still
-// applies: the terms it lacks enter at their null value, held, and it predicts as the same fit
-// with them written at 0 does. A fit that lacks a term that is not optional is refused.
+// A fit written before its effect gained optional terms (link's column and wrist springs, then
+// its bending terms) still applies: the terms it lacks enter at their null value, held, and it
+// predicts as the same fit with them written at 0 does. A fit that lacks a term that is not
+// optional is refused.
 TEST(FitCompatibility, AFitWithoutLaterOptionalTermsStillApplies) {
   const RobotModel robot = test::rokae();
   const Truth truth = test::effect_truth("link", robot);
@@ -178,7 +179,7 @@ TEST(FitCompatibility, AFitWithoutLaterOptionalTermsStillApplies) {
     return p.effect == "link" && p.name != "c_link2_x" && p.name != "c_link2_y" &&
            p.name != "c_link3_x";
   });
-  ASSERT_EQ(old.parameters.size() + 3, full.parameters.size());
+  ASSERT_EQ(old.parameters.size() + 9, full.parameters.size());
   const FitResult back = read_back_predicts_alike(robot, old, full, data);
   const DeflectionModel model(robot, full.model);
   const FitResult conformed = fit_for_model(back, robot, model, "test");

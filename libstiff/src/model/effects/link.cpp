@@ -33,23 +33,68 @@ class LinkCompliance : public EffectT<LinkCompliance> {
       const char* label[2] = {"x", "y"};
       for (int k = 0; k < 2; ++k) {
         if (std::abs(cand[k].dot(next)) > 0.95) continue;  // collinear with joint i+1
-        springs_.push_back({link - 1, cand[k]});
+        springs_.push_back({link - 1, cand[k], label[k]});
         ParameterSpec p =
             effects::parameter("c_link" + std::to_string(link) + "_" + label[k], "rad/(N*m)",
                                "compliance of a virtual rotational spring at the root of link " +
                                    std::to_string(link) + " about its frame's " + label[k] +
                                    " axis (bending or torsion of the link)",
                                0.0, 1e-2, 3e-6, 0.0, 1e-6);
-        p.optional_term = link != 2 && link != 3;
+        p.optional_term = !arm(link);
         params_.push_back(p);
+      }
+    }
+    // The upper arm and forearm bend along their length too: a spring a fraction s of the way
+    // from the root, or a beam's distributed bending, adds terms in s and s^2 that no spring
+    // at the root has (the beam's bending compliance at its root; docs/effects.md). Bending
+    // axes: joint i's (in the arm's plane) and those of the link's root springs; not one along
+    // the link (torsion does not depend on where it gives), nor one parallel to joints i and
+    // i+1 both: bending about it turns the arm as those two joints do, and its cross term is
+    // their coupled compliance (`coupling`).
+    const size_t roots = springs_.size();
+    for (int link = 1; link <= n - 1; ++link) {
+      if (!arm(link)) continue;
+      const Eigen::Matrix3d r = c0.link[link - 1].block<3, 3>(0, 0);
+      const Eigen::Vector3d span = r.transpose() * (c0.origin.col(link) - c0.origin.col(link - 1));
+      const double length = span.norm();
+      if (length < 1e-3) continue;  // joints i and i+1 meet: no lever along the link
+      const Eigen::Vector3d e = span / length;
+      const Eigen::Vector3d own = r.transpose() * c0.axis.col(link - 1);
+      const Eigen::Vector3d next = r.transpose() * c0.axis.col(link);
+      std::vector<std::pair<Eigen::Vector3d, std::string>> axes;
+      if (std::abs(own.dot(next)) <= 0.95) axes.push_back({own, "z"});
+      for (size_t k = 0; k < roots; ++k)
+        if (springs_[k].link == link - 1) axes.push_back({springs_[k].axis, springs_[k].label});
+      for (const auto& [u, label] : axes) {
+        if (u.cross(e).norm() < 0.3) continue;  // torsion
+        beams_.push_back({link - 1, u, length * u.cross(e)});
+        const std::string where = "bending of link " + std::to_string(link) +
+                                  " along its length about its " + label + " axis";
+        ParameterSpec coupled = effects::parameter(
+            "c_link" + std::to_string(link) + "_" + label + "_coupled", "rad/(N*m)",
+            where +
+                ": turn per lateral force times the link's length, shift per moment "
+                "(-c s for a spring a fraction s along; a beam's cross compliance)",
+            -1e-2, 1e-2, 1e-6, 0.0, 0.0);
+        ParameterSpec lateral = effects::parameter(
+            "c_link" + std::to_string(link) + "_" + label + "_lateral", "rad/(N*m)",
+            where +
+                ": shift of the link's far end per lateral force, over its length squared "
+                "(c s^2 for a spring a fraction s along)",
+            0.0, 1e-2, 1e-6, 0.0, 0.0);
+        coupled.optional_term = lateral.optional_term = true;
+        params_.push_back(coupled);
+        params_.push_back(lateral);
       }
     }
   }
   const std::string& name() const override { return name_; }
-  /// The upper arm and forearm alone, the common case, are scored on their own too.
+  /// The upper arm's and forearm's root springs, the common case, are scored on their own too.
+  /// The column's and wrist's springs and the bending terms (the refinement of a spring's
+  /// place) are rare terms: a fit keeps them at a higher price (docs/identifiability.md).
   std::vector<std::vector<int>> sub_forms() const override {
     const std::vector<int> arm = arm_springs();
-    if (arm.empty() || arm.size() == springs_.size()) return {};
+    if (arm.empty() || arm.size() == params_.size()) return {};
     return {arm};
   }
   bool example_parameters(const Eigen::VectorXd& /*c*/, double* p) const override {
@@ -59,8 +104,9 @@ class LinkCompliance : public EffectT<LinkCompliance> {
   }
   std::string description() const override {
     return "link compliance (virtual joint method): rotational springs in the links about the "
-           "axes the joints cannot absorb, d += c_v (u x (P-o)) (u x (L-o) . F); the column's "
-           "and the wrist's kept only when the data support them";
+           "axes the joints cannot absorb, d += c_v (u x (P-o)) (u x (L-o) . F), and the upper "
+           "arm's and forearm's bending along their length; the column's and the wrist's "
+           "springs and the bending terms kept only when the data support them";
   }
   std::string reference() const override {
     return "Pashkevich, Chablat & Wenger, Mech. Mach. Theory 44(5), 2009; Klimchik et al., "
@@ -75,6 +121,15 @@ class LinkCompliance : public EffectT<LinkCompliance> {
       axis(s.context->chain, k, u, o);
       Eigen::Map<Eigen::Vector3d>(out + 3 * k) =
           torque(u, o, s.p_load, s.force, s.moment) * cross(u, s.p_meas, o);
+    }
+    Eigen::Vector3d lateral;
+    double* col = out + 3 * springs_.size();
+    for (size_t k = 0; k < beams_.size(); ++k, col += 6) {
+      beam(s.context->chain, k, u, o, lateral);
+      const double t = torque(u, o, s.p_load, s.force, s.moment), b = lateral.dot(s.force);
+      Eigen::Map<Eigen::Vector3d> coupled(col), shift(col + 3);
+      coupled = t * lateral + b * cross(u, s.p_meas, o);
+      shift = b * lateral;
     }
   }
 
@@ -93,6 +148,15 @@ class LinkCompliance : public EffectT<LinkCompliance> {
         const T angle = p[k] * torque(u, o, pl, f, m);
         effects::add_scaled(s.d, angle, cross(u, pm, o));
         effects::add_scaled(s.rot, angle, u);
+      }
+      Eigen::Vector3d lateral;
+      const T* q = p + springs_.size();
+      for (size_t k = 0; k < beams_.size(); ++k, q += 2) {
+        beam(chain, k, u, o, lateral);
+        const double t = torque(u, o, pl, f, m), b = lateral.dot(f);
+        effects::add_scaled(s.d, q[0] * t + q[1] * b, lateral);
+        effects::add_scaled(s.d, q[0] * b, cross(u, pm, o));
+        effects::add_scaled(s.rot, q[0] * b, u);
       }
       return;
     }
@@ -114,6 +178,20 @@ class LinkCompliance : public EffectT<LinkCompliance> {
       effects::add_scaled(w, angle, u);
       effects::add_scaled(wo, angle, u.cross(o));
     }
+    // A bending term turns the arm like a spring at the root (its rotation joins w) and
+    // shifts it along the lateral direction l = length (u x e): the cross term c by l.F about
+    // u and by the root torque along l, the lateral term by l.F along l.
+    Eigen::Vector3d lateral;
+    const T* q = p + springs_.size();
+    for (size_t k = 0; k < beams_.size(); ++k, q += 2) {
+      beam(chain, k, u, o, lateral);
+      const T tk = joint_torque(cross(u, s.p_load, o), u, s.force, s.moment);
+      const T bk = effects::dot(s.force, lateral);
+      const T angle = q[0] * bk;
+      effects::add_scaled(w, angle, u);
+      effects::add_scaled(wo, angle, u.cross(o));
+      effects::add_scaled(s.d, q[0] * tk + q[1] * bk, lateral);
+    }
     const Vector3<T>& pm = s.p_meas;
     s.d(0) += w(1) * pm(2) - w(2) * pm(1) - wo(0);
     s.d(1) += w(2) * pm(0) - w(0) * pm(2) - wo(1);
@@ -122,12 +200,26 @@ class LinkCompliance : public EffectT<LinkCompliance> {
   }
 
  private:
-  // The springs of the upper arm and forearm: those that are not optional terms.
+  // The upper arm and forearm (links 2 and 3), the long castings.
+  static bool arm(int link) { return link == 2 || link == 3; }
+  // The root springs of the upper arm and forearm: the springs that are not optional terms.
   std::vector<int> arm_springs() const {
     std::vector<int> out;
-    for (size_t k = 0; k < params_.size(); ++k)
+    for (size_t k = 0; k < springs_.size(); ++k)
       if (!params_[k].optional_term) out.push_back(static_cast<int>(k));
     return out;
+  }
+  // Bending term k's axis u and root o (base frame) and its lateral direction
+  // l = length (u x e), e the unit vector from the link's root to the next joint's origin.
+  void beam(const ChainState& chain,
+            size_t k,
+            Eigen::Vector3d& u,
+            Eigen::Vector3d& o,
+            Eigen::Vector3d& lateral) const {
+    const Eigen::Matrix3d r = chain.link[beams_[k].link].block<3, 3>(0, 0);
+    u = r * beams_[k].axis;
+    o = chain.origin.col(beams_[k].link);
+    lateral = r * beams_[k].lateral;
   }
   // The spring axis u and origin o do not depend on the parameters: kept in double so that
   // automatic differentiation only carries derivatives where they can be non-zero.
@@ -154,9 +246,16 @@ class LinkCompliance : public EffectT<LinkCompliance> {
   struct Spring {
     int link;              ///< 0-based link index
     Eigen::Vector3d axis;  ///< unit axis in the link frame
+    std::string label;     ///< its name in the parameters' ("x", "y")
+  };
+  struct Beam {
+    int link;                 ///< 0-based link index
+    Eigen::Vector3d axis;     ///< unit bending axis u in the link frame
+    Eigen::Vector3d lateral;  ///< length (u x e) in the link frame [m]
   };
   std::string name_ = "link";
   std::vector<Spring> springs_;
+  std::vector<Beam> beams_;  ///< parameters after the springs', (coupled, lateral) each
   std::vector<ParameterSpec> params_;
 };
 
