@@ -182,9 +182,10 @@ Level score_level(const Context& cx, Analysis a, const std::vector<std::string>&
     const MatrixXd z = candidate_regressors(a, *mg, &typical);
     GroupScore g = score_group(a, z, typical, opt.rank_tolerance);
     // The whole effect decides what is identifiable; the test takes the best of it and its
-    // common sub-forms (Effect::sub_forms), Bonferroni-corrected for the forms tried.
+    // common sub-forms and its other forms (Effect::score_forms), Bonferroni-corrected for the
+    // forms tried.
     GroupScore best = g;
-    const std::vector<std::vector<int>> forms = eg.sub_forms();
+    const std::vector<std::vector<int>> forms = eg.score_forms();
     size_t form = 0;
     for (size_t f = 0; f < forms.size(); ++f) {
       MatrixXd zf(z.rows(), forms[f].size());

@@ -65,6 +65,30 @@ TEST(Effects, LinkKeepsOnlyDirectionsTheJointsCannotAbsorb) {
   EXPECT_EQ(always, (std::vector<std::string>{"c_link2_x", "c_link2_y", "c_link3_x"}));
 }
 
+// The fit prices the column's and wrist's springs and the bending terms as rare (outside the
+// common sub-form, the arm's root springs), while the score test also tries every root spring,
+// so that a wrist spring is not diluted among the bending terms: trying a form does not make
+// its terms common.
+TEST(Effects, LinkTriesEveryRootSpringButPricesTheRareTermsAsRare) {
+  const RobotModel robot = test::rokae();
+  const DeflectionModel m(robot, {"link"});
+  const Effect& link = *m.effects()[0];
+  std::vector<std::string> common;
+  const std::vector<bool> flags = link.common_terms();
+  for (int k = 0; k < link.size(); ++k)
+    if (flags[static_cast<size_t>(k)]) common.push_back(link.parameters()[k].name);
+  EXPECT_EQ(common, (std::vector<std::string>{"c_link2_x", "c_link2_y", "c_link3_x"}));
+  std::vector<std::vector<std::string>> tried;
+  for (const auto& form : link.score_forms()) {
+    tried.emplace_back();
+    for (int k : form) tried.back().push_back(link.parameters()[static_cast<size_t>(k)].name);
+  }
+  EXPECT_EQ(tried,
+            (std::vector<std::vector<std::string>>{
+                {"c_link2_x", "c_link2_y", "c_link3_x"},
+                {"c_link1_x", "c_link2_x", "c_link2_y", "c_link3_x", "c_link4_x", "c_link5_x"}}));
+}
+
 // The bending terms are the expansion of a spring a fraction s along the link: with c, -c s and
 // c s^2 for its root spring (or the joint that stands for it), coupled and lateral terms, the
 // model moves the measured point as a spring at that point does, computed here from the

@@ -275,6 +275,10 @@ class Effect {
   /// common sub-form is not tested diluted among every term the family has. Empty: the whole
   /// effect only.
   virtual std::vector<std::vector<int>> sub_forms() const { return {}; }
+  /// The forms the score test tries besides the whole effect: the common sub-forms, and forms
+  /// of rare terms that the whole would dilute among other rare terms (link's root springs
+  /// without its bending terms). Trying a form does not make its terms common.
+  virtual std::vector<std::vector<int>> score_forms() const { return sub_forms(); }
   /// Per parameter: whether it belongs to one of the common sub-forms (every parameter when
   /// the effect has none). A term outside them is a rare one.
   std::vector<bool> common_terms() const;

@@ -97,6 +97,15 @@ class LinkCompliance : public EffectT<LinkCompliance> {
     if (arm.empty() || arm.size() == params_.size()) return {};
     return {arm};
   }
+  /// And every root spring: a spring in the column or the wrist is not diluted among the
+  /// bending terms.
+  std::vector<std::vector<int>> score_forms() const override {
+    std::vector<std::vector<int>> out = sub_forms();
+    std::vector<int> roots;
+    for (size_t k = 0; k < springs_.size(); ++k) roots.push_back(static_cast<int>(k));
+    if (roots.size() > arm_springs().size() && roots.size() < params_.size()) out.push_back(roots);
+    return out;
+  }
   bool example_parameters(const Eigen::VectorXd& /*c*/, double* p) const override {
     for (int k = 0; k < size(); ++k) p[k] = 0.0;
     for (int k : arm_springs()) p[k] = 1.0 / 3e5;  // k = 3e5 N*m/rad, a stiff casting
