@@ -399,7 +399,10 @@ FitResult identify_at(const RobotModel& robot,
     if (!opt.select_terms) return;
     std::vector<int> cur = free;
     auto optional = [&](int k) { return model.spec(k).optional_term && !given[k]; };
-    if (std::none_of(cur.begin(), cur.end(), optional)) return;
+    if (std::none_of(cur.begin(), cur.end(), optional) &&
+        std::none_of(model.effects().begin(), model.effects().end(),
+                     [](const auto& e) { return e->alternative_forms(); }))
+      return;
     const Eigen::MatrixXd& jac = last_jacobian;  // at theta (the last solve's)
     Eigen::VectorXd e = weighted_residuals(s, theta);
     Eigen::MatrixXd js(jac.rows(), p);
@@ -424,6 +427,31 @@ FitResult identify_at(const RobotModel& robot,
       for (int k = 0; k < eff.size(); ++k)
         if (!common[k]) price(model.offset(static_cast<int>(ei)) + k) += 2.0 * std::log(rare);
     }
+    // Sub-forms that are alternatives (Effect::alternative_forms) may also go as a whole: a
+    // block's rise is z_B^T cov_BB^-1 z_B, its price the sum of its terms'.
+    // Its terms need not be optional one by one; one alternative of each effect always stays.
+    std::vector<std::vector<int>> blocks;
+    std::vector<size_t> block_effect;
+    for (size_t ei = 0; ei < model.effects().size(); ++ei) {
+      const Effect& eff = *model.effects()[ei];
+      if (!eff.alternative_forms()) continue;
+      for (const auto& form : eff.sub_forms()) {
+        std::vector<int> b;
+        for (int k : form)
+          if (!given[model.offset(static_cast<int>(ei)) + k])
+            b.push_back(model.offset(static_cast<int>(ei)) + k);
+        blocks.push_back(b);
+        block_effect.push_back(ei);
+      }
+    }
+    auto block_free = [&](size_t bi, const std::vector<int>& cur) {
+      std::vector<int> at;  // positions in cur
+      for (int k : blocks[bi]) {
+        const auto it = std::find(cur.begin(), cur.end(), k);
+        if (it != cur.end()) at.push_back(static_cast<int>(it - cur.begin()));
+      }
+      return at;
+    };
     double rss = e.squaredNorm();  // only grows as terms are dropped
     if (!(rss > 0)) return;
     Eigen::VectorXd z(p);  // distance from the null value in typical magnitudes
@@ -451,23 +479,76 @@ FitResult identify_at(const RobotModel& robot,
           worst = a;
         }
       }
-      if (worst < 0 || margin >= 0) break;
-      const int k = cur[worst];
-      for (int a = 0; a < nc; ++a)
-        if (a != worst) z(cur[a]) -= cov(a, worst) / cov(worst, worst) * z(k);
-      z(k) = 0.0;
-      idf.fixed[k] = true;
-      idf.statistical[k] = true;
-      idf.reason[k] =
-          "the data do not support this optional term: it lowers the residual sum of "
-          "squares by " +
-          num(100.0 * rise / (rss + rise)) +
-          " %, less than the Bayesian information criterion asks of one more "
-          "parameter (" +
-          num(100.0 * (1.0 - std::exp(-price(k) / m))) + " %)";
-      left_out[k] = true;
+      // The members (positions in cur) of each alternative sub-form still free, when every
+      // one of them is optional and there are two or more.
+      // cov_BB^-1 z_B for the terms at positions `at` of cur (empty when cov_BB is singular).
+      auto block_weights = [&](const std::vector<int>& at, Eigen::VectorXd* zb) {
+        const int nb = static_cast<int>(at.size());
+        Eigen::MatrixXd cbb(nb, nb);
+        zb->resize(nb);
+        for (int a = 0; a < nb; ++a) {
+          (*zb)(a) = z(cur[at[a]]);
+          for (int c = 0; c < nb; ++c) cbb(a, c) = cov(at[a], at[c]);
+        }
+        const Eigen::LDLT<Eigen::MatrixXd> f(cbb);
+        if (f.info() != Eigen::Success || !(f.vectorD().minCoeff() > 0)) return Eigen::VectorXd();
+        return Eigen::VectorXd(f.solve(*zb));
+      };
+      std::vector<int> best_block;
+      for (size_t bi = 0; bi < blocks.size(); ++bi) {
+        const std::vector<int> at = block_free(bi, cur);
+        bool other = false;  // another alternative of the effect still in the fit
+        for (size_t bj = 0; bj < blocks.size(); ++bj)
+          other = other || (bj != bi && block_effect[bj] == block_effect[bi] &&
+                            !block_free(bj, cur).empty());
+        if (!other || at.size() < 2) continue;
+        Eigen::VectorXd zb;
+        const Eigen::VectorXd w = block_weights(at, &zb);
+        if (w.size() == 0) continue;
+        double cost = 0.0;
+        for (int a : at) cost += price(cur[a]);
+        const double r = zb.dot(w);
+        const double over = m * std::log1p(r / rss) - cost;
+        if (over < margin) {
+          margin = over;
+          rise = r;
+          best_block = at;
+        }
+      }
+      if (margin >= 0 || (worst < 0 && best_block.empty())) break;
+      std::vector<int> gone = best_block;  // positions in cur
+      if (gone.empty()) gone = {worst};
+      {
+        // The other terms follow the removal: z_rest -= cov_rB cov_BB^-1 z_B.
+        Eigen::VectorXd zb;
+        const Eigen::VectorXd w = block_weights(gone, &zb);
+        for (int a = 0; a < nc; ++a) {
+          if (std::find(gone.begin(), gone.end(), a) != gone.end()) continue;
+          for (int c = 0; c < static_cast<int>(w.size()); ++c) z(cur[a]) -= cov(a, gone[c]) * w(c);
+        }
+      }
+      double cost = 0.0;
+      for (int g : gone) cost += price(cur[g]);
+      for (int g : gone) {
+        const int k = cur[g];
+        z(k) = 0.0;
+        idf.fixed[k] = true;
+        idf.statistical[k] = true;
+        idf.reason[k] =
+            std::string(gone.size() > 1 ? "the data do not support this alternative form of "
+                                          "its effect: its terms lower"
+                                        : "the data do not support this optional term: it "
+                                          "lowers") +
+            " the residual sum of squares by " + num(100.0 * rise / (rss + rise)) +
+            " %, less than the Bayesian information criterion asks of " +
+            (gone.size() > 1 ? std::to_string(gone.size()) + " more parameters ("
+                             : std::string("one more parameter (")) +
+            num(100.0 * (1.0 - std::exp(-cost / m))) + " %)";
+        left_out[k] = true;
+      }
       rss += rise;
-      cur.erase(cur.begin() + worst);
+      std::sort(gone.begin(), gone.end(), std::greater<int>());
+      for (int g : gone) cur.erase(cur.begin() + g);
       dropped = true;
     }
     if (dropped) resolve_free("is left after the optional terms the data do not support");

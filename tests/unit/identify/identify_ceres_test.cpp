@@ -741,3 +741,66 @@ TEST(IdentifyCeres, ACommonGainIsHeldBesideANonlinearReducer) {
   EXPECT_LT(rms, 1.2 * noise.tracker_sigma_m);
 }
 }  // namespace stiff
+
+namespace stiff {
+// A force-reading error sits in one frame: a sensor turned on the flange, or a fixture pulling
+// askew in the base frame. On 30 rows the other frame's six terms stood in for part of the
+// true frame's and raised the error on new poses (1.30 times what the true frame reaches on an
+// independent simulator's scenario); the fit now drops the frame the data do not support as a
+// whole, whichever it is.
+TEST(IdentifyCeres, AForceFrameErrorIsFittedInItsOwnFrame) {
+  const RobotModel robot = test::rokae();
+  const std::vector<std::string> effects{"joint", "force_frame"};
+  for (const bool base : {true, false}) {
+    double full_ss = 0, chosen_ss = 0;
+    for (int seed = 0; seed < 3; ++seed) {
+      const Dataset design = test::design60(31 + seed, 30), fresh = test::design60(41 + seed, 40);
+      const DeflectionModel tm(robot, effects, &design);
+      Truth truth;
+      truth.effects = effects;
+      truth.theta = tm.null_parameters();
+      truth.theta.head(6) = test::paper_stiffness().cwiseInverse();
+      const int ff = tm.offset(tm.find("force_frame")) + (base ? 6 : 0);
+      const double frame[5] = {0.06, -0.03, -0.09, -0.08, 0.05};  // rotation, gains x and y
+      for (int k = 0; k < 5; ++k) truth.theta(ff + k) = frame[k];
+      NoiseModel noise;
+      noise.tracker_sigma_m = 20e-6;
+      noise.seed = 50 + seed;
+      const Dataset data = simulate(robot, truth, design, noise);
+      noise.seed = 60 + seed;
+      const Dataset valid = simulate(robot, truth, fresh, noise);
+      IdentifyOptions all;
+      all.select_terms = false;
+      const FitResult chosen = identify(robot, data, effects, IdentifyOptions{});
+      const FitResult full = identify(robot, data, effects, all);
+      for (const auto& par : chosen.parameters) {
+        if (par.effect != "force_frame" || par.name.rfind("crosstalk", 0) == 0) continue;
+        const bool in_base = par.name.find("base") != std::string::npos;
+        const bool gauge = par.name == "scale_z" || par.name == "scale_base_z";
+        if (in_base != base) {
+          EXPECT_FALSE(par.identified) << par.name << " base " << base << " seed " << seed;
+          if (!gauge) EXPECT_EQ(par.held, "left_out") << par.name;
+        } else if (!gauge) {
+          EXPECT_TRUE(par.identified) << par.name << " base " << base << " seed " << seed;
+        }
+      }
+      const DeflectionModel fm(robot, effects, &data);
+      const auto ctx = fm.contexts(valid);
+      for (const FitResult* f : {&chosen, &full}) {
+        const Eigen::VectorXd theta = f->theta();
+        double ss = 0;
+        for (size_t r = 0; r < valid.rows.size(); ++r)
+          ss += (valid.rows[r].observed() - fm.predict(theta, valid.rows[r], ctx[r]).head<3>())
+                    .squaredNorm();
+        (f == &chosen ? chosen_ss : full_ss) += ss;
+      }
+    }
+    // Six parameters fewer on 90 components: new poses predicted better (20.8 and 21.0 um, both
+    // frames 22.8 and 22.9), and near the noise (20 um, about p / n of it more from the fitted
+    // parameters, 10 / 90).
+    const double n = 3.0 * 3.0 * 40.0;
+    EXPECT_LT(chosen_ss, full_ss) << "base " << base;
+    EXPECT_LT(std::sqrt(chosen_ss / n), 1.15 * 20e-6) << "base " << base;
+  }
+}
+}  // namespace stiff

@@ -279,6 +279,10 @@ class Effect {
   /// of rare terms that the whole would dilute among other rare terms (link's root springs
   /// without its bending terms). Trying a form does not make its terms common.
   virtual std::vector<std::vector<int>> score_forms() const { return sub_forms(); }
+  /// Whether the sub-forms are alternatives, of which a set-up usually has one (a force sensor
+  /// on the flange or a fixture in the base frame): a fit's selection of optional terms then
+  /// also weighs dropping each sub-form's terms at once (identify_ceres.cpp, select_terms).
+  virtual bool alternative_forms() const { return false; }
   /// Per parameter: whether it belongs to one of the common sub-forms (every parameter when
   /// the effect has none). A term outside them is a rare one.
   std::vector<bool> common_terms() const;

@@ -84,10 +84,21 @@ class ForceFrame : public EffectT<ForceFrame> {
     return "OnRobot HEX-E/H datasheet (crosstalk < 5 %); docs/effects.md";
   }
   const std::vector<ParameterSpec>& parameters() const override { return params_; }
-  /// The rotations and gains of both frames (a sensor mounted turned, a fixture pulling
-  /// askew). The cross-talk terms stay outside the common form: a fit keeps one only at the
-  /// extended information criterion's price (a term chosen among six).
+  /// The rotation and gains of each frame: a sensor mounted turned on the flange, a fixture
+  /// pulling askew in the base frame. The cross-talk terms stay outside the common forms: a fit
+  /// keeps one only at the extended information criterion's price (a term chosen among six).
   std::vector<std::vector<int>> sub_forms() const override {
+    std::vector<int> flange(6), base(6);
+    for (int k = 0; k < 6; ++k) flange[k] = k, base[k] = 6 + k;
+    return {flange, base};
+  }
+  /// An experiment has one of the two (a sensor on the flange, or a load through a fixture):
+  /// a fit drops the frame the data do not support as a whole (judged one term at a time, the
+  /// other frame's terms stood in for some of the true frame's on 30 rows, and the price of
+  /// each term dropped true ones).
+  bool alternative_forms() const override { return true; }
+  /// The score test tries both frames together, as one form of twelve terms.
+  std::vector<std::vector<int>> score_forms() const override {
     std::vector<int> frame(12);
     for (int k = 0; k < 12; ++k) frame[k] = k;
     return {frame};
