@@ -278,8 +278,15 @@ struct Chain {
 
   /// Does adding one of the members of level L's ambiguity group lower the validation error?
   /// (A group that does not separate is not followed by the chain; this asks whether what it
-  /// takes up on the calibration poses carries over at all.)
-  bool group_validates(const Level& L) const;
+  /// takes up on the calibration poses carries over at all.) With `p_calibration` < 1 (the
+  /// group's evidence), the fall must also be confirmed() with it.
+  bool group_validates(const Level& L, double p_calibration = 1) const;
+
+  /// Do evidence p_calibration on the calibration poses and the validation errors' fall from
+  /// `before` to `after` (paired_fall_p) together reach alpha (Fisher's method)?
+  bool confirmed(double p_calibration,
+                 const std::vector<double>& before,
+                 const std::vector<double>& after) const;
 
   /// The comparable validation RMS of level L's model with `g` added (INFINITY when the re-fit
   /// fails or there are no validation poses); `errors`: that model's validation errors.

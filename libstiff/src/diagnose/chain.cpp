@@ -120,11 +120,23 @@ double Chain::step_validation(const Level& L,
   }
 }
 
-bool Chain::group_validates(const Level& L) const {
+bool Chain::group_validates(const Level& L, double p_calibration) const {
   const double before = comparable_validation(L.a.quality);
+  std::vector<double> errors;
   for (const auto& g : L.group)
-    if (step_validation(L, g) < before) return true;
+    if (step_validation(L, g, &errors) < before &&
+        (p_calibration >= 1 || confirmed(p_calibration, L.a.quality.validation_error_m, errors)))
+      return true;
   return false;
+}
+
+bool Chain::confirmed(double p_calibration,
+                      const std::vector<double>& before,
+                      const std::vector<double>& after) const {
+  // Fisher's combination of two independent p-values (calibration and validation sessions):
+  // -2 (ln p1 + ln p2) ~ chi2(4) under the null, whose tail is k (1 - ln k), k = p1 p2.
+  const double k = p_calibration * paired_fall_p(before, after);
+  return k > 0 ? k * (1 - std::log(k)) < cx->opt->alpha : true;
 }
 
 std::string Chain::validation_separates(const Level& L,
@@ -466,6 +478,18 @@ std::string Chain::decide(size_t i, std::string* why) {
   };
   if (!claims(L)) return nothing("", false);
   const CandidateScore& top = L.scores[0];
+  // Marginal evidence (p_adj >= alpha/10) is a claim only with the validation poses' support:
+  // the calibration's p and the paired test of the step's validation errors (section 2),
+  // combined, must reach alpha. A flexible candidate can reach p_adj = 0.05 on a control's
+  // noise and lower the validation error by chance; a group of look-alikes is no stronger.
+  // A strong trend left in the residual (a mean offset beside a drift) is evidence of its own:
+  // then the rules below judge the candidate as before.
+  const bool marginal =
+      top.p_adjusted > alpha / 10 && q.has_validation && !strong_trend(*cx, L).has_value();
+  if (!L.separable && !omnibus && marginal && !group_validates(L, top.p_adjusted))
+    return nothing(" (" + join(L.group, ", ") + " reached p_adj = " + num(top.p_adjusted, 2) +
+                       " but the validation poses confirm none of them)",
+                   true);
   if (!L.separable) {
     // The calibration poses cannot separate the group. When the validation poses single out
     // one member and its chain explains the data, that member is the claim; otherwise the
@@ -554,6 +578,15 @@ std::string Chain::decide(size_t i, std::string* why) {
     return "ambiguous";
   }
   const CandidateScore& pick = L.scores[L.pick];
+  // Marginal evidence needs the validation poses' support (above).
+  if (pick.p_adjusted > alpha / 10 && q.has_validation && !strong_trend(*cx, L).has_value()) {
+    std::vector<double> errors;
+    if (step_validation(L, pick.effect, &errors) < INFINITY &&
+        !confirmed(pick.p_adjusted, q.validation_error_m, errors))
+      return nothing(" (" + pick.effect + " reached p_adj = " + num(pick.p_adjusted, 2) +
+                         " but the validation poses do not confirm it)",
+                     true);
+  }
   // A mechanism outside the library that takes up the same part of the residual: the chain
   // explains the data, but so may an effect that no candidate has. No claim; the loop follows
   // the step the validation poses confirmed.
