@@ -479,8 +479,6 @@ FitResult identify_at(const RobotModel& robot,
           worst = a;
         }
       }
-      // The members (positions in cur) of each alternative sub-form still free, when every
-      // one of them is optional and there are two or more.
       // cov_BB^-1 z_B for the terms at positions `at` of cur (empty when cov_BB is singular).
       auto block_weights = [&](const std::vector<int>& at, Eigen::VectorXd* zb) {
         const int nb = static_cast<int>(at.size());
@@ -497,7 +495,8 @@ FitResult identify_at(const RobotModel& robot,
       std::vector<int> best_block;
       for (size_t bi = 0; bi < blocks.size(); ++bi) {
         const std::vector<int> at = block_free(bi, cur);
-        bool other = false;  // another alternative of the effect still in the fit
+        // A sub-form with two or more terms still free, beside another of its effect.
+        bool other = false;
         for (size_t bj = 0; bj < blocks.size(); ++bj)
           other = other || (bj != bi && block_effect[bj] == block_effect[bi] &&
                             !block_free(bj, cur).empty());
