@@ -483,10 +483,14 @@ std::string Chain::decide(size_t i, std::string* why) {
   // combined, must reach alpha. A flexible candidate can reach p_adj = 0.05 on a control's
   // noise and lower the validation error by chance; a group of look-alikes is no stronger.
   // A strong trend left in the residual (a mean offset beside a drift) is evidence of its own:
-  // then the rules below judge the candidate as before.
-  const bool marginal =
-      top.p_adjusted > alpha / 10 && q.has_validation && !strong_trend(*cx, L).has_value();
-  if (!L.separable && !omnibus && marginal && !group_validates(L, top.p_adjusted))
+  // then the rules below judge the candidate as before. (Level i's residual: asked once.)
+  std::optional<bool> trend_left;
+  auto marginal = [&](double p) {
+    if (!(p > alpha / 10 && q.has_validation)) return false;
+    if (!trend_left) trend_left = strong_trend(*cx, L).has_value();
+    return !*trend_left;
+  };
+  if (!L.separable && !omnibus && marginal(top.p_adjusted) && !group_validates(L, top.p_adjusted))
     return nothing(" (" + join(L.group, ", ") + " reached p_adj = " + num(top.p_adjusted, 2) +
                        " but the validation poses confirm none of them)",
                    true);
@@ -578,15 +582,13 @@ std::string Chain::decide(size_t i, std::string* why) {
     return "ambiguous";
   }
   const CandidateScore& pick = L.scores[L.pick];
-  // Marginal evidence needs the validation poses' support (above).
-  if (pick.p_adjusted > alpha / 10 && q.has_validation && !strong_trend(*cx, L).has_value()) {
-    std::vector<double> errors;
-    if (step_validation(L, pick.effect, &errors) < INFINITY &&
-        !confirmed(pick.p_adjusted, q.validation_error_m, errors))
-      return nothing(" (" + pick.effect + " reached p_adj = " + num(pick.p_adjusted, 2) +
-                         " but the validation poses do not confirm it)",
-                     true);
-  }
+  // Marginal evidence needs the validation poses' support (above). The chain just built level
+  // i + 1 with the pick added: its validation errors are the step's.
+  if (marginal(pick.p_adjusted) && levels.size() > i + 1 &&
+      !confirmed(pick.p_adjusted, q.validation_error_m, levels[i + 1].a.quality.validation_error_m))
+    return nothing(" (" + pick.effect + " reached p_adj = " + num(pick.p_adjusted, 2) +
+                       " but the validation poses do not confirm it)",
+                   true);
   // A mechanism outside the library that takes up the same part of the residual: the chain
   // explains the data, but so may an effect that no candidate has. No claim; the loop follows
   // the step the validation poses confirmed.

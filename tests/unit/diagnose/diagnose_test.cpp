@@ -144,6 +144,16 @@ Truth joint_and(const std::string& effect,
   return truth;
 }
 
+/// The example truth of `hidden` (test::effect_truth) with the hidden effect's parameters
+/// scaled by `scale` (the joint compliances as they are).
+Truth scaled_truth(const std::string& hidden, const RobotModel& robot, double scale) {
+  Truth truth = test::effect_truth(hidden, robot);
+  const DeflectionModel m(robot, truth.effects);
+  const int at = m.offset(static_cast<int>(truth.effects.size()) - 1);
+  truth.theta.tail(truth.theta.size() - at) *= scale;
+  return truth;
+}
+
 /// 60 calibration and 40 validation poses of `truth` with the realistic noise; `stream`
 /// separates the designs and noises of one test from another's.
 Scenario scenario_of(const Truth& truth, uint64_t seed, uint64_t stream) {
@@ -886,11 +896,7 @@ TEST(DiagnoseControl, MarginalEvidenceNeedsTheNewPoses) {
   EXPECT_NE(control.summary.find("reached p_adj"), std::string::npos) << control.summary;
   const RobotModel robot = test::rokae();
   for (const uint64_t seed : {2, 4}) {
-    Truth truth = test::effect_truth("coupling", robot);
-    const DeflectionModel m(robot, truth.effects);
-    const int at = m.offset(static_cast<int>(truth.effects.size()) - 1);
-    truth.theta.tail(truth.theta.size() - at) *= 0.5;
-    const Diagnosis d = run(scenario_of(truth, seed, 5));
+    const Diagnosis d = run(scenario_of(scaled_truth("coupling", robot, 0.5), seed, 5));
     ASSERT_FALSE(d.candidates.empty());
     EXPECT_GT(d.candidates[0].p_adjusted, 0.005) << seed;
     EXPECT_EQ(d.verdict, "missing_effect") << seed << ": " << d.summary;
@@ -1442,11 +1448,7 @@ TEST(DiagnoseHonesty, SlowSmallEffectIsNotCalledUnexplained) {
   for (const std::string hidden : {"nonlinear_joint", "coupling", "point_offset", "link"}) {
     int unexplained = 0;
     for (uint64_t seed = 1; seed <= 12; ++seed) {
-      Truth truth = test::effect_truth(hidden, robot);
-      const DeflectionModel m(robot, truth.effects);
-      const int at = m.offset(static_cast<int>(truth.effects.size()) - 1);
-      truth.theta.tail(truth.theta.size() - at) *= 0.5;
-      const Diagnosis d = run(scenario_of(truth, seed, 3));
+      const Diagnosis d = run(scenario_of(scaled_truth(hidden, robot, 0.5), seed, 3));
       print("half " + hidden, seed, d);
       unexplained += d.verdict == "unexplained";
       if (claimed(d)) {
