@@ -922,11 +922,32 @@ FitResult identify_at(const RobotModel& robot,
                                 ? " (the data do not exclude " + num(sp.confidence_lower) + " to " +
                                       num(sp.confidence_upper) + ")"
                                 : std::string()));
+    } else if (!fp.identified && left_out[k]) {
+      // A sub-form left out whole (an alternative frame of force_frame): one line for its
+      // terms, which share the reason.
+      auto with_previous = [&](int j) {
+        return j > 0 && left_out[j - 1] && idf.reason[j - 1] == idf.reason[j] &&
+               &model.owner(j - 1) == &model.owner(j);
+      };
+      if (with_previous(k)) continue;
+      int end = k;
+      while (end + 1 < model.parameter_count() && with_previous(end + 1)) ++end;
+      std::string names = qualified(model, k);
+      bool zero = true;
+      for (int j = k; j <= end; ++j) {
+        if (j > k) names += (j == end ? " and " : ", ") + model.spec(j).name;
+        zero = zero && theta(j) == 0.0;
+      }
+      const std::string held =
+          end == k ? num(theta(k)) + (sp.unit == "1" ? std::string() : " " + sp.unit)
+          : zero   ? std::string("0")
+                   : std::string("their values without the effect");
+      f.warnings.push_back(names + (end > k ? " are" : " is") + " left out: " + idf.reason[k] +
+                           "; held at " + held);
     } else if (!fp.identified) {
-      f.warnings.push_back(
-          qualified(model, k) +
-          (left_out[k] ? " is left out: " : " is not identifiable from this data: ") +
-          idf.reason[k] + "; held at " + num(theta(k)) + " " + sp.unit);
+      f.warnings.push_back(qualified(model, k) +
+                           " is not identifiable from this data: " + idf.reason[k] + "; held at " +
+                           num(theta(k)) + (sp.unit == "1" ? std::string() : " " + sp.unit));
     } else if (sp.lower > -1e299 && sp.lower != sp.null_value &&
                theta(k) <= sp.lower + 1e-9 * s.typical(k)) {
       f.warnings.push_back(qualified(model, k) + " ended at its lower bound " + num(sp.lower) +

@@ -784,6 +784,18 @@ TEST(IdentifyCeres, AForceFrameErrorIsFittedInItsOwnFrame) {
           EXPECT_TRUE(par.identified) << par.name << " base " << base << " seed " << seed;
         }
       }
+      // The dropped frame is reported in one line naming its five terms, not five lines.
+      const std::string dropped =
+          base ? "force_frame.omega_x, omega_y, omega_z, scale_x and scale_y are left out"
+               : "force_frame.omega_base_x, omega_base_y, omega_base_z, scale_base_x and "
+                 "scale_base_y are left out";
+      int lines = 0, frame_lines = 0;
+      for (const std::string& w : chosen.warnings) {
+        lines += w.find(dropped) == 0;
+        frame_lines += w.rfind("force_frame.omega", 0) == 0;
+      }
+      EXPECT_EQ(lines, 1) << "base " << base << " seed " << seed;
+      EXPECT_EQ(frame_lines, 1) << "base " << base << " seed " << seed;
       const DeflectionModel fm(robot, effects, &data);
       const auto ctx = fm.contexts(valid);
       for (const FitResult* f : {&chosen, &full}) {
