@@ -883,6 +883,7 @@ FitResult identify_at(const RobotModel& robot,
   for (int a = 0; a < nf; ++a)
     for (int b = 0; b < nf; ++b)
       f.covariance(free[a], free[b]) = s2 * cov_s(a, b) / (norms(a) * norms(b));
+  std::vector<bool> reported(p, false);  // folded into an earlier warning line
   for (int k = 0; k < p; ++k) {
     const auto& sp = model.spec(k);
     FitParameter fp;
@@ -922,27 +923,54 @@ FitResult identify_at(const RobotModel& robot,
                                 ? " (the data do not exclude " + num(sp.confidence_lower) + " to " +
                                       num(sp.confidence_upper) + ")"
                                 : std::string()));
-    } else if (!fp.identified && left_out[k]) {
+    } else if (!fp.identified && (left_out[k] || reported[k])) {
       // A sub-form left out whole (an alternative frame of force_frame): one line for its
-      // terms, which share the reason.
-      auto with_previous = [&](int j) {
-        return j > 0 && left_out[j - 1] && idf.reason[j - 1] == idf.reason[j] &&
-               &model.owner(j - 1) == &model.owner(j);
+      // terms, which share the reason, and for the terms of that sub-form held before the
+      // selection (the frame's gauge gain), which mean nothing without it.
+      if (reported[k]) continue;
+      std::vector<int> members{k};
+      const Effect& e = model.owner(k);
+      for (int j = k + 1; j < p; ++j)
+        if (left_out[j] && &model.owner(j) == &e && idf.reason[j] == idf.reason[k])
+          members.push_back(j);
+      if (members.size() > 1 && e.alternative_forms()) {
+        const int first = model.offset(model.find(e.name()));
+        for (const std::vector<int>& form : e.sub_forms()) {
+          if (std::find(form.begin(), form.end(), k - first) == form.end()) continue;
+          for (const int local : form) {
+            const int j = first + local;
+            if (j > k && idf.fixed[j] && !left_out[j] && !model.spec(j).from_data)
+              members.push_back(j);
+          }
+        }
+        std::sort(members.begin(), members.end());
+      }
+      // "a, b and c are left out, with d": the terms the selection dropped, then those held before.
+      auto list = [&](bool dropped) {
+        std::vector<std::string> n;
+        for (const int j : members)
+          if (left_out[j] == dropped)
+            n.push_back(j == k ? qualified(model, j) : model.spec(j).name);
+        std::string out;
+        for (size_t i = 0; i < n.size(); ++i)
+          out += (i == 0 ? "" : i + 1 == n.size() ? " and " : ", ") + n[i];
+        return out;
       };
-      if (with_previous(k)) continue;
-      int end = k;
-      while (end + 1 < model.parameter_count() && with_previous(end + 1)) ++end;
-      std::string names = qualified(model, k);
       bool zero = true;
-      for (int j = k; j <= end; ++j) {
-        if (j > k) names += (j == end ? " and " : ", ") + model.spec(j).name;
+      for (const int j : members) {
+        reported[j] = true;
         zero = zero && theta(j) == 0.0;
       }
+      const std::string with = list(false);
+      const bool one = members.size() == 1;
       const std::string held =
-          end == k ? num(theta(k)) + (sp.unit == "1" ? std::string() : " " + sp.unit)
-          : zero   ? std::string("0")
-                   : std::string("their values without the effect");
-      f.warnings.push_back(names + (end > k ? " are" : " is") + " left out: " + idf.reason[k] +
+          one    ? num(theta(k)) + (sp.unit == "1" ? std::string() : " " + sp.unit)
+          : zero ? std::string("0")
+                 : std::string("their values without the effect");
+      const bool several =
+          std::count_if(members.begin(), members.end(), [&](int j) { return left_out[j]; }) > 1;
+      f.warnings.push_back(list(true) + (several ? " are" : " is") + " left out" +
+                           (with.empty() ? "" : ", with " + with) + ": " + idf.reason[k] +
                            "; held at " + held);
     } else if (!fp.identified) {
       f.warnings.push_back(qualified(model, k) +
