@@ -288,13 +288,6 @@ struct Chain {
                  const std::vector<double>& before,
                  const std::vector<double>& after) const;
 
-  /// Level i's lead (its pick) raises the validation error, and its evidence on the calibration
-  /// poses is gone (p_adj >= alpha, the lead's Holm factor kept) once the rows that carry most
-  /// of it are left out (one in twenty, rounded up): unusual rows (gross errors the outlier
-  /// test left, the noise's tail), not an effect, which shows in many rows. `why` names the
-  /// rows and the numbers.
-  bool rests_on_few_rows(size_t i, std::string* why) const;
-
   /// The comparable validation RMS of level L's model with `g` added (INFINITY when the re-fit
   /// fails or there are no validation poses); `errors`: that model's validation errors.
   double step_validation(const Level& L,

@@ -139,47 +139,6 @@ bool Chain::confirmed(double p_calibration,
   return k > 0 ? k * (1 - std::log(k)) < cx->opt->alpha : true;
 }
 
-bool Chain::rests_on_few_rows(size_t i, std::string* why) const {
-  const Level& L = levels[i];
-  const ModelQuality& q = L.a.quality;
-  if (!q.has_validation || L.pick >= L.bases.size()) return false;
-  const CandidateScore& lead = L.scores[L.pick];
-  if (!(lead.p_value > 0) || !(step_validation(L, lead.effect) > q.validation_rms_m)) return false;
-  // Each row's share of the lead's score: its drop of the residual sum of squares is |U^T r|^2
-  // (U the projected basis), and without row k it is |U^T r - U_k^T r_k|^2.
-  const MatrixXd& u = L.bases[L.pick];
-  const Eigen::VectorXd s = u.transpose() * L.a.r;
-  const int rows = static_cast<int>(L.a.used.rows.size());
-  std::vector<std::pair<double, int>> share;
-  for (int k = 0; k < rows; ++k) {
-    const Eigen::VectorXd sk = u.middleRows(3 * k, 3).transpose() * L.a.r.segment<3>(3 * k);
-    share.emplace_back(s.squaredNorm() - (s - sk).squaredNorm(), k);
-  }
-  std::sort(share.begin(), share.end(), std::greater<>());
-  const int most = std::max(1, (rows + 19) / 20);
-  std::vector<bool> flags = L.a.outlier;
-  std::vector<std::string> ids;
-  for (int j = 0; j < most && j < rows && share[j].first > 0; ++j) {
-    flags[L.a.used_rows[share[j].second]] = true;
-    ids.push_back(L.a.used.rows[share[j].second].id);
-  }
-  if (ids.empty()) return false;
-  try {
-    Level without = score_level(*cx, analyse(*cx, L.a.effects, &flags), {lead.effect});
-    if (without.scores.empty() || !without.scores[0].testable) return false;
-    const double p_adj = std::min(1.0, without.scores[0].p_value * lead.p_adjusted / lead.p_value);
-    if (p_adj < cx->opt->alpha) return false;
-    *why = lead.effect + " reached p_adj = " + num(lead.p_adjusted, 2) +
-           " on the calibration poses, but its evidence rests on " + join(ids, ", ") +
-           " (without " + (ids.size() > 1 ? "them" : "it") + " p_adj = " + num(p_adj, 2) +
-           ") and it raises the validation error: unusual rows (gross errors, the noise's "
-           "tail), not an effect";
-    return true;
-  } catch (const std::exception&) {
-    return false;  // the re-fit without them failed: no evidence either way
-  }
-}
-
 std::string Chain::validation_separates(const Level& L,
                                         std::string* why,
                                         std::vector<double>* top_errors) const {
@@ -610,10 +569,6 @@ std::string Chain::decide(size_t i, std::string* why) {
                         "new poses, or stand in for an effect outside the candidate list");
       return "ambiguous";
     }
-    // Refuted by the validation poses, and its evidence on the calibration poses rests on a
-    // few rows: gross errors the outlier test left (an effect shows in many rows).
-    std::string few;
-    if (rests_on_few_rows(i, &few)) return nothing(" (" + few + ")", true);
     *why = evidence + ": the missing effect is probably not in the candidate list";
     return "unexplained";
   }
