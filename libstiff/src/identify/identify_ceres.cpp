@@ -884,6 +884,11 @@ FitResult identify_at(const RobotModel& robot,
     for (int b = 0; b < nf; ++b)
       f.covariance(free[a], free[b]) = s2 * cov_s(a, b) / (norms(a) * norms(b));
   std::vector<bool> reported(p, false);  // folded into an earlier warning line
+  // A parameter's value with its unit, a dimensionless one ("1") bare.
+  auto value_of = [&](int k) {
+    const std::string& unit = model.spec(k).unit;
+    return num(theta(k)) + (unit == "1" ? std::string() : " " + unit);
+  };
   for (int k = 0; k < p; ++k) {
     const auto& sp = model.spec(k);
     FitParameter fp;
@@ -917,8 +922,8 @@ FitResult identify_at(const RobotModel& robot,
                            "which spreads the prediction of new poses");
     } else if (!fp.identified && sp.from_data) {
       // Decided by the effect from the data before the fit (no derivative): not a failure.
-      f.warnings.push_back(qualified(model, k) + " is decided from the data, not fitted: " +
-                           num(theta(k)) + (sp.unit == "1" ? std::string() : " " + sp.unit) +
+      f.warnings.push_back(qualified(model, k) +
+                           " is decided from the data, not fitted: " + value_of(k) +
                            (std::isfinite(sp.confidence_lower) && std::isfinite(sp.confidence_upper)
                                 ? " (the data do not exclude " + num(sp.confidence_lower) + " to " +
                                       num(sp.confidence_upper) + ")"
@@ -963,19 +968,17 @@ FitResult identify_at(const RobotModel& robot,
       }
       const std::string with = list(false);
       const bool one = members.size() == 1;
-      const std::string held =
-          one    ? num(theta(k)) + (sp.unit == "1" ? std::string() : " " + sp.unit)
-          : zero ? std::string("0")
-                 : std::string("their values without the effect");
+      const std::string held = one    ? value_of(k)
+                               : zero ? std::string("0")
+                                      : std::string("their values without the effect");
       const bool several =
           std::count_if(members.begin(), members.end(), [&](int j) { return left_out[j]; }) > 1;
       f.warnings.push_back(list(true) + (several ? " are" : " is") + " left out" +
                            (with.empty() ? "" : ", with " + with) + ": " + idf.reason[k] +
                            "; held at " + held);
     } else if (!fp.identified) {
-      f.warnings.push_back(qualified(model, k) +
-                           " is not identifiable from this data: " + idf.reason[k] + "; held at " +
-                           num(theta(k)) + (sp.unit == "1" ? std::string() : " " + sp.unit));
+      f.warnings.push_back(qualified(model, k) + " is not identifiable from this data: " +
+                           idf.reason[k] + "; held at " + value_of(k));
     } else if (sp.lower > -1e299 && sp.lower != sp.null_value &&
                theta(k) <= sp.lower + 1e-9 * s.typical(k)) {
       f.warnings.push_back(qualified(model, k) + " ended at its lower bound " + num(sp.lower) +
